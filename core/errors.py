@@ -1,0 +1,47 @@
+"""Exceptions for user-facing errors.
+
+Every error a user can cause by a config, a data file or a plugin choice is
+one of these. The command line prints ``str(error)`` as one line and exits
+with code 2; no traceback unless ``--debug``.
+"""
+
+from __future__ import annotations
+
+
+class SuspidError(Exception):
+    """Base class of suspid's user-facing errors (exit code 2 in the CLI)."""
+
+
+class ConfigError(SuspidError):
+    """A config file, a key in it or a ``--set`` override is invalid.
+
+    The message names the file, the key path (``simulator.options.step``),
+    the YAML line where known, and what was expected.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, key: str | None = None,
+                 line: int | None = None):
+        self.file, self.key, self.line, self.detail = file, key, line, message
+        where = []
+        if file:
+            where.append(f"{file}" + (f":{line}" if line else ""))
+        if key:
+            where.append(f"key '{key}'")
+        prefix = ", ".join(where)
+        super().__init__(f"{prefix}: {message}" if prefix else message)
+
+
+class PluginError(SuspidError):
+    """A plugin failed to load, registered a duplicate name, or was not found."""
+
+
+class UnknownPluginError(PluginError):
+    """A config names a plugin that is not registered."""
+
+
+class DataError(SuspidError):
+    """A measurement or track file is malformed; the message names the file."""
+
+
+class SimulatorError(SuspidError):
+    """A simulator run failed (external program, invalid output, unstable model)."""

@@ -1,0 +1,62 @@
+"""Hook specifications: the whole contract between suspid and its plugins.
+
+A plugin is a module (or object) with functions marked ``@suspid.hookimpl``
+whose names match the specifications below. It is found through the
+entry-point group ``suspid``; the built-in plugins come through the same
+group, declared in suspid's own ``pyproject.toml``.
+
+Every hook here is a ``register`` hook: it receives a callback and calls it
+once per class it provides. Classes are keyed by their class attribute
+``name`` (``name = "exudyn-train"``); two classes of one kind with the same
+name are a startup error that names both providers. Hooks evolve by gaining
+arguments only: an implementation may accept a subset of them.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from suspid import hookspec
+
+Register = Callable[[type], None]
+"""``register(cls)``: add one class to the registry of the hook's kind."""
+
+
+@hookspec
+def suspid_register_simulators(register: Register) -> None:
+    """Register simulator backends.
+
+    Called once, when the registry is first used (``suspid.registry``), after
+    every plugin has been loaded.
+
+    :param register: call ``register(cls)`` for each simulator class. ``cls``
+        subclasses :class:`suspid.interfaces.Simulator` and has a unique
+        ``name``; configs select it as ``simulator: {plugin: <name>}``.
+    :returns: nothing; the return value is ignored.
+    """
+
+
+@hookspec
+def suspid_register_objectives(register: Register) -> None:
+    """Register objective functions Ψ_k (paper eq. 5-8).
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each objective class. ``cls``
+        subclasses :class:`suspid.interfaces.Objective` and has a unique
+        ``name``; configs select it as ``objective: {plugin: <name>}``.
+    :returns: nothing; the return value is ignored.
+    """
+
+
+@hookspec
+def suspid_register_surrogates(register: Register) -> None:
+    """Register surrogate models (metamodels of J for EGO, paper §3.2).
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each surrogate class. ``cls``
+        subclasses :class:`suspid.interfaces.Surrogate` and has a unique
+        ``name``; configs select it as ``surrogate: {plugin: <name>}``.
+    :returns: nothing; the return value is ignored.
+    """
