@@ -1,0 +1,5 @@
+"""``python -m suspid``: the command line."""
+
+from suspid.cli import main
+
+main()

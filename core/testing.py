@@ -1,0 +1,161 @@
+"""Conformance checks for plugin authors (CONVENTIONS.md, 10).
+
+Call them from your plugin's test suite::
+
+    from suspid.testing import check_simulator
+    def test_conformance():
+        check_simulator(MySimulator, {"fs_hz": 100})
+
+Each check raises ``AssertionError`` with a message saying which part of the
+contract in :mod:`suspid.interfaces` is broken. (``assert`` is right here:
+these are tests, not user-input validation.)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+
+from suspid.interfaces import (IRREGULARITY_CHANNELS, Objective, Parameter, Response, Simulator, Surrogate,
+                               TrackSegment)
+
+
+def _build(cls: type, base: type, options: Mapping[str, Any] | None) -> Any:
+    assert isinstance(cls, type) and issubclass(cls, base), f"{cls!r} must subclass {base.__name__}"
+    name = getattr(cls, "name", None)
+    assert isinstance(name, str) and name, f"{cls.__name__}.name must be a non-empty string"
+    options = dict(options or {})
+    model = getattr(cls, "Options", None)
+    if model is not None:
+        validated = model.model_validate(options)
+        options = {k: getattr(validated, k) for k in model.model_fields}
+    return cls(**options)
+
+
+def sample_segments(n: int = 2, length_m: float = 600.0, speed_mps: float = 50.0, dx_m: float = 0.25,
+                    seed: int = 0) -> list[TrackSegment]:
+    """Short track segments with millimetre-scale random irregularities, for checks.
+
+    Each row of ``irregularities`` (4, n_x) in m is smoothed white noise with an
+    rms of about 1 mm, so that a linear model gives accelerations well above zero.
+    """
+    rng = np.random.default_rng(seed)
+    x = np.arange(0.0, length_m + dx_m / 2, dx_m)
+    kernel = np.hanning(41)
+    kernel /= kernel.sum()
+    out = []
+    for i in range(n):
+        raw = rng.standard_normal((len(IRREGULARITY_CHANNELS), len(x)))
+        smooth = np.array([np.convolve(r, kernel, mode="same") for r in raw])
+        smooth *= 1e-3 / smooth.std(axis=1, keepdims=True)
+        out.append(TrackSegment(f"check-{i}", x, smooth, speed_mps))
+    return out
+
+
+def check_simulator(cls: type, options: Mapping[str, Any] | None = None,
+                    segments: list[TrackSegment] | None = None) -> None:
+    """Check a simulator class against :class:`suspid.interfaces.Simulator`.
+
+    Checks: name and options; parameters well formed (lower < upper, nominal
+    inside, finite, unique names) and the default set among them; channels;
+    ``simulate`` returns one finite ``Response`` per segment with the declared
+    channels and a duration matching the segment; results are deterministic;
+    every default parameter, moved to a bound, changes the output.
+    """
+    sim = _build(cls, Simulator, options)
+    params = sim.parameters()
+    assert params, "parameters() must declare at least one parameter"
+    names = [p.name for p in params]
+    assert len(set(names)) == len(names), f"duplicate parameter names in {names}"
+    for p in params:
+        assert isinstance(p, Parameter), f"parameters() must return Parameter objects, got {p!r}"
+        assert all(math.isfinite(v) for v in (p.nominal, p.lower, p.upper)), f"{p.name}: non-finite values"
+        assert p.lower < p.upper, f"{p.name}: lower {p.lower} must be below upper {p.upper}"
+        assert p.lower <= p.nominal <= p.upper, f"{p.name}: nominal {p.nominal} outside [{p.lower}, {p.upper}]"
+        assert isinstance(p.unit, str), f"{p.name}: unit must be a string"
+    defaults = sim.default_parameters()
+    assert defaults and set(defaults) <= set(names), f"default_parameters() {defaults} not among {names}"
+    channels = sim.channels()
+    assert channels and len(set(channels)) == len(channels), f"channels() must be unique names, got {channels}"
+
+    segments = segments or sample_segments()
+    first = sim.simulate({}, segments)
+    assert isinstance(first, list) and len(first) == len(segments), "simulate() must return one Response per segment"
+    for seg, r in zip(segments, first):
+        assert isinstance(r, Response), f"simulate() must return Response objects, got {type(r).__name__}"
+        assert list(r.channels) == list(channels), f"response channels {r.channels} != channels() {channels}"
+        assert r.fs > 0, "fs must be positive"
+        a = np.asarray(r.accelerations)
+        assert a.ndim == 2 and a.shape[0] == len(channels), f"accelerations must be (n_channels, n_t), got {a.shape}"
+        assert np.all(np.isfinite(a)), f"segment {seg.name}: non-finite accelerations"
+        assert np.std(a) > 0, f"segment {seg.name}: accelerations are constant"
+        expected = seg.duration()
+        assert abs(r.duration - expected) <= max(0.05 * expected, 2 / r.fs), (
+            f"segment {seg.name}: record of {r.duration:.3f} s, expected about {expected:.3f} s")
+    again = sim.simulate({}, segments)
+    for r1, r2 in zip(first, again):
+        assert np.allclose(r1.accelerations, r2.accelerations), "simulate() must be deterministic"
+    nominal = {p.name: p.nominal for p in params}
+    explicit = sim.simulate(nominal, segments[:1])[0]
+    assert np.allclose(explicit.accelerations, first[0].accelerations), \
+        "parameters not named in w must keep their nominal values"
+    by_name = {p.name: p for p in params}
+    for name in defaults:
+        p = by_name[name]
+        moved = sim.simulate({name: p.upper}, segments[:1])[0].accelerations
+        assert not np.allclose(moved, first[0].accelerations, rtol=1e-6, atol=0), \
+            f"moving parameter {name} to its upper bound does not change the output"
+
+
+def check_objective(cls: type, options: Mapping[str, Any] | None = None) -> None:
+    """Check an objective class against :class:`suspid.interfaces.Objective`.
+
+    Checks: ``psi`` returns ``(n_channels,)`` finite values; samples from the
+    measured distribution score higher than shifted ones on every channel;
+    the result does not depend on the order of the samples.
+    """
+    obj = _build(cls, Objective, options)
+    rng = np.random.default_rng(0)
+    n, n_ch, n_f = 60, 3, 25
+    freqs = np.linspace(0.5, 20.0, n_f)
+    y_mes = rng.normal(0.0, 2.0, (n, n_ch, n_f))
+    same = rng.normal(0.0, 2.0, (n, n_ch, n_f))
+    shifted = same + 6.0
+    psi_same = np.asarray(obj.psi(y_mes, same, freqs))
+    psi_shift = np.asarray(obj.psi(y_mes, shifted, freqs))
+    assert psi_same.shape == (n_ch,), f"psi must return shape (n_channels,) = ({n_ch},), got {psi_same.shape}"
+    assert np.all(np.isfinite(psi_same)) and np.all(np.isfinite(psi_shift)), "psi must be finite"
+    assert np.all(psi_same > psi_shift), "matching distributions must score higher than shifted ones (J is maximised)"
+    permuted = np.asarray(obj.psi(y_mes[::-1], same[rng.permutation(n)], freqs))
+    assert np.allclose(permuted, psi_same, rtol=1e-6, atol=1e-9), "psi must not depend on sample order"
+
+
+def check_surrogate(cls: type, options: Mapping[str, Any] | None = None) -> None:
+    """Check a surrogate class against :class:`suspid.interfaces.Surrogate`.
+
+    Checks: ``fit`` returns self; ``predict`` gives ``(n,)`` means and
+    non-negative variances; it reproduces a smooth 2-d function at held-out
+    points to a few per cent of its range; its variance is smaller at a
+    training point than far from the data.
+    """
+    model = _build(cls, Surrogate, options)
+    rng = np.random.default_rng(1)
+    X = rng.random((40, 2))
+
+    def f(x):
+        return np.sin(3 * x[:, 0]) + np.cos(2 * x[:, 1]) + x[:, 0] * x[:, 1]
+
+    y = f(X)
+    assert model.fit(X, y) is model, "fit() must return self"
+    Xt = rng.random((50, 2))
+    mean, var = model.predict(Xt)
+    mean, var = np.asarray(mean), np.asarray(var)
+    assert mean.shape == (50,) and var.shape == (50,), f"predict must return (n,), (n,); got {mean.shape}, {var.shape}"
+    assert np.all(var >= 0), "predictive variances must be non-negative"
+    err = np.max(np.abs(mean - f(Xt))) / np.ptp(y)
+    assert err < 0.05, f"held-out error {err:.3f} of the range is too large for a smooth function"
+    _, v_in = model.predict(X[:1])
+    _, v_out = model.predict(np.array([[3.0, 3.0]]))
+    assert v_in[0] < v_out[0], "variance at a training point must be below the variance far from the data"

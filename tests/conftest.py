@@ -1,0 +1,57 @@
+"""Shared fixtures.
+
+Entry-point autoloading of third-party plugins is off for the whole suite
+(``SUSPID_DISABLE_PLUGIN_AUTOLOAD=1``): only suspid's own entry points load,
+so plugins a user has installed cannot leak into our tests. Tests about
+discovery turn it back on in a subprocess of their own.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+os.environ["SUSPID_DISABLE_PLUGIN_AUTOLOAD"] = "1"
+for _var in ("SUSPID_STRICT_PLUGINS", "SUSPID_DISABLE_PLUGINS"):
+    os.environ.pop(_var, None)
+
+ROOT = Path(__file__).resolve().parents[1]
+TEMPLATE_SRC = ROOT / "examples" / "plugin-template" / "src"
+
+
+@pytest.fixture(autouse=True)
+def _fresh_registry():
+    """Every test starts and ends with a registry built from the environment."""
+    from suspid import registry
+
+    registry.reset()
+    yield
+    registry.reset()
+
+
+@pytest.fixture
+def quarter_car():
+    """Register the template's quarter-car simulator in code (not through an entry point)."""
+    from suspid import registry
+
+    sys.path.insert(0, str(TEMPLATE_SRC))
+    try:
+        import suspid_quartercar
+
+        registry.add_plugin(suspid_quartercar, "quarter-car")
+        yield suspid_quartercar.QuarterCar
+    finally:
+        sys.path.remove(str(TEMPLATE_SRC))
+
+
+def run_cli(*args: str, env: dict | None = None, cwd: Path | None = None):
+    """Run ``python -m suspid`` in a subprocess; returns CompletedProcess."""
+    import subprocess
+
+    full_env = dict(os.environ)
+    full_env.update(env or {})
+    return subprocess.run([sys.executable, "-m", "suspid", *args], capture_output=True, text=True,
+                          env=full_env, cwd=cwd, timeout=300)
