@@ -35,7 +35,9 @@ def parse_options(model: type[M], data: M | Mapping[str, Any] | None, section: s
         return model.model_validate(dict(data))
     except ValidationError as exc:
         error = exc.errors()[0]
-        loc = ".".join(str(part) for part in error["loc"])
+        # keep field names and list indices; drop union-member tags such as 'constrained-float'
+        loc = ".".join(str(part) for part in error["loc"]
+                       if isinstance(part, int) or str(part).isidentifier())
         msg = error["msg"].removeprefix("Value error, ")
         if "input" in error and not isinstance(error["input"], (dict, list)):
             msg += f" (got {error['input']!r})"

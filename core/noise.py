@@ -1,0 +1,319 @@
+"""The additive noise B(ω) of measurement and model uncertainty (paper §2.3, eq. 3).
+
+At the reference date, v0 pairs of measured and simulated spectra give v0
+paths of the noise (eq. 3, :func:`noise_samples`)::
+
+    b_i(ω) = y_mes_i(ω) - y_sim_i(ω, w0),   i = 1..v0,   (n_channels, n_freqs) dB each.
+
+B is modelled as a Gaussian process over (channel, ω) on the grid Ω, i.e. a
+Gaussian vector of dimension D = n_channels × n_freqs, with the sample mean
+and a covariance estimated from the v0 paths. Since v0 (about 100) is far
+below D (thousands) the sample covariance C has rank v0 - 1 at most; the model
+keeps it in a **low-rank plus diagonal** form:
+
+1. *Karhunen-Loève / principal components.* The centred paths, scaled by
+   1/√(v0 - 1), are decomposed by a thin SVD: C = Σ_m λ_m φ_m φ_mᵀ with
+   orthonormal φ_m ``(D,)`` and λ_1 >= λ_2 >= ... The first r components are
+   kept: ``n_components`` if given, else the fewest that explain
+   ``variance_fraction`` of the total variance.
+2. *Diagonal remainder.* What the r components leave of each variance,
+   d = diag(C) - Σ_{m<=r} λ_m φ_m², is kept as independent noise per
+   (channel, ω). The marginal variance of B at every (channel, ω), which is
+   all the objectives Ψ_k of eq. 6-7 see, is therefore exactly the sample
+   variance whatever r.
+3. *Shrinkage* (optional) of the correlations towards zero:
+   C_γ = (1 - γ) C_r + γ diag(C), with γ given or ``"auto"``, the
+   Schäfer-Strimmer (2005) estimate for the "diagonal, unequal variance"
+   target (computed from the v0 × v0 Gram matrix, never forming C).
+
+The model covariance is C_model = (1 - γ) Φ_r Λ_r Φ_rᵀ + diag(diag(C) - (1 - γ) diag(Φ_r Λ_r Φ_rᵀ)),
+and a path is drawn as b = μ + Φ_r ((1 - γ) Λ_r)^{1/2} z + d_γ^{1/2} ⊙ e with z,
+e standard normal. The model is identified once at the reference date and
+reused at later dates: :meth:`NoiseModel.save` / :meth:`NoiseModel.load`
+keep it in a ``.npz`` file with a format version, together with the grid
+(frequencies, channels) it belongs to.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+from pathlib import Path
+from typing import Annotated, Any, Literal, Mapping, Sequence
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from suspid._options import parse_options
+from suspid.errors import DataError
+
+FORMAT = "suspid-noise-model"
+FORMAT_VERSION = 1
+
+
+class NoiseOptions(BaseModel):
+    """The ``noise:`` section: how many Karhunen-Loève components to keep, and shrinkage."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    n_components: int | None = Field(default=None, ge=1,
+                                     description="components kept; default: by variance_fraction")
+    variance_fraction: float = Field(default=0.99, gt=0.0, le=1.0,
+                                     description="fraction of the total variance the kept components explain")
+    shrinkage: Annotated[float, Field(ge=0.0, le=1.0)] | Literal["auto"] = Field(
+        default=0.0, description="γ in [0, 1] towards the diagonal, or 'auto' (Schäfer-Strimmer)")
+
+
+def noise_samples(y_mes: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
+    """Noise paths b_i = y_mes_i - y_sim_i(w0) (eq. 3).
+
+    :param y_mes: ``(v0, n_channels, n_freqs)`` dB, measured at the reference date.
+    :param y_sim: ``(v0, n_channels, n_freqs)`` dB, simulated at w0 on the same
+        segments, in the same order.
+    :returns: ``(v0, n_channels, n_freqs)`` dB.
+    :raises DataError: shapes differ or values are not finite.
+    """
+    y_mes = np.asarray(y_mes, dtype=float)
+    y_sim = np.asarray(y_sim, dtype=float)
+    if y_mes.ndim != 3 or y_mes.shape != y_sim.shape:
+        raise DataError(f"measured spectra {y_mes.shape} and simulated spectra {y_sim.shape} must have the "
+                        f"same shape (v0, n_channels, n_freqs), one pair per segment")
+    b = y_mes - y_sim
+    if not np.all(np.isfinite(b)):
+        raise DataError("measured or simulated spectra contain NaN or infinite values")
+    return b
+
+
+def _auto_shrinkage(z: np.ndarray) -> float:
+    """Schäfer-Strimmer intensity for the diagonal target, from centred paths ``z`` ``(v, D)``.
+
+    γ* = Σ_{i≠j} Var(r_ij) / Σ_{i≠j} r_ij² with r the sample correlations; the
+    sums over D² pairs are computed through the v × v Gram matrix.
+    """
+    v = z.shape[0]
+    sd = np.sqrt((z * z).sum(axis=0) / (v - 1))
+    zs = np.divide(z, sd, out=np.zeros_like(z), where=sd > 0)  # standardised; constant variables drop out
+    row_sq = (zs * zs).sum(axis=1)                    # Σ_i z_ki²
+    sum_w2_all = float(row_sq @ row_sq)               # Σ_k Σ_{i,j} (z_ki z_kj)²
+    sum_w2_diag = float((zs ** 4).sum())
+    gram = zs @ zs.T
+    mean_w = (zs * zs).sum(axis=0) / v                # w̄_ii
+    sum_wbar2_off = (float((gram * gram).sum()) / v ** 2) - float(mean_w @ mean_w)
+    var_sum = v / (v - 1) ** 3 * ((sum_w2_all - sum_w2_diag) - v * sum_wbar2_off)
+    r2_sum = (v / (v - 1)) ** 2 * sum_wbar2_off
+    if r2_sum <= 0:
+        return 1.0
+    return float(np.clip(var_sum / r2_sum, 0.0, 1.0))
+
+
+class NoiseModel:
+    """Gaussian model of the noise B over (channel, ω) (paper §2.3), low rank plus diagonal.
+
+    ``NoiseModel(**options)`` stores :class:`NoiseOptions`; :meth:`fit` does the
+    work and sets the fitted attributes:
+
+    - ``mean_`` ``(n_channels, n_freqs)`` dB, the mean function of B;
+    - ``components_`` ``(r, D)`` orthonormal Karhunen-Loève modes φ_m (D = n_channels·n_freqs);
+    - ``eigenvalues_`` ``(r,)`` dB², their variances λ_m (before shrinkage);
+    - ``variance_`` ``(n_channels, n_freqs)`` dB², the sample variance of B at each point;
+    - ``residual_variance_`` ``(n_channels, n_freqs)`` dB², the diagonal remainder d_γ;
+    - ``shrinkage_`` γ, ``n_samples_`` v0, ``explained_variance_ratio_`` ``(r,)``;
+    - ``freqs_`` ``(n_freqs,)`` Hz and ``channels_`` when given to :meth:`fit`.
+    """
+
+    def __init__(self, **options: Any) -> None:
+        self.options = options
+
+    # -- fitting -----------------------------------------------------------------
+    def fit(self, b: np.ndarray, freqs: np.ndarray | None = None,
+            channels: Sequence[str] | None = None) -> "NoiseModel":
+        """Estimate mean and covariance from noise paths (eq. 3); returns ``self``.
+
+        :param b: ``(v0, n_channels, n_freqs)`` dB, see :func:`noise_samples`; v0 >= 2.
+        :param freqs: ``(n_freqs,)`` Hz, the grid Ω, stored to check later reuse.
+        :param channels: channel names, stored to check later reuse.
+        :raises DataError: wrong shape, fewer than 2 paths, non-finite values.
+        :raises ConfigError: invalid options.
+        """
+        opt = parse_options(NoiseOptions, self.options, "noise")
+        b = np.asarray(b, dtype=float)
+        if b.ndim != 3 or b.shape[0] < 2:
+            raise DataError(f"noise paths must be (v0, n_channels, n_freqs) with v0 >= 2, got shape {b.shape}")
+        if not np.all(np.isfinite(b)):
+            raise DataError("noise paths contain NaN or infinite values")
+        v0, n_ch, n_f = b.shape
+        self._set_grid(freqs, channels, n_ch, n_f)
+        mean = b.mean(axis=0)
+        z = (b - mean).reshape(v0, -1)
+        scaled = z / math.sqrt(v0 - 1)
+        _, s, vt = np.linalg.svd(scaled, full_matrices=False)
+        lam = s * s
+        total = float(lam.sum())
+        keep = lam > total * 1e-12 if total > 0 else np.zeros_like(lam, dtype=bool)
+        lam, vt = lam[keep], vt[keep]
+        if opt.n_components is not None:
+            r = min(opt.n_components, lam.size)
+        else:
+            cumulative = np.cumsum(lam) / total if total > 0 else np.ones(0)
+            r = int(np.searchsorted(cumulative, opt.variance_fraction * (1 - 1e-12)) + 1) if lam.size else 0
+            r = min(r, lam.size)
+        gamma = _auto_shrinkage(z) if opt.shrinkage == "auto" else float(opt.shrinkage)
+        variance = (scaled * scaled).sum(axis=0)
+        explained = ((1 - gamma) * lam[:r]) @ (vt[:r] ** 2)
+        self.mean_ = mean
+        self.components_ = vt[:r].copy()
+        self.eigenvalues_ = lam[:r].copy()
+        self.variance_ = variance.reshape(n_ch, n_f)
+        self.residual_variance_ = np.maximum(variance - explained, 0.0).reshape(n_ch, n_f)
+        self.shrinkage_ = gamma
+        self.n_samples_ = v0
+        self.explained_variance_ratio_ = lam[:r] / total if total > 0 else lam[:r]
+        return self
+
+    def _set_grid(self, freqs, channels, n_ch: int, n_f: int) -> None:
+        self.freqs_ = None if freqs is None else np.asarray(freqs, dtype=float)
+        self.channels_ = None if channels is None else tuple(str(c) for c in channels)
+        if self.freqs_ is not None and self.freqs_.shape != (n_f,):
+            raise DataError(f"freqs has shape {self.freqs_.shape}, the noise paths have {n_f} frequencies")
+        if self.channels_ is not None and len(self.channels_) != n_ch:
+            raise DataError(f"{len(self.channels_)} channel names for noise paths with {n_ch} channels")
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "mean_"):
+            raise DataError("the noise model is not fitted: call fit(b) or NoiseModel.load(path) first")
+
+    # -- using -------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_channels, n_freqs)`` of one path."""
+        self._check_fitted()
+        return self.mean_.shape
+
+    def covariance(self) -> np.ndarray:
+        """The model covariance C_model ``(D, D)`` dB² (dense: for checks on small grids)."""
+        self._check_fitted()
+        low_rank = (self.components_.T * ((1 - self.shrinkage_) * self.eigenvalues_)) @ self.components_
+        return low_rank + np.diag(self.residual_variance_.ravel())
+
+    def sample(self, n: int, seed: int | np.random.Generator | None) -> np.ndarray:
+        """``n`` paths of B drawn from the fitted Gaussian model.
+
+        :param n: number of paths (>= 1).
+        :param seed: an int seed or a ``numpy.random.Generator``; the same seed
+            gives the same paths (draws: KL coefficients first, then the diagonal part).
+        :returns: ``(n, n_channels, n_freqs)`` dB.
+        """
+        self._check_fitted()
+        if int(n) != n or n < 1:
+            raise DataError(f"number of noise paths must be a positive integer, got {n!r}")
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+        n = int(n)
+        coefficients = rng.standard_normal((n, self.eigenvalues_.size))
+        coefficients *= np.sqrt((1 - self.shrinkage_) * self.eigenvalues_)
+        independent = rng.standard_normal((n, self.mean_.size)) * np.sqrt(self.residual_variance_.ravel())
+        paths = coefficients @ self.components_ + independent
+        return paths.reshape((n,) + self.mean_.shape) + self.mean_
+
+    def check_grid(self, freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> None:
+        """Raise :class:`DataError` unless the model belongs to this grid Ω and these channels.
+
+        A model identified at the reference date can only be reused on the same grid.
+        """
+        self._check_fitted()
+        if freqs is not None:
+            freqs = np.asarray(freqs, dtype=float)
+            if freqs.shape != (self.mean_.shape[1],) or (
+                    self.freqs_ is not None and not np.allclose(freqs, self.freqs_, rtol=1e-9, atol=0)):
+                raise DataError(f"the noise model was identified on {self.mean_.shape[1]} other frequencies; "
+                                f"recompute it for this grid (spectra: section)")
+        if channels is not None:
+            channels = tuple(str(c) for c in channels)
+            if len(channels) != self.mean_.shape[0] or (self.channels_ is not None and channels != self.channels_):
+                raise DataError(f"the noise model has channels {list(self.channels_ or [])} "
+                                f"({self.mean_.shape[0]}), the data {list(channels)}")
+
+    # -- files -------------------------------------------------------------------
+    _ARRAYS = ("mean", "components", "eigenvalues", "variance", "residual_variance", "explained_variance_ratio")
+
+    def save(self, path: str | Path) -> Path:
+        """Write the fitted model to ``path`` (a ``.npz`` file, format version :data:`FORMAT_VERSION`).
+
+        :returns: the path written.
+        """
+        self._check_fitted()
+        path = Path(path)
+        arrays = {name: getattr(self, name + "_") for name in self._ARRAYS}
+        meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "shrinkage": self.shrinkage_,
+                "n_samples": self.n_samples_,
+                "options": parse_options(NoiseOptions, self.options, "noise").model_dump(),
+                "channels": list(self.channels_) if self.channels_ is not None else None}
+        try:
+            with open(path, "wb") as fh:
+                np.savez(fh, meta=np.array(json.dumps(meta)),
+                         freqs=self.freqs_ if self.freqs_ is not None else np.zeros(0), **arrays)
+        except OSError as exc:
+            raise DataError(f"cannot write noise model {path}: {exc.strerror or exc}") from None
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "NoiseModel":
+        """Read a model written by :meth:`save`.
+
+        :raises DataError: missing file, not a suspid noise model, another
+            format version, or inconsistent arrays; the message names the file.
+        """
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                content = {key: data[key] for key in data.files}
+        except FileNotFoundError:
+            raise DataError(f"noise model file {path} not found") from None
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise DataError(f"noise model file {path} is not a readable .npz file ({exc})") from None
+        missing = [key for key in ("meta", "freqs", *cls._ARRAYS) if key not in content]
+        if missing:
+            raise DataError(f"noise model file {path} is not a suspid noise model (missing {', '.join(missing)})")
+        try:
+            meta = json.loads(str(content["meta"]))
+        except json.JSONDecodeError:
+            raise DataError(f"noise model file {path} has a corrupt header") from None
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+            raise DataError(f"noise model file {path} is not a suspid noise model")
+        if meta.get("format_version") != FORMAT_VERSION:
+            raise DataError(f"noise model file {path} has format version {meta.get('format_version')}; "
+                            f"this suspid reads version {FORMAT_VERSION}: identify the noise model again")
+        model = cls(**(meta.get("options") or {}))
+        for name in cls._ARRAYS:
+            setattr(model, name + "_", np.asarray(content[name], dtype=float))
+        model.shrinkage_ = float(meta["shrinkage"])
+        model.n_samples_ = int(meta["n_samples"])
+        freqs = content["freqs"]
+        model.freqs_ = np.asarray(freqs, dtype=float) if freqs.size else None
+        model.channels_ = tuple(meta["channels"]) if meta.get("channels") is not None else None
+        model._check_consistent(path)
+        return model
+
+    def _check_consistent(self, path: Path) -> None:
+        grid = self.mean_.shape
+        r = self.eigenvalues_.shape[0] if self.eigenvalues_.ndim == 1 else -1
+        ok = (len(grid) == 2 and self.variance_.shape == grid and self.residual_variance_.shape == grid
+              and self.components_.shape == (r, grid[0] * grid[1])
+              and self.explained_variance_ratio_.shape == (r,)
+              and (self.freqs_ is None or self.freqs_.shape == (grid[1],))
+              and (self.channels_ is None or len(self.channels_) == grid[0])
+              and 0.0 <= self.shrinkage_ <= 1.0
+              and all(np.all(np.isfinite(getattr(self, n + "_"))) for n in self._ARRAYS))
+        if not ok:
+            raise DataError(f"noise model file {path} is inconsistent (array shapes or values do not match)")
+
+
+def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions | Mapping[str, Any] | None = None,
+                    freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> NoiseModel:
+    """Eq. 3 then the Gaussian model: the noise model of a reference date in one call.
+
+    :param y_mes: ``(v0, n_channels, n_freqs)`` dB measured spectra.
+    :param y_sim: ``(v0, n_channels, n_freqs)`` dB spectra simulated at w0.
+    """
+    opt = parse_options(NoiseOptions, options, "noise")
+    return NoiseModel(**opt.model_dump()).fit(noise_samples(y_mes, y_sim), freqs=freqs, channels=channels)
