@@ -60,3 +60,16 @@ def suspid_register_surrogates(register: Register) -> None:
         ``name``; configs select it as ``surrogate: {plugin: <name>}``.
     :returns: nothing; the return value is ignored.
     """
+
+
+@hookspec
+def suspid_register_executors(register: Register) -> None:
+    """Register executors: where the simulator calls of a run are carried out.
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each executor class. ``cls``
+        subclasses :class:`suspid.interfaces.Executor` and has a unique
+        ``name``; configs select it as ``executor: {plugin: <name>}``.
+    :returns: nothing; the return value is ignored.
+    """

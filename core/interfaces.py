@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -209,3 +209,38 @@ class Surrogate(ABC):
         and EGO falls back to derivative-free search.
         """
         raise NotImplementedError
+
+
+class Executor(ABC):
+    """Where independent tasks (simulator calls) run: in process, a process pool, a cluster.
+
+    Used as a context manager: resources (pools, cluster clients) are made in
+    ``__enter__`` and released in ``__exit__``, never in the constructor.
+    """
+
+    name: ClassVar[str]
+    Options: ClassVar[type | None] = None
+
+    def __init__(self, **options: Any) -> None:
+        self.options = options
+
+    def __enter__(self) -> "Executor":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        return None
+
+    @property
+    def n_workers(self) -> int:
+        """How many tasks run at once (EGO batches use it)."""
+        return 1
+
+    @abstractmethod
+    def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
+        """Apply ``fn`` to every item; yield ``(index, result)`` as each task finishes.
+
+        A task that raises yields ``(index, exception)`` instead of a result,
+        so the caller can record the failure and go on with the others. A
+        worker that dies loses only its task in flight, which is retried.
+        ``fn`` and the items must be picklable for out-of-process executors.
+        """

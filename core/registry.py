@@ -36,6 +36,7 @@ KINDS: dict[str, str] = {
     "simulator": "suspid_register_simulators",
     "objective": "suspid_register_objectives",
     "surrogate": "suspid_register_surrogates",
+    "executor": "suspid_register_executors",
 }
 """Plugin kind -> the register hook that provides it."""
 

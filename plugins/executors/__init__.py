@@ -1,0 +1,1 @@
+"""Built-in executors: serial, a local process pool, dask.distributed."""
