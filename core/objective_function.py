@@ -1,0 +1,145 @@
+"""The objective function J(w) = Σ_k α_k Ψ_k(w) (paper §3.1, eq. 5), with common random numbers.
+
+For a parameter w the simulator gives v spectra y_sim_i(w), one per track
+segment; the modelled samples are y_mod_i(w) = y_sim_i(w) + b_i with noise
+paths b_i drawn from the noise model B (§2.3), and an :class:`~suspid.interfaces.Objective`
+plugin compares them with the measured samples y_mes_i channel by channel
+(Ψ_k, eq. 6 or 7). Within one run the paths b_i are drawn **once**, from the
+run's seed, and reused for every w (common random numbers): J is then a
+deterministic function of w, which the Kriging metamodel of §3.2 needs, and
+differences J(w) - J(w') are not blurred by fresh noise.
+
+Weights α_k (eq. 5) are non-negative and sum to 1; by default 1/n as in §3.3.
+"""
+
+from __future__ import annotations
+
+from collections import abc
+from functools import cached_property
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from suspid.errors import ConfigError, DataError
+from suspid.interfaces import Objective
+from suspid.noise import NoiseModel
+
+
+def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, channels: Sequence[str],
+                     key: str = "objective.weights") -> np.ndarray:
+    """The weights α_k of eq. 5 as ``(n_channels,)``, normalised to sum to 1.
+
+    :param weights: ``None`` (equal weights 1/n), a list in channel order, or a
+        mapping channel name -> weight (channels not named get 0).
+    :param channels: the channel names, in the order of the spectra.
+    :param key: the config key named in errors.
+    :raises ConfigError: wrong length, unknown channel names, negative or
+        non-finite weights, or weights that are all zero.
+    """
+    channels = [str(c) for c in channels]
+    n = len(channels)
+    if n == 0:
+        raise ConfigError("there are no channels to weight", key=key)
+    if weights is None:
+        return np.full(n, 1.0 / n)
+    if isinstance(weights, abc.Mapping):
+        unknown = [str(name) for name in weights if str(name) not in channels]
+        if unknown:
+            raise ConfigError(f"unknown channel(s) {', '.join(unknown)}; channels are: {', '.join(channels)}",
+                              key=key)
+        values = [weights.get(name, 0.0) for name in channels]
+    elif isinstance(weights, (str, bytes)) or not isinstance(weights, (abc.Sequence, np.ndarray)):
+        raise ConfigError(f"expected a list of {n} weights or a mapping channel -> weight, "
+                          f"got {type(weights).__name__}", key=key)
+    else:
+        values = list(weights)
+        if len(values) != n:
+            raise ConfigError(f"{len(values)} weights given for {n} channels ({', '.join(channels)})", key=key)
+    try:
+        alpha = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigError(f"weights must be numbers, got {values!r}", key=key) from None
+    if not np.all(np.isfinite(alpha)) or np.any(alpha < 0):
+        raise ConfigError(f"weights must be finite and non-negative, got {values!r}", key=key)
+    total = alpha.sum()
+    if total <= 0:
+        raise ConfigError("weights are all zero; at least one channel needs a positive weight", key=key)
+    return alpha / total
+
+
+class ObjectiveFunction:
+    """J(w) of eq. 5 for one run: measured spectra, fixed noise paths, an objective plugin, weights.
+
+    :param objective: an :class:`~suspid.interfaces.Objective` instance (Ψ_k).
+    :param y_mes: ``(v_mes, n_channels, n_freqs)`` measured spectra in dB.
+    :param freqs: ``(n_freqs,)`` Hz.
+    :param noise_paths: ``(v, n_channels, n_freqs)`` dB, the paths b_i, fixed
+        for the run; v is the number of simulated spectra per evaluation.
+    :param weights: α_k as accepted by :func:`validate_weights` (default 1/n).
+    :param channels: channel names, needed when ``weights`` is a mapping.
+
+    The constructor stores; :meth:`evaluate` validates and computes. Build it
+    from a noise model with :meth:`from_noise_model`.
+    """
+
+    def __init__(self, objective: Objective, y_mes: np.ndarray, freqs: np.ndarray, noise_paths: np.ndarray,
+                 weights: Sequence[float] | Mapping[str, float] | None = None,
+                 channels: Sequence[str] | None = None) -> None:
+        self.objective = objective
+        self.y_mes = y_mes
+        self.freqs = freqs
+        self.noise_paths = noise_paths
+        self.weights = weights
+        self.channels = channels
+
+    @classmethod
+    def from_noise_model(cls, objective: Objective, y_mes: np.ndarray, freqs: np.ndarray,
+                         noise_model: NoiseModel, seed: int | np.random.Generator,
+                         n_paths: int | None = None,
+                         weights: Sequence[float] | Mapping[str, float] | None = None,
+                         channels: Sequence[str] | None = None) -> "ObjectiveFunction":
+        """Draw the run's noise paths b_i once from ``noise_model`` with ``seed`` (common random numbers).
+
+        :param n_paths: v, the number of simulated spectra per evaluation;
+            default: as many as measured spectra (one per segment).
+        :raises DataError: the noise model belongs to another grid or other channels.
+        """
+        y_mes = np.asarray(y_mes, dtype=float)
+        if y_mes.ndim != 3:
+            raise DataError(f"y_mes must be (n_samples, n_channels, n_freqs), got shape {y_mes.shape}")
+        noise_model.check_grid(freqs, channels)
+        if noise_model.shape != y_mes.shape[1:]:
+            raise DataError(f"the noise model is on a {noise_model.shape} (channels, frequencies) grid, "
+                            f"the measured spectra on {y_mes.shape[1:]}")
+        paths = noise_model.sample(y_mes.shape[0] if n_paths is None else n_paths, seed)
+        return cls(objective, y_mes, freqs, paths, weights=weights, channels=channels)
+
+    @cached_property
+    def alpha(self) -> np.ndarray:
+        """α_k ``(n_channels,)``, normalised to sum to 1 (eq. 5)."""
+        n_ch = np.shape(self.y_mes)[1]
+        channels = self.channels if self.channels is not None else [f"channel {k}" for k in range(n_ch)]
+        if len(channels) != n_ch:
+            raise DataError(f"{len(channels)} channel names for spectra with {n_ch} channels")
+        if isinstance(self.weights, abc.Mapping) and self.channels is None:
+            raise ConfigError("weights given by channel name need the channel names", key="objective.weights")
+        return validate_weights(self.weights, channels)
+
+    def evaluate(self, y_sim: np.ndarray) -> tuple[float, np.ndarray]:
+        """J and Ψ for simulated spectra (eq. 5).
+
+        :param y_sim: ``(v, n_channels, n_freqs)`` dB, y_sim_i(w) for the segments in order.
+        :returns: ``(J, psi)`` with J a float and psi ``(n_channels,)``.
+        :raises DataError: ``y_sim`` does not match the noise paths.
+        """
+        y_sim = np.asarray(y_sim, dtype=float)
+        if y_sim.shape != np.shape(self.noise_paths):
+            raise DataError(f"simulated spectra have shape {y_sim.shape}; this objective function holds "
+                            f"noise paths of shape {np.shape(self.noise_paths)} (v, n_channels, n_freqs)")
+        psi = np.asarray(self.objective.psi(self.y_mes, y_sim + self.noise_paths, self.freqs), dtype=float)
+        if psi.shape != self.alpha.shape:
+            raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "
+                            f"{psi.shape}, expected {self.alpha.shape}")
+        return float(self.alpha @ psi), psi
+
+    __call__ = evaluate
