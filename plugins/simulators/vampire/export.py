@@ -208,13 +208,14 @@ def to_response(data: ExportData, channels: Sequence[ChannelSpec], opts: ExportO
     if back.size:
         j = back[0] + 1
         raise SimulatorError(f"{path}:{data.lines[j]}: {opts.x_kind} does not increase "
-                             f"({data.x[j - 1]!r} then {data.x[j]!r})")
-    dt = (t[-1] - t[0]) / (n - 1)
-    off = np.abs(steps - dt) > opts.uniform_rtol * dt
+                             f"({float(data.x[j - 1])!r} then {float(data.x[j])!r})")
+    typical = float(np.median(steps))
+    off = np.abs(steps - typical) > opts.uniform_rtol * typical
     if off.any():
         j = np.flatnonzero(off)[0] + 1
-        raise SimulatorError(f"{path}:{data.lines[j]}: non-uniform sampling: step {steps[j - 1]:.6g} s where the "
-                             f"mean step is {dt:.6g} s")
+        raise SimulatorError(f"{path}:{data.lines[j]}: non-uniform sampling: a step of {steps[j - 1]:.6g} s where "
+                             f"the typical step is {typical:.6g} s")
+    dt = (t[-1] - t[0]) / (n - 1)
     fs = 1.0 / dt
     if fs_expected is not None and abs(fs - fs_expected) > opts.uniform_rtol * fs_expected:
         raise SimulatorError(f"{path}: sampling rate {fs:.6g} Hz, expected {fs_expected:g} Hz (option fs)")
@@ -223,7 +224,7 @@ def to_response(data: ExportData, channels: Sequence[ChannelSpec], opts: ExportO
         values = data.columns[ch.column]
         bad = np.flatnonzero(~np.isfinite(values))
         if bad.size:
-            raise SimulatorError(f"{path}:{data.lines[bad[0]]}: non-finite value {values[bad[0]]!r} in "
+            raise SimulatorError(f"{path}:{data.lines[bad[0]]}: non-finite value {float(values[bad[0]])!r} in "
                                  f"'{ch.column}'")
         out[i] = values * ch.to_si
     duration = n / fs

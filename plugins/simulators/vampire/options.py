@@ -354,9 +354,11 @@ class Options(_Model):
                 raise ValueError(f"placeholder '{p.template_name}' of parameter '{p.name}' is already "
                                  f"{taken[p.template_name]}")
             taken[p.template_name] = f"parameter '{p.name}'"
-        for key in self.values:
+        for key, value in self.values.items():
             if not is_name(key):
                 raise ValueError(f"values: '{key}' is not a valid placeholder name")
+            if isinstance(value, str) and any(c in value for c in "\r\n\0"):
+                raise ValueError(f"values: '{key}' must be one line")
             if key in taken:
                 raise ValueError(f"values: '{key}' is already {taken[key]}")
         channels = [c.name for c in self.channels]

@@ -330,7 +330,7 @@ class VampireSimulator(Simulator):
         wd.mkdir(parents=True)
         self._templates().render_into(wd, job.values)
         header = [render(line, job.values, f"track.header[{i}]") for i, line in enumerate(opts.track.header)]
-        write_track_file(inside(wd, opts.track.file), job.rows, opts.track, header)
+        write_track_file(inside(wd, opts.track.file), job.rows, opts.track, header, opts.template_encoding)
 
     def _run_job(self, job: _Job, cancel: threading.Event, opts: Options) -> Response:
         seg = job.segment.name

@@ -24,7 +24,7 @@ FIELDS = ("distance", "cross_level", "curvature", "lateral", "vertical", "gauge"
 def check_segment(segment: TrackSegment) -> None:
     """Check what the adapter needs of a segment.
 
-    :raises DataError: naming the segment, when the distance is not a
+    :raises DataError: naming the segment, when its name is not one line, the distance is not a
         strictly increasing ``(n_x,)`` array with n_x >= 2, the irregularities
         are not a finite ``(4, n_x)`` array, or the speed is not a positive
         constant (a speed record must not vary by more than 0.1 %; the adapter
@@ -33,6 +33,8 @@ def check_segment(segment: TrackSegment) -> None:
     x = np.asarray(segment.distance, dtype=float)
     irr = np.asarray(segment.irregularities, dtype=float)
     where = f"segment '{segment.name}'"
+    if any(c in segment.name for c in "\r\n\0"):
+        raise DataError(f"{where}: the name must be one line (it is written into the run files)")
     if x.ndim != 1 or x.size < 2 or not np.all(np.isfinite(x)) or not np.all(np.diff(x) > 0):
         raise DataError(f"{where}: distance must be a finite, strictly increasing (n_x,) array with n_x >= 2")
     if irr.shape != (len(IRREGULARITY_CHANNELS), x.size):
@@ -74,39 +76,17 @@ def track_rows(segment: TrackSegment, opts: TrackFileOptions) -> np.ndarray:
     ])
 
 
-def write_track_file(path: Path, rows: np.ndarray, opts: TrackFileOptions, header: list[str]) -> None:
-    """Write ``rows`` (``(n_x, 6)``, file units) after the already rendered ``header`` lines."""
+def write_track_file(path: Path, rows: np.ndarray, opts: TrackFileOptions, header: list[str],
+                     encoding: str = "utf-8") -> None:
+    """Write ``rows`` (``(n_x, 6)``, file units) after the already rendered ``header`` lines.
+
+    Header characters that ``encoding`` cannot represent are replaced by ``?``.
+    """
     specs = [opts.distance_format, opts.value_format, opts.curvature_format,
              opts.value_format, opts.value_format, opts.value_format]
     row_format = opts.delimiter.join("{:" + spec + "}" for spec in specs)
     newline = "\r\n" if opts.newline == "crlf" else "\n"
     lines = list(header) + [row_format.format(*row) for row in rows.tolist()]
-    with open(path, "w", encoding="ascii", errors="strict", newline="") as fh:
+    with open(path, "w", encoding=encoding, errors="replace", newline="") as fh:
         fh.write(newline.join(lines) + newline)
 
-
-def read_track_file(path: Path, delimiter: str | None = None) -> np.ndarray:
-    """Read the data rows of a 6-field track file (lines that are not 6 numbers before the data are a header).
-
-    A helper for checks and tests.
-
-    :returns: ``(n_x, 6)`` array in file units.
-    :raises DataError: naming the file and line of a malformed data row.
-    """
-    rows = []
-    for lineno, line in enumerate(Path(path).read_text(encoding="ascii", errors="replace").splitlines(), 1):
-        parts = line.replace(delimiter, " ").split() if delimiter else line.replace(",", " ").split()
-        if not parts:
-            continue
-        try:
-            values = [float(p) for p in parts]
-        except ValueError:
-            values = None
-        if values is None or len(values) != len(FIELDS):
-            if rows:
-                raise DataError(f"{path}:{lineno}: expected {len(FIELDS)} numbers, got {line!r}")
-            continue
-        rows.append(values)
-    if not rows:
-        raise DataError(f"{path}: no data rows")
-    return np.asarray(rows)
