@@ -15,10 +15,9 @@ the adapter. It
 4. writes the ASCII export (``FORMAT table`` or ``blocks``, ``UNITS g`` or
    ``m/s2``) at the run file's sample rate.
 
-Faults, switched by environment variables (only for the segment named in
-``VAMPIRE_DOUBLE_FAULT_SEGMENT`` when that is set):
-
-``VAMPIRE_DOUBLE_FAULT`` = ``exit`` (exit code 5), ``hang`` (starts a child,
+Faults, switched by the environment variable ``VAMPIRE_DOUBLE_FAULT``: one
+mode for every run, or ``segment=mode`` pairs separated by commas. Modes:
+``exit`` (exit code 5), ``hang`` (starts a child,
 ignores SIGTERM, sleeps), ``missing`` (exit 0, no export), ``empty`` (empty
 export), ``truncated`` (export cut in the middle of a line), ``malformed``
 (a Fortran overflow field ``*********``), ``nonfinite`` (a NaN), ``licence``
@@ -64,7 +63,7 @@ CHANNELS = [("carbody_z", "BodyVertical"), ("carbody_y", "BodyLateral"),
 
 
 def double_options(work_root: str | Path | None = None, *, fs: float = 200.0, export_form: str = "table",
-                   export_units: str = "g", fault: str | None = None, fault_segment: str | None = None,
+                   export_units: str = "g", fault: str | dict[str, str] | None = None,
                    **overrides: Any) -> dict[str, Any]:
     """Options of the ``vampire`` simulator that run this double.
 
@@ -72,16 +71,16 @@ def double_options(work_root: str | Path | None = None, *, fs: float = 200.0, ex
     :param fs: output sampling rate in Hz.
     :param export_form: ``"table"`` or ``"blocks"``.
     :param export_units: ``"g"`` or ``"m/s2"``.
-    :param fault: a fault mode (module docstring), passed through ``env``.
-    :param fault_segment: restrict the fault to this segment.
+    :param fault: a fault mode for every run, or segment name -> mode (module
+        docstring), passed through ``env``.
     :param overrides: any other option, replacing the default.
     :returns: a plain dict, as it would appear under ``simulator.options`` in YAML.
     """
     env = {}
-    if fault:
+    if isinstance(fault, dict):
+        env["VAMPIRE_DOUBLE_FAULT"] = ",".join(f"{seg}={mode}" for seg, mode in fault.items())
+    elif fault:
         env["VAMPIRE_DOUBLE_FAULT"] = fault
-    if fault_segment:
-        env["VAMPIRE_DOUBLE_FAULT_SEGMENT"] = fault_segment
     options: dict[str, Any] = {
         "template_dir": str(TEMPLATE_DIR),
         "run_file": "double.run",
@@ -252,9 +251,9 @@ def main(argv: list[str]) -> int:
     run = _read_keyed(Path(argv[0]))
     segment = run.get("SEGMENT", "")
     fault = os.environ.get("VAMPIRE_DOUBLE_FAULT", "")
-    only = os.environ.get("VAMPIRE_DOUBLE_FAULT_SEGMENT")
-    if only and only != segment:
-        fault = ""
+    if "=" in fault:
+        pairs = dict(item.split("=", 1) for item in fault.split(",") if item)
+        fault = pairs.get(segment, "")
     log_file = os.environ.get("VAMPIRE_DOUBLE_LOG")
 
     def log(event: str) -> None:
@@ -287,16 +286,16 @@ def main(argv: list[str]) -> int:
     if fault == "nonfinite":
         acc[0, len(t) // 2] = float("nan")
     text = _export_text(t, acc, run["FORMAT"])
-    if fault == "malformed":
+    if fault == "malformed":  # a Fortran overflow field in the last column of a data line
         lines = text.splitlines(keepends=True)
-        k = len(lines) // 2
+        k = next(k for k in range(len(lines) // 2, len(lines)) if len(lines[k].split()) >= 3)
         parts = lines[k].split()
         parts[-1] = "*********"
         lines[k] = " ".join(parts) + "\n"
         text = "".join(lines)
-    if fault == "truncated":
+    if fault == "truncated":  # cut after 40 %: tables inside a row, blocks at the end of a line
         text = text[: int(len(text) * 0.4)]
-        text = text[: text.rstrip().rfind(" ") + 3]  # stop inside a number
+        text = text[: text.rfind("\n") + 1] + ("0.12" if run["FORMAT"] == "table" else "")
     out = Path(run["OUTPUT"])
     out.parent.mkdir(parents=True, exist_ok=True)
     if fault != "missing":
