@@ -1,0 +1,691 @@
+"""The exudyn multibody model of the car: bodies, suspension, wheel-rail contact, sensors.
+
+One :class:`TrainModel` owns one exudyn ``MainSystem``. It is built once and
+updated in place when parameters change (``SetObjectParameter``); only a
+change of geometry (positions of bodies and attachment points) rebuilds it.
+Both solvers use this same system: the time solver integrates it with
+exudyn's generalised-alpha solver, the frequency solver takes exudyn's
+linearisation ``ComputeLinearizedSystem`` (M, K, D) of it.
+
+Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
+x, y, z, roll, pitch, yaw relative to the reference position, small angles
+about x, y, z): carbody, front and rear bogie frame, wheelsets 1-4 (1 leads).
+The longitudinal coordinate of every body and the pitch (spin perturbation)
+of the wheelsets are not degrees of freedom of this model: stiff restraint
+springs to ground (``CoordinateSpringDamper``, natural frequency
+:data:`RESTRAINT_HZ`) hold them in the time solver, and the linear analysis
+treats them as fixed (rows and columns removed); the difference is of order
+(suspension stiffness / restraint stiffness), below 1e-4.
+
+Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
+attachment points):
+
+- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs and a
+  vertical damper, between wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
+- secondary, per side (4): ``CartesianSpringDamper`` x, y, z springs, the
+  vertical damper and the lateral damper, between bogie and carbody at
+  (+-a_bogie, +-b_sec, h_sec);
+- yaw dampers, one per side of each bogie (4): ``CartesianSpringDamper`` with
+  a longitudinal damper only, at (+-a_bogie, +-b_yaw, h_yaw);
+- anti-roll bars, one per bogie (2): ``CoordinateSpringDamper`` on the relative
+  roll angle of carbody and bogie frame;
+- lateral bump stops (option of the time solver), one per bogie:
+  ``CartesianSpringDamper`` with a symbolic force law, zero inside the gap.
+
+Spring preloads are connector offsets, so the reference configuration under
+gravity is the static equilibrium (no static solve needed; a test checks the
+residual).
+
+Wheel-rail contact, per wheelset: an ``ObjectGenericODE2`` force element on
+the wheelset coordinates and the odometer coordinate (below), with
+
+- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping):
+  vertical force 2 k_H (V - z) and roll moment k_H l0 (C - 2 l0 roll);
+- linearised Kalker creep with equivalent conicity lambda (creepages from the
+  wheelset's lateral velocity, yaw angle, yaw rate and rolling-radius
+  difference 2 lambda (y - Y)): F_y = -2 f22 (dy/dt / v - yaw),
+  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0);
+- gravitational stiffness W lambda / l0 on (y - Y).
+
+V, Y and C are the track's vertical level, alignment and cross-level under
+the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does
+not act in an equivalent-conicity contact: the rolling-radius differences of
+the two rails cancel). The contact's stiffness and damping matrices hold the
+linear terms (damping f/v at the configured speed: creep damping is speed
+dependent); the track enters as the force G r, with G the
+:meth:`TrainModel.input_matrix` (7 x 3). In the time solver a symbolic
+``forceUserFunction`` (exudyn.symbolic, evaluated in C++) adds G r(s), with
+r looked up in the track table at the wheelset's distance s; with creep
+saturation or a variable speed it computes the creep forces itself (then the
+speed is the odometer's velocity).
+
+Odometer: one extra coordinate (``NodeGenericODE2`` + ``ObjectMass1D``)
+holding the car centre's distance along the track in track samples. At
+constant speed it coasts (initial velocity v/dx, no force: exact in
+generalised-alpha); with a speed record a velocity-level ``CoordinateConstraint``
+prescribes its velocity from a symbolic speed table.
+
+Tables in exudyn.symbolic. Track tables are named ``Real`` leaves (one per
+distance sample and channel, shared by the four wheelsets) read by a
+balanced ``IfThenElse`` tree with linear interpolation: O(log n) operations
+per lookup, all in C++, and a new segment only sets leaf values (no model
+rebuild). Symbolic ``Vector`` indexing is not used: it is unreliable in
+exudyn 1.13 (crashes when indexed repeatedly).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from . import parameters as P
+
+RESTRAINT_HZ = 300.0
+"""Natural frequency (Hz) of the stiff springs that hold the longitudinal and wheelset pitch coordinates."""
+
+BODIES = ("carbody", "bogie_front", "bogie_rear", "wheelset_1", "wheelset_2", "wheelset_3", "wheelset_4")
+"""Body names; wheelset 1 leads, wheelsets 1-2 are in the front bogie."""
+
+COORDINATES = ("longitudinal", "lateral", "vertical", "roll", "pitch", "yaw")
+"""Motions of one rigid-body node, in the order of its exudyn (Rxyz) coordinates."""
+
+TRACK_INPUTS = ("vertical", "lateral", "cross_level")
+"""Track channels that act on the model (columns of :meth:`TrainModel.input_matrix`)."""
+
+DIRECTIONS = {"longitudinal": 0, "lateral": 1, "vertical": 2}
+"""Sensor direction -> component of the (global-axes) acceleration."""
+
+FLOOR_HEIGHT = 1.2
+"""Height above rail (m) of the default carbody sensors, floor level (assumption)."""
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """An accelerometer: body, direction and position relative to the body's centre of mass.
+
+    Accelerations are kinematic (no gravity component, no tilt), in the axes
+    of the frame that moves with the train (x forward, y left, z up), m/s^2.
+    """
+
+    name: str
+    body: str
+    direction: str
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def default_sensors(values: dict[str, float]) -> list[Sensor]:
+    """The default channels: carbody vertical and lateral above each bogie and mid-car, at floor
+    level, and bogie frame vertical and lateral at the frame centre (10 channels)."""
+    z = FLOOR_HEIGHT - values["h_car"]
+    a = values["a_bogie"]
+    out = []
+    for where, x in (("front", a), ("middle", 0.0), ("rear", -a)):
+        for d in ("vertical", "lateral"):
+            out.append(Sensor(f"carbody_{where}_{d}", "carbody", d, (x, 0.0, z)))
+    for where in ("front", "rear"):
+        for d in ("vertical", "lateral"):
+            out.append(Sensor(f"bogie_{where}_{d}", f"bogie_{where}", d, (0.0, 0.0, 0.0)))
+    return out
+
+
+GEOMETRY = ("h_car", "h_bogie", "r0", "a_bogie", "a_ws", "b_prim", "b_sec", "h_sec", "b_yaw", "h_yaw")
+"""Parameters that move bodies or attachment points: changing one rebuilds the exudyn system."""
+
+
+def wheelset_positions(values: dict[str, float]) -> np.ndarray:
+    """Longitudinal positions (m) of wheelsets 1-4 relative to the car centre, forward positive."""
+    a, w = values["a_bogie"], values["a_ws"]
+    return np.array([a + w, a - w, -a + w, -a - w])
+
+
+@dataclass
+class TimeFeatures:
+    """What the time solver adds to the system (changing it rebuilds the system).
+
+    :ivar track_capacity: number of track samples the symbolic tables hold
+        (a power of two; 0: no track input, e.g. for the frequency solver).
+    :ivar variable_speed: the odometer's velocity is prescribed by a speed table.
+    :ivar speed_capacity: number of samples of the speed table.
+    :ivar saturation: nonlinear creep saturation with friction coefficient ``friction``.
+    :ivar bump_stops: lateral bump stops with ``bump_gap`` (m) and ``bump_stiffness`` (N/m).
+    """
+
+    track_capacity: int = 0
+    variable_speed: bool = False
+    speed_capacity: int = 0
+    saturation: bool = False
+    friction: float = 0.3
+    bump_stops: bool = False
+    bump_gap: float = 0.025
+    bump_stiffness: float = 2.0e6
+
+    def key(self) -> tuple:
+        return (self.track_capacity, self.variable_speed, self.speed_capacity, self.saturation,
+                self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness)
+
+    @property
+    def creep_in_user_function(self) -> bool:
+        """Creep forces computed by the symbolic function (not the matrices)."""
+        return self.saturation or self.variable_speed
+
+
+@dataclass
+class LinearSystem:
+    """The linearised model at one speed, on its free coordinates (SI units).
+
+    M q'' + D q' + K q = sum_j G_j r_j(t), accelerations at the sensors = C q''.
+
+    :ivar M, K, D: ``(n, n)`` from exudyn's ``ComputeLinearizedSystem``.
+    :ivar G: ``(n_wheelsets, n, 3)`` track input matrices, columns :data:`TRACK_INPUTS`.
+    :ivar C: ``(n_sensors, n)`` sensor acceleration matrix.
+    :ivar labels: ``(n,)`` (body, motion) of each free coordinate.
+    :ivar wheelset_x: ``(n_wheelsets,)`` wheelset positions relative to the car centre, m.
+    :ivar speed: m/s.
+    """
+
+    M: np.ndarray
+    K: np.ndarray
+    D: np.ndarray
+    G: np.ndarray
+    C: np.ndarray
+    labels: list[tuple[str, str]]
+    wheelset_x: np.ndarray
+    speed: float
+
+
+class TrainModel:
+    """The exudyn system of the car for given parameter values, sensors and time-solver features."""
+
+    def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
+                 features: TimeFeatures | None = None) -> None:
+        self.features = features or TimeFeatures()
+        self.sensors = list(sensors)
+        self.values = dict(values)
+        self.speed = float(speed)
+        self._build()
+
+    # ------------------------------------------------------------------ building
+    def _build(self) -> None:
+        import exudyn as exu
+        from exudyn import itemInterface as ii
+
+        self.exu = exu
+        self.SC = exu.SystemContainer()
+        mbs = self.mbs = self.SC.AddSystem()
+        p = self.values
+        self._updaters: list[tuple[Callable[[object, object], None], Callable[[dict], object]]] = []
+        self._current: list[object] = []
+
+        ground_node = mbs.AddNode(ii.NodePointGround())
+        self._m_ground = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=ground_node, coordinate=0))
+
+        # --- bodies
+        ref = self._body_positions(p)
+        self.nodes: dict[str, object] = {}
+        self.objects: dict[str, object] = {}
+        for name in BODIES:
+            node = mbs.AddNode(ii.NodeRigidBodyRxyz(referenceCoordinates=list(ref[name]) + [0.0, 0.0, 0.0]))
+            obj = mbs.AddObject(ii.ObjectRigidBody(nodeNumber=node, mass=1.0,
+                                                   inertia=[1.0, 1.0, 1.0, 0.0, 0.0, 0.0]))
+            self.nodes[name], self.objects[name] = node, obj
+            kind = name.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
+            self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "mass", v),
+                        lambda q, k=kind: q[f"m_{k}"])
+            self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
+                        lambda q, k=kind: (q[f"I_{k}_x"], q[f"I_{k}_y"], q[f"I_{k}_z"], 0.0, 0.0, 0.0))
+            mass_marker = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
+            mbs.AddLoad(ii.LoadMassProportional(markerNumber=mass_marker, loadVector=[0.0, 0.0, -P.GRAVITY]))
+            # restraints of the coordinates that are not degrees of freedom
+            restrained = [0] + ([4] if name.startswith("wheelset") else [])
+            for coord in restrained:
+                m = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=node, coordinate=coord))
+                csd = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[self._m_ground, m], stiffness=0.0))
+                kind_i = "m" if coord == 0 else "I"
+                self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "stiffness", v),
+                            lambda q, k=kind, c=coord: (2 * math.pi * RESTRAINT_HZ) ** 2 * (
+                                q[f"m_{k}"] if c == 0 else q[f"I_{k}_y"]))
+
+        car = self.objects["carbody"]
+        xw = wheelset_positions(p)
+        # --- primary suspension, per axlebox
+        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
+            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+            for w in range(2):
+                j = 2 * b + w
+                ws = self.objects[f"wheelset_{j + 1}"]
+                for side in (1.0, -1.0):
+                    m0 = self._marker(ws, (0.0, side * p["b_prim"], 0.0))
+                    m1 = self._marker(self.objects[bogie], (xw[j] - xb, side * p["b_prim"], p["r0"] - p["h_bogie"]))
+                    self._cartesian(m0, m1,
+                                    lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
+                                    lambda q: (0.0, 0.0, q["c_prim_z"]),
+                                    lambda q: (0.0, 0.0, P.static_loads(q)["axlebox"] / q["k_prim_z"]))
+            # --- secondary suspension, per side (springs, vertical and lateral dampers)
+            for side in (1.0, -1.0):
+                m0 = self._marker(self.objects[bogie], (0.0, side * p["b_sec"], p["h_sec"] - p["h_bogie"]))
+                m1 = self._marker(car, (xb, side * p["b_sec"], p["h_sec"] - p["h_car"]))
+                self._cartesian(m0, m1,
+                                lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
+                                lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
+                                lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
+            # --- yaw dampers, one per side
+            for side in (1.0, -1.0):
+                m0 = self._marker(self.objects[bogie], (0.0, side * p["b_yaw"], p["h_yaw"] - p["h_bogie"]))
+                m1 = self._marker(car, (xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))
+                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0), lambda q: (q["c_yaw"], 0.0, 0.0),
+                                lambda q: (0.0, 0.0, 0.0))
+            # --- anti-roll bar: relative roll of carbody and bogie frame
+            mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
+            mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes["carbody"], coordinate=3))
+            arb = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[mr0, mr1], stiffness=0.0))
+            self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v), lambda q: q["k_arb"])
+
+        # --- odometer: car-centre distance along the track, in track samples
+        self.odometer = mbs.AddNode(ii.NodeGenericODE2(referenceCoordinates=[0.0], initialCoordinates=[0.0],
+                                                       initialCoordinates_t=[0.0], numberOfODE2Coordinates=1))
+        mbs.AddObject(ii.ObjectMass1D(nodeNumber=self.odometer, mass=1.0))
+
+        # --- wheel-rail contact, one force element per wheelset
+        self.contacts = []
+        zeros7 = np.zeros((7, 7))
+        for j in range(4):
+            ws = self.nodes[f"wheelset_{j + 1}"]
+            c = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=[ws, self.odometer], massMatrix=zeros7,
+                                                   stiffnessMatrix=zeros7, dampingMatrix=zeros7,
+                                                   forceVector=[0.0] * 7))
+            self.contacts.append(c)
+            self._track(lambda v, o=c: mbs.SetObjectParameter(o, "stiffnessMatrix", v),
+                        lambda q: self.contact_matrices(q, self.speed)[0])
+            self._track(lambda v, o=c: mbs.SetObjectParameter(o, "dampingMatrix", v),
+                        lambda q: self.contact_matrices(q, self.speed)[1])
+            self._track(lambda v, o=c: mbs.SetObjectParameter(o, "forceVector", list(v)),
+                        lambda q: (0.0, 0.0, P.static_loads(q)["axle"], 0.0, 0.0, 0.0, 0.0))
+
+        # --- sensors
+        self.sensor_items = []
+        for s in self.sensors:
+            if s.body not in self.objects:
+                raise ValueError(f"sensor '{s.name}': unknown body '{s.body}'")
+            self.sensor_items.append(mbs.AddSensor(ii.SensorBody(
+                bodyNumber=self.objects[s.body], localPosition=list(s.position), storeInternal=True,
+                writeToFile=False, outputVariableType=exu.OutputVariableType.Acceleration)))
+
+        self._time_extras()
+        self._apply(p, force=True)
+        mbs.Assemble()
+        self._coordinate_map()
+
+    def _track(self, setter: Callable[[object], None], getter: Callable[[dict], object]) -> None:
+        """Register an item field that depends on parameter values."""
+        self._updaters.append((setter, getter))
+        self._current.append(None)
+
+    def _marker(self, obj, local) -> object:
+        from exudyn import itemInterface as ii
+
+        return self.mbs.AddMarker(ii.MarkerBodyPosition(bodyNumber=obj, localPosition=[float(v) for v in local]))
+
+    def _cartesian(self, m0, m1, stiffness, damping, offset) -> object:
+        from exudyn import itemInterface as ii
+
+        mbs = self.mbs
+        csd = mbs.AddObject(ii.CartesianSpringDamper(markerNumbers=[m0, m1]))
+        self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "stiffness", list(v)), stiffness)
+        self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "damping", list(v)), damping)
+        self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "offset", list(v)), offset)
+        return csd
+
+    @staticmethod
+    def _body_positions(p: dict[str, float]) -> dict[str, np.ndarray]:
+        xw = wheelset_positions(p)
+        out = {"carbody": np.array([0.0, 0.0, p["h_car"]]),
+               "bogie_front": np.array([p["a_bogie"], 0.0, p["h_bogie"]]),
+               "bogie_rear": np.array([-p["a_bogie"], 0.0, p["h_bogie"]])}
+        for j in range(4):
+            out[f"wheelset_{j + 1}"] = np.array([xw[j], 0.0, p["r0"]])
+        return out
+
+    def _apply(self, values: dict[str, float], force: bool = False) -> None:
+        for i, (setter, getter) in enumerate(self._updaters):
+            new = getter(values)
+            old = self._current[i]
+            if force or not _same(old, new):
+                setter(new)
+                self._current[i] = new
+
+    # ------------------------------------------------------------------ updating
+    def needs_rebuild(self, values: dict[str, float], sensors: Sequence[Sensor],
+                      features: TimeFeatures) -> bool:
+        """True when ``values``, ``sensors`` or ``features`` change the structure of the system."""
+        return (any(values[k] != self.values[k] for k in GEOMETRY) or list(sensors) != self.sensors
+                or features.key() != self.features.key())
+
+    def update(self, values: dict[str, float], speed: float) -> None:
+        """Set new parameter values and speed (geometry must be unchanged: see :meth:`needs_rebuild`)."""
+        self.values = dict(values)
+        self.speed = float(speed)
+        self._apply(self.values)
+
+    # ------------------------------------------------------------------ contact
+    def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
+        """Stiffness and damping matrices (7 x 7) of one contact element.
+
+        Coordinates: the wheelset's x, y, z, roll, pitch, yaw and the odometer.
+        With creep computed by the symbolic function (saturation, variable
+        speed) only the Hertzian and gravitational terms stay here.
+        """
+        kh = P.hertz_stiffness(p)
+        f = P.creep_coefficient(p)
+        lam, l0, r0 = p["conicity"], p["l0"], p["r0"]
+        K = np.zeros((7, 7))
+        D = np.zeros((7, 7))
+        K[2, 2] = 2.0 * kh
+        K[3, 3] = 2.0 * kh * l0 ** 2
+        K[1, 1] = P.gravitational_stiffness(p)
+        if not self.features.creep_in_user_function:
+            K[1, 5] = -2.0 * f
+            K[5, 1] = 2.0 * f * l0 * lam / r0
+            D[1, 1] = 2.0 * f / speed
+            D[5, 5] = 2.0 * f * l0 ** 2 / speed
+        return K, D
+
+    @staticmethod
+    def input_matrix(p: dict[str, float]) -> np.ndarray:
+        """G (7 x 3): generalised contact force per unit track input, columns :data:`TRACK_INPUTS`.
+
+        The force on the wheelset is G @ (V, Y, C) at its position: the
+        Hertzian springs pull towards the rail level V and cross-level C; the
+        gravitational stiffness and the conicity term act on y - Y.
+        """
+        kh = P.hertz_stiffness(p)
+        f = P.creep_coefficient(p)
+        G = np.zeros((7, 3))
+        G[2, 0] = 2.0 * kh
+        G[3, 2] = kh * p["l0"]
+        G[1, 1] = P.gravitational_stiffness(p)
+        G[5, 1] = 2.0 * f * p["l0"] * p["conicity"] / p["r0"]
+        return G
+
+    # ------------------------------------------------------------------ time-solver extras
+    def _time_extras(self) -> None:
+        """Symbolic track tables, creep laws, speed prescription and bump stops (time solver)."""
+        feat = self.features
+        self.track_leaves: list[list] = []
+        self.speed_leaves: list = []
+        self.wheel_offsets: list = []
+        self._keep: list = []
+        self.speed_constraint = None
+        if feat.bump_stops:
+            self._add_bump_stops()
+        if feat.track_capacity <= 0:
+            return
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        n = feat.track_capacity
+        self.track_leaves = [[esym.Real(f"{ch}_{i}", 0.0) for i in range(n + 1)] for ch in TRACK_INPUTS]
+        self.wheel_offsets = [esym.Real(f"offset_{j}", 0.0) for j in range(4)]
+        self._uf_constants()
+        sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
+        for j, c in enumerate(self.contacts):
+            fn = self._contact_force_function(j)
+            uf = CreateSymbolicUserFunction(self.mbs, fn, "forceUserFunction", c)
+            self.mbs.SetObjectParameter(c, "forceUserFunction", uf)
+            self._keep.append(uf)
+        if feat.variable_speed:
+            m = feat.speed_capacity
+            self.speed_leaves = [esym.Real(f"speed_{i}", 0.0) for i in range(m + 1)]
+            self.speed_step = esym.Real("speed_dt_inv", 1.0)
+            m_odo = self.mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.odometer, coordinate=0))
+            con = self.mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[self._m_ground, m_odo],
+                                                             velocityLevel=True))
+
+            def speed_function(mbs, t, itemNumber, lOffset):
+                return _lookup(esym, self.speed_leaves, t * self.speed_step, m)
+
+            uf = CreateSymbolicUserFunction(self.mbs, speed_function, "offsetUserFunction_t", con)
+            self.mbs.SetObjectParameter(con, "offsetUserFunction_t", uf)
+            self._keep.append(uf)
+            self.speed_constraint = con
+
+    def _contact_force_function(self, j: int):
+        """The symbolic force function of wheelset j's contact element (track input, creep laws).
+
+        Parameter-dependent constants are named symbolic ``Real`` values
+        (:attr:`uf_values`), updated with the parameters: the function itself
+        is recorded once.
+        """
+        esym = self.exu.symbolic
+        feat = self.features
+        n = feat.track_capacity
+        leaves = self.track_leaves
+        offset = self.wheel_offsets[j]
+        c = self.uf_values
+
+        def force(mbs, t, itemNumber, q, q_t):
+            q.SetVector([0.0] * 7)
+            q_t.SetVector([0.0] * 7)
+            where = q[6] + offset
+            V = _lookup(esym, leaves[0], where, n)
+            Y = _lookup(esym, leaves[1], where, n)
+            C = _lookup(esym, leaves[2], where, n)
+            fz = c["two_kh"] * V
+            mx = c["kh_l0"] * C
+            fy = c["kg"] * Y
+            if not feat.creep_in_user_function:
+                return [0.0, fy, fz, mx, 0.0, c["yaw_y"] * Y, 0.0]
+            # creep forces computed here: speed from the odometer, optional saturation
+            v = q_t[6] * c["dx"]
+            nu_y = q_t[1] / v - q[5]                                  # lateral creepage
+            a_long = c["l0"] * q_t[5] / v + c["lam_r0"] * (q[1] - Y)  # minus the left wheel's long. creepage
+            fy_wheel = -c["f"] * nu_y                                 # lateral creep force per wheel
+            fx_left = c["f"] * a_long                                 # longitudinal, left wheel; right: -fx_left
+            if feat.saturation:
+                n_left = esym.max(0.0, c["n0"] - c["kh"] * (q[2] + c["l0"] * q[3] - V - 0.5 * C))
+                n_right = esym.max(0.0, c["n0"] - c["kh"] * (q[2] - c["l0"] * q[3] - V + 0.5 * C))
+                eps_l = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_left)
+                eps_r = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_right)
+                fy = fy + (eps_l + eps_r) * fy_wheel
+                mz = -c["l0"] * (eps_l + eps_r) * fx_left
+            else:
+                fy = fy + 2.0 * fy_wheel
+                mz = -2.0 * c["l0"] * fx_left
+            return [0.0, fy, fz, mx, 0.0, mz, 0.0]
+
+        return force
+
+    def _uf_constants(self) -> None:
+        """Named symbolic constants of the contact functions, kept in step with the parameters."""
+        esym = self.exu.symbolic
+        getters = {
+            "two_kh": lambda q: 2.0 * P.hertz_stiffness(q),
+            "kh": lambda q: P.hertz_stiffness(q),
+            "kh_l0": lambda q: P.hertz_stiffness(q) * q["l0"],
+            "kg": lambda q: P.gravitational_stiffness(q),
+            "f": lambda q: P.creep_coefficient(q),
+            "yaw_y": lambda q: 2.0 * P.creep_coefficient(q) * q["l0"] * q["conicity"] / q["r0"],
+            "l0": lambda q: q["l0"],
+            "lam_r0": lambda q: q["conicity"] / q["r0"],
+            "n0": lambda q: P.static_loads(q)["wheel"],
+            "mu": lambda q: self.features.friction,
+        }
+        self.uf_values = {}
+        for name, getter in getters.items():
+            leaf = esym.Real(name, 0.0)
+            self.uf_values[name] = leaf
+            self._track(lambda v, r=leaf: r.SetValue(float(v)), getter)
+        self.uf_values["dx"] = esym.Real("dx", 1.0)
+
+    def _add_bump_stops(self) -> None:
+        """Lateral bump stops between carbody and each bogie frame (symbolic force law)."""
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        p = self.values
+        gap, k = self.features.bump_gap, self.features.bump_stiffness
+        car = self.objects["carbody"]
+        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
+            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+            m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_sec"] - p["h_bogie"]))
+            m1 = self._marker(car, (xb, 0.0, p["h_sec"] - p["h_car"]))
+            csd = self.mbs.AddObject(ii.CartesianSpringDamper(markerNumbers=[m0, m1]))
+
+            def stop(mbs, t, itemNumber, displacement, velocity, stiffness, damping, offset):
+                u = displacement[1]
+                over = u - esym.min(gap, esym.max(-gap, u))
+                return [0.0, k * over, 0.0]
+
+            uf = CreateSymbolicUserFunction(self.mbs, stop, "springForceUserFunction", csd)
+            self.mbs.SetObjectParameter(csd, "springForceUserFunction", uf)
+            self._keep.append(uf)
+
+    # ------------------------------------------------------------------ bookkeeping
+    def _coordinate_map(self) -> None:
+        """Global ODE2 indices: free coordinates, their labels, per-wheelset index lists."""
+        mbs = self.mbs
+        self.n_ode2 = len(mbs.systemData.GetODE2Coordinates())
+        free, labels = [], []
+        self.node_index: dict[str, int] = {}
+        for name in BODIES:
+            start = mbs.GetNodeODE2Index(self.nodes[name])
+            self.node_index[name] = start
+            for k, motion in enumerate(COORDINATES):
+                if k == 0 or (k == 4 and name.startswith("wheelset")):
+                    continue
+                free.append(start + k)
+                labels.append((name, motion))
+        self.odometer_index = mbs.GetNodeODE2Index(self.odometer)
+        self.free = np.array(free)
+        self.labels = labels
+        position = {g: i for i, g in enumerate(free)}
+        # element coordinate k of contact j -> free index (or -1)
+        self.contact_rows = []
+        for j in range(4):
+            start = self.node_index[f"wheelset_{j + 1}"]
+            self.contact_rows.append([position.get(start + k, -1) for k in range(6)] + [-1])
+
+    # ------------------------------------------------------------------ linearisation
+    def linear_system(self) -> LinearSystem:
+        """Linearise with exudyn about the static equilibrium at the model's speed."""
+        ss = self.exu.SimulationSettings()
+        ss.solution.file.write = False
+        ss.solution.sensors.active = False
+        ss.timeIntegration.verboseMode = 0
+        ss.staticSolver.verboseMode = 0
+        # the linearisation must not see the track (symbolic inputs are zero at rest anyway)
+        M, K, D = self.mbs.ComputeLinearizedSystem(ss)[:3]
+        idx = self.free
+        M = np.asarray(M)[np.ix_(idx, idx)]
+        K = np.asarray(K)[np.ix_(idx, idx)]
+        D = np.asarray(D)[np.ix_(idx, idx)]
+        n = len(idx)
+        G7 = self.input_matrix(self.values)
+        G = np.zeros((4, n, 3))
+        for j in range(4):
+            for k, row in enumerate(self.contact_rows[j]):
+                if row >= 0:
+                    G[j, row] = G7[k]
+        return LinearSystem(M, K, D, G, self.sensor_matrix(), list(self.labels),
+                            wheelset_positions(self.values), self.speed)
+
+    def sensor_matrix(self) -> np.ndarray:
+        """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration.
+
+        Derived from exudyn's own kinematics: the sensor point's position is
+        read back from the system for small perturbations of each coordinate
+        (a = C q'' holds to first order in the small rotations).
+        """
+        exu = self.exu
+        mbs = self.mbs
+        cfg = exu.ConfigurationType.Current
+        q0 = np.array(mbs.systemData.GetODE2Coordinates(configuration=cfg))
+        n = len(self.free)
+        C = np.zeros((len(self.sensors), n))
+        eps = 1e-6
+        try:
+            for i, s in enumerate(self.sensors):
+                obj = self.objects[s.body]
+                comp = DIRECTIONS[s.direction]
+                start = self.node_index[s.body]
+                for k in range(6):
+                    g = start + k
+                    col = np.flatnonzero(self.free == g)
+                    if col.size == 0:
+                        continue
+                    vals = []
+                    for sign in (1.0, -1.0):
+                        q = q0.copy()
+                        q[g] += sign * eps
+                        mbs.systemData.SetODE2Coordinates(list(q), configuration=cfg)
+                        vals.append(mbs.GetObjectOutputBody(obj, exu.OutputVariableType.Position,
+                                                            localPosition=list(s.position),
+                                                            configuration=cfg)[comp])
+                    C[i, col[0]] = (vals[0] - vals[1]) / (2 * eps)
+        finally:
+            mbs.systemData.SetODE2Coordinates(list(q0), configuration=cfg)
+        return C
+
+    # ------------------------------------------------------------------ track tables
+    def set_track(self, table: np.ndarray, dx: float, offsets: Sequence[float]) -> None:
+        """Put a track table into the symbolic leaves.
+
+        :param table: ``(3, n)`` rows :data:`TRACK_INPUTS`, m, at spacing ``dx``
+            (n <= track_capacity + 1; the rest of the leaves are zero).
+        :param offsets: per wheelset, its distance ahead of the car centre in samples.
+        """
+        n = table.shape[1]
+        cap = self.features.track_capacity
+        if n > cap + 1:
+            raise ValueError(f"track table of {n} samples exceeds the capacity {cap + 1}")
+        for leaves, row in zip(self.track_leaves, table):
+            for i in range(cap + 1):
+                leaves[i].SetValue(float(row[i]) if i < n else 0.0)
+        for leaf, off in zip(self.wheel_offsets, offsets):
+            leaf.SetValue(float(off))
+        self.uf_values["dx"].SetValue(float(dx))
+
+    def set_speed_table(self, speeds_per_sample: np.ndarray, dt: float) -> None:
+        """Odometer velocity (samples/s) at times k dt, for the variable-speed constraint."""
+        cap = self.features.speed_capacity
+        if len(speeds_per_sample) > cap + 1:
+            raise ValueError("speed table exceeds its capacity")
+        last = float(speeds_per_sample[-1])
+        for i in range(cap + 1):
+            self.speed_leaves[i].SetValue(float(speeds_per_sample[i]) if i < len(speeds_per_sample) else last)
+        self.speed_step.SetValue(1.0 / dt)
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return False
+    return np.array_equal(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+
+
+def _tree(esym, leaves, tau, lo: int, hi: int):
+    """Linear interpolation of ``leaves`` at ``tau`` in [lo, hi) by bisection (IfThenElse is lazy)."""
+    if hi - lo == 1:
+        return leaves[lo] + (leaves[lo + 1] - leaves[lo]) * (tau - float(lo))
+    mid = (lo + hi) // 2
+    return esym.IfThenElse(tau < float(mid), _tree(esym, leaves, tau, lo, mid), _tree(esym, leaves, tau, mid, hi))
+
+
+def _lookup(esym, leaves, tau, n: int):
+    """Table value at fractional sample ``tau``: zero outside [0, n]."""
+    zero = esym.Real(0.0)
+    inside = esym.IfThenElse(tau < float(n), _tree(esym, leaves, tau, 0, n), zero)
+    return esym.IfThenElse(tau < 0.0, zero, inside)
+
+
+def _saturation(esym, fx, fy, limit):
+    """Shen-Hedrick-Elkins factor eps on linear creep forces (fx, fy) for the limit mu N.
+
+    u = |F| / (mu N); eps = 1 - u/3 + u^2/27 for u < 3, else 1/u.
+    """
+    u = esym.sqrt(fx * fx + fy * fy) / esym.max(limit, 1.0)
+    return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
