@@ -72,6 +72,51 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> No
                   f"surrogate {cfg.surrogate.plugin})")
 
 
+@app.command()
+def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+        fresh: bool = typer.Option(False, "--fresh", help="Start over: forget the run's ledger."),
+        quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
+    """Identify the parameters: design, Kriging, EGO; writes result.json and report.md in the run directory.
+
+    Interrupt with Ctrl-C at any time; running the same command again resumes
+    from the ledger without recomputing finished simulations.
+    """
+    from suspid.config import load_config
+    from suspid.pipeline import run as run_pipeline
+
+    cfg = load_config(config, set_ or [])
+    out = run_pipeline(cfg, fresh=fresh, progress=not quiet,
+                       log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+    _print_result(out.result, out.run_dir)
+
+
+@app.command()
+def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+          fresh: bool = typer.Option(False, "--fresh", help="Start every variant over."),
+          quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
+    """Run the variants of the config's study: section; writes study.csv, study.md and a Figure 2 plot."""
+    from suspid.study import run_study
+
+    out = run_study(config, set_ or [], fresh=fresh, progress=not quiet,
+                    log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+    console.print((out / "study.md").read_text())
+
+
+def _print_result(result: dict, run_dir: Path) -> None:
+    table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({result['stop_reason']}, "
+                        f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
+    for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable"):
+        table.add_column(col)
+    for n in result["parameters"]:
+        lo, hi = result["interval"][n]
+        table.add_row(n, f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
+                      f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
+                      f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
+                      "yes" if result["identifiable"][n] else "[red]no[/red]")
+    console.print(table)
+    console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}")
+
+
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"warning: {message}", file=sys.stderr)
 

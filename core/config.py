@@ -84,6 +84,7 @@ class ParameterBounds(Section):
 
 class OutputSection(Section):
     dir: ConfigPath | None = Field(default=None, description="run directory; default runs/<name>/")
+    figure_channel: str | None = Field(default=None, description="channel of Figure 1; default: first carbody vertical")
 
 
 class DataSection(Section):
@@ -125,6 +126,8 @@ class Config(Section):
     design: dict[str, Any] = Field(default_factory=dict)
     ego: dict[str, Any] = Field(default_factory=dict)
     executor: ExecutorSection = Field(default_factory=ExecutorSection)
+    identifiability: dict[str, Any] = Field(default_factory=dict)
+    study: dict[str, Any] = Field(default_factory=dict)
     output: OutputSection = Field(default_factory=OutputSection)
 
     # set by load_config, not by the user

@@ -1,0 +1,586 @@
+"""The whole identification chain of the paper, as ``suspid run`` runs it.
+
+1. data: the measured spectra y_mes (or the numerical experiment of §3.3,
+   :mod:`suspid.experiment`), and the noise model B identified at the
+   reference date (§2.3) or loaded from a file;
+2. J(w) = Σ α_k Ψ_k(w) (eq. 5) with Y_mod = Y_sim(w) + b_i, the paths b_i
+   drawn once from the run's seed (common random numbers);
+3. J on the maximin design of m0 points, the Kriging surrogate, EGO (eq. 9);
+4. identifiability, intervals, ``result.json`` and ``report.md``.
+
+Every evaluation of J is committed to the run ledger the moment it
+finishes. The whole chain is deterministic for a given config, so a run that
+was interrupted is resumed by running it again: the design and the EGO steps
+are retraced and every finished evaluation is read from the ledger instead of
+being simulated again.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import yaml
+
+from suspid import registry
+from suspid.config import Config, build_simulator, identified_bounds
+from suspid.errors import ConfigError, SimulatorError, SuspidError
+from suspid.interfaces import Response, Simulator, TrackSegment
+from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
+from suspid.seeds import rng as named_rng
+from suspid.seeds import seed_for
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """A content hash of arrays (shape, dtype and bytes)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.shape, a.dtype.str)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def segments_digest(segments: Sequence[TrackSegment]) -> str:
+    """A content hash of track segments (geometry, distance and speed)."""
+    parts = []
+    for s in segments:
+        parts.append(array_digest(np.asarray(s.distance, float), np.asarray(s.irregularities, float),
+                                  np.atleast_1d(np.asarray(s.speed, float))))
+    return stable_hash(parts)
+
+
+@dataclass
+class Problem:
+    """Everything J(w) needs, built once per run.
+
+    :ivar names: identified parameter names, ``(q,)``.
+    :ivar bounds: ``(q, 2)`` SI lower and upper bounds.
+    :ivar segments: measurement-date track segments (v of them).
+    :ivar y_mes: ``(v, n_channels, n_freqs)`` dB measured spectra.
+    :ivar b: ``(v, n_channels, n_freqs)`` dB noise paths for Y_mod.
+    :ivar freqs: ``(n_freqs,)`` Hz.
+    """
+
+    config: Config
+    simulator: Simulator
+    names: list[str]
+    bounds: np.ndarray
+    segments: list[TrackSegment]
+    channels: list[str]
+    freqs: np.ndarray
+    y_mes: np.ndarray
+    b: np.ndarray
+    objective: Any
+    weights: np.ndarray
+    data_identity: str
+    w_ref: dict[str, float] | None = None
+    reference: dict[str, np.ndarray] = field(default_factory=dict)  # y_mes0, y_sim0 at the reference date
+    noise_model: Any = None
+
+    @property
+    def q(self) -> int:
+        return len(self.names)
+
+    def w_of(self, x_si: np.ndarray) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.names, np.asarray(x_si, float))}
+
+    def to_unit(self, x_si: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds[:, 0], self.bounds[:, 1]
+        return (np.asarray(x_si, float) - lo) / (hi - lo)
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        lo, hi = self.bounds[:, 0], self.bounds[:, 1]
+        return lo + np.asarray(u, float) * (hi - lo)
+
+
+# -- building the problem -------------------------------------------------------------
+def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarray, np.ndarray]]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Spectra ``(y, freqs)`` from the ledger's artifacts, or computed and stored there."""
+    y, f = ledger.get_array(key + ":y"), ledger.get_array(key + ":freqs")
+    if y is None or f is None:
+        y, f = make()
+        ledger.put_array(key + ":y", y)
+        ledger.put_array(key + ":freqs", f)
+    return y, f
+
+
+def _simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequence[TrackSegment],
+                      spectra_options: Any, transform: Callable[[list[Response]], list[Response]] | None = None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    from suspid.spectra import compute_spectra
+
+    responses = simulator.simulate(w, segments)
+    if transform is not None:
+        responses = transform(responses)
+    return compute_spectra(responses, spectra_options)
+
+
+def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
+    """The synthetic track of one date of a numerical experiment (seeded by the config's seed)."""
+    from suspid.track import TrackOptions, synthetic_segments
+
+    options = dict(config.data.track)
+    if n_segments is not None:
+        options["n_segments"] = n_segments
+    options.setdefault("seed", seed_for(config.seed, f"track-{date}"))
+    try:
+        opt = TrackOptions.model_validate(options)
+    except Exception as exc:  # pydantic error -> one line naming the section
+        raise ConfigError(f"invalid track options: {exc}".splitlines()[0], file=str(config.source_file),
+                          key="data.track") from None
+    return synthetic_segments(opt)
+
+
+def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
+    """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3)."""
+    from suspid.experiment import ReferenceOptions, apply_model_error
+    from suspid.noise import NoiseModel, fit_noise_model
+    from suspid.spectra import SpectraOptions
+
+    file = str(config.source_file)
+    simulator = build_simulator(config)
+    bounds_map = identified_bounds(config, simulator)
+    names = list(bounds_map)
+    bounds = np.array([bounds_map[n] for n in names], dtype=float)
+    spectra_options = SpectraOptions.model_validate(config.spectra)
+    sim_id = simulator.identity()
+    channels = simulator.channels()
+    noise_section = dict(config.noise)
+    noise_path = noise_section.pop("path", None)
+    reference: dict[str, np.ndarray] = {}
+
+    if config.data.source == "experiment":
+        w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
+        segments = synthetic_track(config, "measurement")
+        ref_opt = ReferenceOptions.model_validate(config.data.reference)
+        if noise_path:
+            noise_model = NoiseModel.load(_resolve(config, noise_path))
+        else:
+            log("reference date: simulating w0 and identifying the noise model B (eq. 3)")
+            ref_segments = synthetic_track(config, "reference", ref_opt.n_segments or len(segments))
+            ref_sim = simulator
+            if ref_opt.simulator_options:
+                ref_sim = type(simulator)(**(dict(config.simulator.options) | ref_opt.simulator_options))
+            key = stable_hash("reference", sim_id, ref_sim.identity(), segments_digest(ref_segments),
+                              ref_opt.model_dump(), spectra_options.model_dump(), config.seed)
+            err_rng = named_rng(config.seed, "reference-model-error")
+            y_mes0, freqs = _cached_spectra(ledger, key + ":mes", lambda: _simulate_spectra(
+                ref_sim, {}, ref_segments, spectra_options, lambda rs: apply_model_error(rs, ref_opt, err_rng)))
+            y_sim0, _ = _cached_spectra(ledger, key + ":sim", lambda: _simulate_spectra(
+                simulator, {}, ref_segments, spectra_options))
+            noise_model = fit_noise_model(y_mes0, y_sim0, {k: v for k, v in noise_section.items()},
+                                          freqs=freqs, channels=channels)
+            reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
+        log("measurement date: simulating w_ref (eq. 10)")
+        key = stable_hash("measurement", sim_id, w_ref, segments_digest(segments), spectra_options.model_dump())
+        y_sim_ref, freqs = _cached_spectra(ledger, key, lambda: _simulate_spectra(
+            simulator, w_ref, segments, spectra_options))
+        b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement"))
+        y_mes = y_sim_ref + b_ref
+    else:
+        from suspid.track import read_measurements
+
+        w_ref = None
+        segments, responses = read_measurements(config.data.measurements, config.data.track_file,
+                                                channels=channels)
+        from suspid.spectra import compute_spectra
+
+        y_mes, freqs = compute_spectra(responses, spectra_options)
+        if not noise_path:
+            raise ConfigError("measured data need a noise model identified at the reference date "
+                              "(noise.path: a file written by a reference-date run)", file=file, key="noise.path")
+        noise_model = NoiseModel.load(_resolve(config, noise_path))
+    noise_model.check_grid(freqs, channels)
+    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"))
+
+    objective_cls = registry.get("objective", config.objective.plugin)
+    objective = objective_cls(**config.objective.options)
+    weights = channel_weights(config, channels)
+    data_identity = stable_hash("data", array_digest(y_mes, b), segments_digest(segments),
+                                config.objective.plugin, config.objective.options, weights.tolist(),
+                                spectra_options.model_dump())
+    return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
+                   channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
+                   data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model)
+
+
+def _resolve(config: Config, path: str | Path) -> Path:
+    p = Path(path).expanduser()
+    if not p.is_absolute() and config.source_file is not None:
+        p = config.source_file.parent / p
+    return p
+
+
+def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:
+    """α_k of eq. 5 from ``objective.weights``, normalised to sum 1; default 1/n."""
+    from suspid.objective_function import validate_weights
+
+    try:
+        return validate_weights(config.objective.weights, channels)
+    except ConfigError as exc:
+        raise ConfigError(exc.detail, file=str(config.source_file), key="objective.weights") from None
+
+
+# -- J(w) through the ledger -------------------------------------------------------------
+def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (the run's fixed paths by default)."""
+    from suspid.objective_function import ObjectiveFunction
+
+    fn = ObjectiveFunction(problem.objective, problem.y_mes, problem.freqs, problem.b if b is None else b,
+                           weights=problem.weights, channels=problem.channels)
+    J, psi = fn.evaluate(y_sim)
+    return J, psi
+
+
+def simulate_spectra_task(task: tuple) -> np.ndarray:
+    """Worker side of one evaluation: ``(plugin, options, w, segments, spectra) -> y_sim``.
+
+    Module-level and built from picklable parts so that process and cluster
+    executors can run it; the simulator is rebuilt from the registry.
+    """
+    plugin, options, w, segments, spectra_options = task
+    simulator = registry.get("simulator", plugin)(**options)
+    y_sim, _ = _simulate_spectra(simulator, w, segments, spectra_options)
+    return y_sim
+
+
+def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str, float]]:
+    w = problem.w_of(x_si)
+    return evaluation_key(problem.simulator.identity(), w, problem.data_identity), w
+
+
+def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor,
+                  on_done: Callable[[int, Evaluation | None, bool], None] = lambda i, ev, reused: None
+                  ) -> list[Evaluation | None]:
+    """J at many parameter vectors: reused from the ledger, or simulated by ``executor``.
+
+    Each result is committed to the ledger the moment it arrives. A failed
+    simulation is recorded as failed and gives ``None`` in the returned list.
+
+    :param X_si: ``(n_points, q)`` SI values.
+    :param on_done: called as ``on_done(index, evaluation, reused)`` for every point.
+    """
+    out: list[Evaluation | None] = [None] * len(X_si)
+    todo, keys = [], {}
+    for i, x in enumerate(np.asarray(X_si, float)):
+        key, w = evaluation_key_of(problem, x)
+        found = ledger.get(key)
+        if found is not None and found.ok:
+            out[i] = found
+            on_done(i, found, True)
+        else:
+            keys[len(todo)] = (i, key, w)
+            todo.append((problem.config.simulator.plugin, dict(problem.config.simulator.options), w,
+                         problem.segments, problem.config.spectra))
+    t0 = time.perf_counter()
+    for j, result in executor.map_unordered(simulate_spectra_task, todo):
+        i, key, w = keys[j]
+        wall = time.perf_counter() - t0
+        if isinstance(result, BaseException):
+            ev = Evaluation(key, w, None, None, status="failed", error=f"{type(result).__name__}: {result}",
+                            wall_time_s=wall)
+            ledger.put(ev)
+            on_done(i, None, False)
+            if not isinstance(result, SimulatorError):  # bad data, bad options or a bug: fatal
+                raise result
+            continue
+        J, psi = j_of_spectra(problem, result)
+        ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=wall)
+        ledger.put(ev)
+        out[i] = ev
+        on_done(i, ev, False)
+    return out
+
+
+def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray) -> tuple[Evaluation, bool]:
+    """J at one parameter vector, from the ledger or computed in this process and committed at once.
+
+    :param x_si: ``(q,)`` SI values in the order of ``problem.names``.
+    :returns: the evaluation and whether it was reused from the ledger.
+    :raises SimulatorError: when the simulator fails (the failure is recorded first).
+    """
+    key, w = evaluation_key_of(problem, x_si)
+    found = ledger.get(key)
+    if found is not None and found.ok:
+        return found, True
+    t0 = time.perf_counter()
+    try:
+        y_sim, _ = _simulate_spectra(problem.simulator, w, problem.segments, problem.config.spectra)
+    except SuspidError as exc:
+        ledger.put(Evaluation(key, w, None, None, status="failed", error=f"{type(exc).__name__}: {exc}",
+                              wall_time_s=time.perf_counter() - t0))
+        raise
+    J, psi = j_of_spectra(problem, y_sim)
+    ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=time.perf_counter() - t0)
+    ledger.put(ev)
+    return ev, False
+
+
+# -- the run ---------------------------------------------------------------------------
+def _section_with_seed(model, values: dict, seed: int, section: str, file: str):
+    """Validate ``values`` as ``model``; a missing ``seed`` field is derived from the run seed."""
+    from pydantic import ValidationError
+
+    values = dict(values)
+    if "seed" in model.model_fields and "seed" not in values:
+        values["seed"] = seed
+    try:
+        return model.model_validate(values)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise ConfigError(err["msg"], file=file, key=".".join([section, *map(str, err["loc"])])) from None
+
+
+def make_progress(enabled: bool):
+    """A rich progress display with elapsed and remaining time (disabled: a no-op display)."""
+    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                               TimeRemainingColumn)
+
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    TextColumn("eta"), TimeRemainingColumn(), TextColumn("{task.fields[status]}"),
+                    disable=not enabled, transient=False)
+
+
+@dataclass
+class RunResult:
+    """What ``suspid run`` produced: the result dict (as in result.json) and the run directory."""
+
+    result: dict[str, Any]
+    run_dir: Path
+    problem: Problem
+    ego: Any
+
+
+def run(config: Config, *, fresh: bool = False, progress: bool = True,
+        log: Callable[[str], None] = print) -> RunResult:
+    """The whole identification (see the module docstring); writes result.json and report.md.
+
+    :param fresh: forget the ledger of a previous run in the same directory.
+    :param progress: show rich progress bars.
+    """
+    from suspid.design import DesignOptions, from_unit, make_design
+    from suspid.ego import EGOOptions, run_ego
+
+    t_start = time.perf_counter()
+    file = str(config.source_file)
+    run_dir = config.run_dir()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.yaml").write_text(yaml.safe_dump(config.model_dump(mode="json", exclude={"source_file"}),
+                                                        sort_keys=False))
+    ledger = Ledger(run_dir / "ledger.sqlite")
+    if fresh:
+        ledger.clear()
+    n_before = ledger.count()
+    problem = build_problem(config, ledger, log)
+    problem.noise_model.save(run_dir / "noise_model.npz")
+
+    design_opts = _section_with_seed(DesignOptions, config.design, seed_for(config.seed, "design"), "design", file)
+    ego_opts = _section_with_seed(EGOOptions, config.ego, seed_for(config.seed, "ego"), "ego", file)
+    surrogate_cls = registry.get("surrogate", config.surrogate.plugin)
+    surrogate_options = dict(config.surrogate.options)
+    model = getattr(surrogate_cls, "Options", None)
+    if model is not None and "seed" in model.model_fields and "seed" not in (config.surrogate.options or {}):
+        surrogate_options["seed"] = seed_for(config.seed, "surrogate")
+    surrogate = surrogate_cls(**surrogate_options)
+    executor_cls = registry.get("executor", config.executor.plugin)
+
+    U0 = make_design(design_opts, problem.q)
+    X0 = from_unit(U0, problem.bounds)
+    ei_history: list[float] = []
+    with make_progress(progress) as bars:
+        design_task = bars.add_task("initial design", total=len(X0), status="")
+        n_reused = 0
+
+        def design_done(i: int, ev: Evaluation | None, reused: bool) -> None:
+            nonlocal n_reused
+            n_reused += reused
+            bars.update(design_task, advance=1,
+                        status=f"J_max {max([e.J for e in evs_seen if e] + [ev.J if ev else -np.inf]):.4g}"
+                        if ev else "failed point")
+            if ev is not None:
+                evs_seen.append(ev)
+
+        evs_seen: list[Evaluation] = []
+        with executor_cls(**config.executor.options) as executor:
+            evs = evaluate_many(problem, ledger, X0, executor, design_done)
+        ok = np.array([e is not None for e in evs])
+        if ok.sum() < 2:
+            raise SimulatorError(f"only {int(ok.sum())} of {len(evs)} design points could be simulated; "
+                                 f"see the failures in {ledger.path}")
+        for i, e in enumerate(evs):
+            if e is not None:
+                ledger.put_iteration("design", i, {"w": e.w, "J": e.J})
+        y0 = np.array([e.J for e in evs if e is not None])
+
+        ego_task = bars.add_task("EGO", total=ego_opts.max_iter, status="")
+
+        def func(x: np.ndarray) -> float:
+            return evaluate(problem, ledger, x)[0].J
+
+        def callback(record) -> None:
+            if record.phase in ("ego", "stop"):
+                ei_history.append(float(record.EI) if record.EI is not None else float("nan"))
+                ledger.put_iteration("ego", record.iteration, {
+                    "phase": record.phase, "w": problem.w_of(record.x), "J": record.J, "EI": record.EI,
+                    "J_max": record.J_max, "epsilon": record.epsilon, "hyperparameters": record.hyperparameters,
+                    "fit_s": record.fit_seconds, "search_s": record.search_seconds, "eval_s": record.eval_seconds})
+                bars.update(ego_task, advance=1 if record.phase == "ego" else 0,
+                            status=f"J_max {record.J_max:.4g}  EI {record.EI:.2e}" if record.EI is not None else "")
+
+        ego = run_ego(func, problem.bounds, ego=ego_opts, design=design_opts, surrogate=surrogate,
+                      X_init=X0[ok], y_init=y0, callback=callback)
+        bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
+
+    result = analyse(problem, ledger, ego, ei_history, config)
+    result.update({
+        "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
+        "n_simulator_calls": int(ego.n_evaluations),
+        "n_simulator_calls_this_session": int(ledger.count() - n_before),
+        "stop_reason": ego.stop_reason, "wall_time_s": round(time.perf_counter() - t_start, 3),
+        "design_min_distance": float(ego.design_min_distance),
+    })
+    (run_dir / "result.json").write_text(json.dumps(result, indent=2))
+    write_report(run_dir, problem, ego, result, ei_history)
+    return RunResult(result, run_dir, problem, ego)
+
+
+def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], config: Config) -> dict[str, Any]:
+    """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict."""
+    from suspid.identifiability import IdentifiabilityOptions, assess
+
+    opts = IdentifiabilityOptions.model_validate(config.identifiability)
+    names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
+    x_opt = np.asarray(ego.x_opt, float)
+    u_opt = problem.to_unit(x_opt)
+    # σ_J: J(w_opt) with redrawn noise paths, y_sim(w_opt) simulated once (paper §2.3 noise model)
+    key = stable_hash("y_sim_opt", problem.simulator.identity(), problem.w_of(x_opt), segments_digest(problem.segments))
+    y_opt, _ = _cached_spectra(ledger, key, lambda: _simulate_spectra(
+        problem.simulator, problem.w_of(x_opt), problem.segments, config.spectra))
+    rng = named_rng(config.seed, "identifiability")
+    redraws = [j_of_spectra(problem, y_opt, problem.noise_model.sample(len(problem.segments), rng))[0]
+               for _ in range(opts.n_redraws)]
+    sigma_J = float(np.std(redraws, ddof=1))
+    verdict = assess(names, u_opt, float(ego.y_opt), sigma_J, ego.surrogate, opts, rng)
+    interval_si = lo[:, None] + verdict.interval_unit * (hi - lo)[:, None]
+    units = {p.name: p.unit for p in problem.simulator.parameters()}
+    result: dict[str, Any] = {
+        "name": config.name,
+        "parameters": names,
+        "units": {n: units.get(n, "") for n in names},
+        "bounds": {n: [float(a), float(b)] for n, a, b in zip(names, lo, hi)},
+        "w_opt": {n: float(v) for n, v in zip(names, x_opt)},
+        "w_opt_normalized": {n: float(v) for n, v in zip(names, u_opt)},
+        "identifiable": {n: bool(v) for n, v in zip(names, verdict.identifiable)},
+        "non_identifiable_reasons": {n: r for n, r in zip(names, verdict.reasons) if r},
+        "correlated_with": {n: c for n, c in zip(names, verdict.correlated_with) if c},
+        "interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_si)},
+        "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, verdict.interval_unit)},
+        "interval_threshold": {"sigma_J": sigma_J, "delta": verdict.delta, "n_redraws": opts.n_redraws},
+        "sensitivity": {
+            "total_sobol": {n: float(v) for n, v in zip(names, verdict.total_index)},
+            "first_sobol": {n: float(v) for n, v in zip(names, verdict.first_index)},
+            "lengthscales": None if verdict.lengthscales is None
+            else {n: float(v) for n, v in zip(names, np.ravel(verdict.lengthscales))},
+        },
+        "J_max": float(ego.y_opt),
+        "objective": config.objective.plugin,
+        "surrogate": config.surrogate.plugin,
+        "simulator": config.simulator.plugin,
+        "seed": config.seed,
+    }
+    if problem.w_ref is not None:
+        w_ref = np.array([problem.w_ref[n] for n in names])
+        result["w_ref"] = {n: float(v) for n, v in zip(names, w_ref)}
+        result["w_ref_normalized"] = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
+        result["errors_percent"] = {n: float(100 * abs(a - b) / (h - l))
+                                    for n, a, b, l, h in zip(names, x_opt, w_ref, lo, hi)}
+    return result
+
+
+def _figure_channel(config: Config, channels: Sequence[str]) -> int:
+    wanted = config.output.figure_channel
+    if wanted is not None:
+        if wanted not in channels:
+            raise ConfigError(f"unknown channel '{wanted}'; channels are {', '.join(channels)}",
+                              file=str(config.source_file), key="output.figure_channel")
+        return list(channels).index(wanted)
+    for i, c in enumerate(channels):
+        if "carbody" in c and "vertical" in c:
+            return i
+    return 0
+
+
+def write_report(run_dir: Path, problem: Problem, ego, result: dict[str, Any], ei_history: list[float]) -> Path:
+    """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot."""
+    from suspid.report import figure_convergence, figure_parameters, figure_spectra, markdown_table
+
+    config = problem.config
+    names = problem.names
+    k = _figure_channel(config, problem.channels)
+    if problem.reference:
+        y_mes0, y_sim0 = problem.reference["y_mes0"], problem.reference["y_sim0"]
+        date = "reference date (where B is identified)"
+    else:
+        y_mes0 = problem.y_mes
+        y_sim0, _ = _simulate_spectra(problem.simulator, {}, problem.segments, config.spectra)
+        date = "measurement date"
+    y_mod0 = y_sim0 + problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1"))
+    figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, y_mes0, y_sim0, y_mod0, k, problem.channels[k])
+    w_ref_n = np.array([result["w_ref_normalized"][n] for n in names]) if "w_ref" in result else None
+    figure_parameters(run_dir / "figure2_parameters.png", names,
+                      {config.objective.plugin: np.array([result["w_opt_normalized"][n] for n in names])},
+                      w_ref_n, {config.objective.plugin: np.array([result["interval_normalized"][n] for n in names])})
+    figure_convergence(run_dir / "convergence.png", np.asarray(ego.y), ego.n_initial, ei_history)
+
+    rows = []
+    for n in names:
+        u = result["units"][n]
+        row = [n, u, result["w_opt"][n]]
+        if "w_ref" in result:
+            row += [result["w_ref"][n], f"{result['errors_percent'][n]:.2f}"]
+        lo_i, hi_i = result["interval"][n]
+        row += [f"[{lo_i:.4g}, {hi_i:.4g}]", "yes" if result["identifiable"][n] else
+                "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
+                f"{result['sensitivity']['total_sobol'][n]:.3f}"]
+        rows.append(row)
+    header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
+        + ["interval", "identifiable", "total Sobol index"]
+    text = f"""# suspid run `{config.name}`
+
+Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
+seed {config.seed}. {result['n_initial']} initial points (maximin design, minimum distance
+{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} EGO iterations, stop: `{result['stop_reason']}`,
+J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
+
+{markdown_table(header, rows)}
+
+Components marked **no** are not identifiable from these data: their value is not a finding.
+Intervals: the range of the parameters whose metamodel J stays within δ = {result['interval_threshold']['delta']:.3g}
+(2 σ_J, σ_J = {result['interval_threshold']['sigma_J']:.3g} the scatter of J(w_opt) under redrawn noise paths) of J_max.
+
+## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
+
+![figure 1](figure1_spectra.png)
+
+## Figure 2: identified parameters, normalised
+
+![figure 2](figure2_parameters.png)
+
+## Convergence
+
+![convergence](convergence.png)
+"""
+    if result.get("correlated_with"):
+        text += "\n## Correlated components\n\n" + "\n".join(
+            f"- `{n}` with {', '.join(c)}" for n, c in result["correlated_with"].items()) + "\n"
+    path = run_dir / "report.md"
+    path.write_text(text)
+    return path
