@@ -84,6 +84,9 @@ import numpy as np
 
 from . import parameters as P
 
+TABLE_PAD = 2
+"""Zero leaves before the first track sample (and at least as many after the last one)."""
+
 RESTRAINT_HZ = 300.0
 """Natural frequency (Hz) of the stiff springs that hold the longitudinal and wheelset pitch coordinates."""
 
@@ -237,17 +240,36 @@ class TrainModel:
                         lambda q, k=kind: q[f"m_{k}"])
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
                         lambda q, k=kind: (q[f"I_{k}_x"], q[f"I_{k}_y"], q[f"I_{k}_z"], 0.0, 0.0, 0.0))
-            mass_marker = mbs.AddMarker(ii.MarkerBodyMass(bodyNumber=obj))
-            mbs.AddLoad(ii.LoadMassProportional(markerNumber=mass_marker, loadVector=[0.0, 0.0, -P.GRAVITY]))
-            # restraints of the coordinates that are not degrees of freedom
-            restrained = [0] + ([4] if name.startswith("wheelset") else [])
-            for coord in restrained:
-                m = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=node, coordinate=coord))
-                csd = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[self._m_ground, m], stiffness=0.0))
-                kind_i = "m" if coord == 0 else "I"
-                self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "stiffness", v),
-                            lambda q, k=kind, c=coord: (2 * math.pi * RESTRAINT_HZ) ** 2 * (
-                                q[f"m_{k}"] if c == 0 else q[f"I_{k}_y"]))
+
+        # gravity, and restraints of the coordinates that are not degrees of freedom (longitudinal
+        # motion of every body, wheelset pitch: stiff springs to ground), gathered in one exudyn
+        # GenericODE2 "ground" element: gravity -m g on each body's vertical coordinate (the nodes sit at
+        # the centres of mass) and a sparse diagonal stiffness. One item instead of 7 loads and 11
+        # connectors: exudyn's cost per item and step dominates this small model.
+        n_r = 6 * len(BODIES)
+        restrained = [(6 * i + k, name, k) for i, name in enumerate(BODIES)
+                      for k in ([0, 4] if name.startswith("wheelset") else [0])]
+        self.restraint = mbs.AddObject(ii.ObjectGenericODE2(
+            nodeNumbers=[self.nodes[b] for b in BODIES], massMatrix=_sparse(n_r, []),
+            stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i, _, _ in restrained]), dampingMatrix=_sparse(n_r, []),
+            forceVector=[0.0] * n_r))
+
+        def restraint_stiffness(q):
+            w2 = (2 * math.pi * RESTRAINT_HZ) ** 2
+            kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
+            return tuple((i, i, w2 * (q[f"m_{kind(b)}"] if k == 0 else q[f"I_{kind(b)}_y"])) for i, b, k in restrained)
+
+        self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "stiffnessMatrix", _sparse(n_r, v)),
+                    restraint_stiffness)
+
+        def gravity(q):
+            kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
+            f = np.zeros(n_r)
+            for i, b in enumerate(BODIES):
+                f[6 * i + 2] = -P.GRAVITY * q[f"m_{kind(b)}"]
+            return f
+
+        self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "forceVector", list(v)), gravity)
 
         car = self.objects["carbody"]
         xw = wheelset_positions(p)
@@ -284,19 +306,21 @@ class TrainModel:
             arb = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[mr0, mr1], stiffness=0.0))
             self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v), lambda q: q["k_arb"])
 
-        # --- odometer: car-centre distance along the track, in track samples
-        self.odometer = mbs.AddNode(ii.NodeGenericODE2(referenceCoordinates=[0.0], initialCoordinates=[0.0],
-                                                       initialCoordinates_t=[0.0], numberOfODE2Coordinates=1))
-        mbs.AddObject(ii.ObjectMass1D(nodeNumber=self.odometer, mass=1.0))
-
-        # --- wheel-rail contact, one force element per wheelset
+        # --- wheel-rail contact: one force element per wheelset, on the wheelset's coordinates and its
+        #     odometer (its distance along the track, in track samples). One element per wheelset because
+        #     exudyn.symbolic vectors of 8 or more entries cannot be indexed (crash in exudyn 1.13).
+        self.odometers = []
         self.contacts = []
-        zeros7 = np.zeros((7, 7))
+        mass = np.zeros((7, 7))
+        mass[6, 6] = 1.0  # the odometer's (unit) mass
+        zeros = np.zeros((7, 7))
         for j in range(4):
-            ws = self.nodes[f"wheelset_{j + 1}"]
-            c = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=[ws, self.odometer], massMatrix=zeros7,
-                                                   stiffnessMatrix=zeros7, dampingMatrix=zeros7,
+            odo = mbs.AddNode(ii.NodeGenericODE2(referenceCoordinates=[0.0], initialCoordinates=[0.0],
+                                                 initialCoordinates_t=[0.0], numberOfODE2Coordinates=1))
+            c = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=[self.nodes[f"wheelset_{j + 1}"], odo],
+                                                   massMatrix=mass, stiffnessMatrix=zeros, dampingMatrix=zeros,
                                                    forceVector=[0.0] * 7))
+            self.odometers.append(odo)
             self.contacts.append(c)
             self._track(lambda v, o=c: mbs.SetObjectParameter(o, "stiffnessMatrix", v),
                         lambda q: self.contact_matrices(q, self.speed)[0])
@@ -305,19 +329,22 @@ class TrainModel:
             self._track(lambda v, o=c: mbs.SetObjectParameter(o, "forceVector", list(v)),
                         lambda q: (0.0, 0.0, P.static_loads(q)["axle"], 0.0, 0.0, 0.0, 0.0))
 
-        # --- sensors
-        self.sensor_items = []
+        # --- sensors: accelerations of the nodes that carry accelerometers (C q'' gives the sensors)
         for s in self.sensors:
             if s.body not in self.objects:
                 raise ValueError(f"sensor '{s.name}': unknown body '{s.body}'")
-            self.sensor_items.append(mbs.AddSensor(ii.SensorBody(
-                bodyNumber=self.objects[s.body], localPosition=list(s.position), storeInternal=True,
-                writeToFile=False, outputVariableType=exu.OutputVariableType.Acceleration)))
+            if s.direction not in DIRECTIONS:
+                raise ValueError(f"sensor '{s.name}': unknown direction '{s.direction}'")
+        self.sensor_bodies = sorted({s.body for s in self.sensors}, key=BODIES.index)
+        self.sensor_items = [mbs.AddSensor(ii.SensorNode(
+            nodeNumber=self.nodes[b], storeInternal=True, writeToFile=False,
+            outputVariableType=exu.OutputVariableType.Coordinates_tt)) for b in self.sensor_bodies]
 
         self._time_extras()
         self._apply(p, force=True)
         mbs.Assemble()
         self._coordinate_map()
+        self.point_jacobians = self._sensor_jacobians()
 
     def _track(self, setter: Callable[[object], None], getter: Callable[[dict], object]) -> None:
         """Register an item field that depends on parameter values."""
@@ -371,18 +398,17 @@ class TrainModel:
         self._apply(self.values)
 
     # ------------------------------------------------------------------ contact
-    def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
-        """Stiffness and damping matrices (7 x 7) of one contact element.
+    def wheelset_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
+        """Stiffness and damping (6 x 6) of one wheelset's contact, coordinates x, y, z, roll, pitch, yaw.
 
-        Coordinates: the wheelset's x, y, z, roll, pitch, yaw and the odometer.
         With creep computed by the symbolic function (saturation, variable
         speed) only the Hertzian and gravitational terms stay here.
         """
         kh = P.hertz_stiffness(p)
         f = P.creep_coefficient(p)
         lam, l0, r0 = p["conicity"], p["l0"], p["r0"]
-        K = np.zeros((7, 7))
-        D = np.zeros((7, 7))
+        K = np.zeros((6, 6))
+        D = np.zeros((6, 6))
         K[2, 2] = 2.0 * kh
         K[3, 3] = 2.0 * kh * l0 ** 2
         K[1, 1] = P.gravitational_stiffness(p)
@@ -393,9 +419,18 @@ class TrainModel:
             D[5, 5] = 2.0 * f * l0 ** 2 / speed
         return K, D
 
+    def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
+        """Stiffness and damping (7 x 7) of one contact element: the wheelset's coordinates, the odometer."""
+        k6, d6 = self.wheelset_matrices(p, speed)
+        K = np.zeros((7, 7))
+        D = np.zeros((7, 7))
+        K[:6, :6] = k6
+        D[:6, :6] = d6
+        return K, D
+
     @staticmethod
     def input_matrix(p: dict[str, float]) -> np.ndarray:
-        """G (7 x 3): generalised contact force per unit track input, columns :data:`TRACK_INPUTS`.
+        """G (6 x 3): generalised contact force on a wheelset per unit track input, columns :data:`TRACK_INPUTS`.
 
         The force on the wheelset is G @ (V, Y, C) at its position: the
         Hertzian springs pull towards the rail level V and cross-level C; the
@@ -403,7 +438,7 @@ class TrainModel:
         """
         kh = P.hertz_stiffness(p)
         f = P.creep_coefficient(p)
-        G = np.zeros((7, 3))
+        G = np.zeros((6, 3))
         G[2, 0] = 2.0 * kh
         G[3, 2] = kh * p["l0"]
         G[1, 1] = P.gravitational_stiffness(p)
@@ -416,7 +451,6 @@ class TrainModel:
         feat = self.features
         self.track_leaves: list[list] = []
         self.speed_leaves: list = []
-        self.wheel_offsets: list = []
         self._keep: list = []
         self.speed_constraint = None
         if feat.bump_stops:
@@ -429,21 +463,23 @@ class TrainModel:
         esym = self.exu.symbolic
         n = feat.track_capacity
         self.track_leaves = [[esym.Real(f"{ch}_{i}", 0.0) for i in range(n + 1)] for ch in TRACK_INPUTS]
-        self.wheel_offsets = [esym.Real(f"offset_{j}", 0.0) for j in range(4)]
         self._uf_constants()
         sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
-        for j, c in enumerate(self.contacts):
-            fn = self._contact_force_function(j)
-            uf = CreateSymbolicUserFunction(self.mbs, fn, "forceUserFunction", c)
-            self.mbs.SetObjectParameter(c, "forceUserFunction", uf)
+        for contact in self.contacts:
+            uf = CreateSymbolicUserFunction(self.mbs, self._contact_force_function(), "forceUserFunction", contact)
+            self.mbs.SetObjectParameter(contact, "forceUserFunction", uf)
             self._keep.append(uf)
         if feat.variable_speed:
             m = feat.speed_capacity
             self.speed_leaves = [esym.Real(f"speed_{i}", 0.0) for i in range(m + 1)]
             self.speed_step = esym.Real("speed_dt_inv", 1.0)
-            m_odo = self.mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.odometer, coordinate=0))
-            con = self.mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[self._m_ground, m_odo],
+            m_odo = [self.mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=o, coordinate=0))
+                     for o in self.odometers]
+            con = self.mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[self._m_ground, m_odo[0]],
                                                              velocityLevel=True))
+            # the other wheelsets keep their distance to the leading one
+            self.odometer_links = [self.mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[m_odo[0], m_odo[j]]))
+                                   for j in range(1, 4)]
 
             def speed_function(mbs, t, itemNumber, lOffset):
                 return _lookup(esym, self.speed_leaves, t * self.speed_step, m)
@@ -453,32 +489,35 @@ class TrainModel:
             self._keep.append(uf)
             self.speed_constraint = con
 
-    def _contact_force_function(self, j: int):
-        """The symbolic force function of wheelset j's contact element (track input, creep laws).
+    def _contact_force_function(self):
+        """The symbolic force function of a contact element (track input, creep laws).
 
-        Parameter-dependent constants are named symbolic ``Real`` values
-        (:attr:`uf_values`), updated with the parameters: the function itself
-        is recorded once.
+        Element coordinates: the wheelset's x, y, z, roll, pitch, yaw (0-5) and
+        its odometer (distance in track samples, 6). Parameter-dependent
+        constants are named symbolic ``Real`` values (:attr:`uf_values`),
+        updated with the parameters: the function itself is recorded once.
         """
         esym = self.exu.symbolic
         feat = self.features
         n = feat.track_capacity
         leaves = self.track_leaves
-        offset = self.wheel_offsets[j]
         c = self.uf_values
 
         def force(mbs, t, itemNumber, q, q_t):
             q.SetVector([0.0] * 7)
             q_t.SetVector([0.0] * 7)
-            where = q[6] + offset
+            where = q[6]
             V = _lookup(esym, leaves[0], where, n)
             Y = _lookup(esym, leaves[1], where, n)
             C = _lookup(esym, leaves[2], where, n)
+            if not feat.creep_in_user_function:
+                # one lookup per channel: each table value scales a constant force pattern
+                return (V * esym.Vector([0.0, 0.0, c["two_kh"], 0.0, 0.0, 0.0, 0.0])
+                        + Y * esym.Vector([0.0, c["kg"], 0.0, 0.0, 0.0, c["yaw_y"], 0.0])
+                        + C * esym.Vector([0.0, 0.0, 0.0, c["kh_l0"], 0.0, 0.0, 0.0]))
             fz = c["two_kh"] * V
             mx = c["kh_l0"] * C
             fy = c["kg"] * Y
-            if not feat.creep_in_user_function:
-                return [0.0, fy, fz, mx, 0.0, c["yaw_y"] * Y, 0.0]
             # creep forces computed here: speed from the odometer, optional saturation
             v = q_t[6] * c["dx"]
             nu_y = q_t[1] / v - q[5]                                  # lateral creepage
@@ -560,15 +599,14 @@ class TrainModel:
                     continue
                 free.append(start + k)
                 labels.append((name, motion))
-        self.odometer_index = mbs.GetNodeODE2Index(self.odometer)
         self.free = np.array(free)
         self.labels = labels
         position = {g: i for i, g in enumerate(free)}
-        # element coordinate k of contact j -> free index (or -1)
+        # coordinate k of wheelset j -> free index (or -1)
         self.contact_rows = []
         for j in range(4):
             start = self.node_index[f"wheelset_{j + 1}"]
-            self.contact_rows.append([position.get(start + k, -1) for k in range(6)] + [-1])
+            self.contact_rows.append([position.get(start + k, -1) for k in range(6)])
 
     # ------------------------------------------------------------------ linearisation
     def linear_system(self) -> LinearSystem:
@@ -585,28 +623,39 @@ class TrainModel:
         K = np.asarray(K)[np.ix_(idx, idx)]
         D = np.asarray(D)[np.ix_(idx, idx)]
         n = len(idx)
-        G7 = self.input_matrix(self.values)
+        G6 = self.input_matrix(self.values)
         G = np.zeros((4, n, 3))
         for j in range(4):
             for k, row in enumerate(self.contact_rows[j]):
                 if row >= 0:
-                    G[j, row] = G7[k]
+                    G[j, row] = G6[k]
         return LinearSystem(M, K, D, G, self.sensor_matrix(), list(self.labels),
                             wheelset_positions(self.values), self.speed)
 
     def sensor_matrix(self) -> np.ndarray:
-        """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration.
+        """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration."""
+        C = np.zeros((len(self.sensors), len(self.free)))
+        column = {g: i for i, g in enumerate(self.free)}
+        for i, s in enumerate(self.sensors):
+            start = self.node_index[s.body]
+            for k in range(6):
+                if start + k in column:
+                    C[i, column[start + k]] = self.point_jacobians[i, k]
+        return C
 
-        Derived from exudyn's own kinematics: the sensor point's position is
-        read back from the system for small perturbations of each coordinate
-        (a = C q'' holds to first order in the small rotations).
+    def _sensor_jacobians(self) -> np.ndarray:
+        """``(n_sensors, 6)``: d(sensor position component)/d(coordinate) of the sensor's body node.
+
+        Read back from exudyn's kinematics for small perturbations of each
+        coordinate: the sensor acceleration is J q''_body to first order in
+        the small rotations (the time solver uses it on exudyn's node
+        accelerations, the frequency solver on the linear model).
         """
         exu = self.exu
         mbs = self.mbs
         cfg = exu.ConfigurationType.Current
         q0 = np.array(mbs.systemData.GetODE2Coordinates(configuration=cfg))
-        n = len(self.free)
-        C = np.zeros((len(self.sensors), n))
+        J = np.zeros((len(self.sensors), 6))
         eps = 1e-6
         try:
             for i, s in enumerate(self.sensors):
@@ -614,51 +663,69 @@ class TrainModel:
                 comp = DIRECTIONS[s.direction]
                 start = self.node_index[s.body]
                 for k in range(6):
-                    g = start + k
-                    col = np.flatnonzero(self.free == g)
-                    if col.size == 0:
-                        continue
                     vals = []
                     for sign in (1.0, -1.0):
                         q = q0.copy()
-                        q[g] += sign * eps
+                        q[start + k] += sign * eps
                         mbs.systemData.SetODE2Coordinates(list(q), configuration=cfg)
                         vals.append(mbs.GetObjectOutputBody(obj, exu.OutputVariableType.Position,
                                                             localPosition=list(s.position),
                                                             configuration=cfg)[comp])
-                    C[i, col[0]] = (vals[0] - vals[1]) / (2 * eps)
+                    J[i, k] = (vals[0] - vals[1]) / (2 * eps)
         finally:
             mbs.systemData.SetODE2Coordinates(list(q0), configuration=cfg)
-        return C
+        return J
+
+    def sensor_accelerations(self) -> np.ndarray:
+        """``(n_sensors, n_records)`` accelerations from the stored node accelerations of the last run."""
+        node_acc = {}
+        for body, item in zip(self.sensor_bodies, self.sensor_items):
+            node_acc[body] = np.asarray(self.mbs.GetSensorStoredData(item))[:, 1:7]
+        return np.array([node_acc[s.body] @ self.point_jacobians[i] for i, s in enumerate(self.sensors)])
 
     # ------------------------------------------------------------------ track tables
-    def set_track(self, table: np.ndarray, dx: float, offsets: Sequence[float]) -> None:
+    def set_track(self, table: np.ndarray, dx: float) -> None:
         """Put a track table into the symbolic leaves.
 
-        :param table: ``(3, n)`` rows :data:`TRACK_INPUTS`, m, at spacing ``dx``
-            (n <= track_capacity + 1; the rest of the leaves are zero).
-        :param offsets: per wheelset, its distance ahead of the car centre in samples.
+        :param table: ``(3, n)`` rows :data:`TRACK_INPUTS`, m, at spacing ``dx``:
+            sample i goes to leaf ``TABLE_PAD + i``; the other leaves are zero
+            (the table must start and end at zero: tapered).
         """
         n = table.shape[1]
         cap = self.features.track_capacity
-        if n > cap + 1:
-            raise ValueError(f"track table of {n} samples exceeds the capacity {cap + 1}")
+        if n + 2 * TABLE_PAD > cap + 1:
+            raise ValueError(f"track table of {n} samples exceeds the capacity {cap + 1 - 2 * TABLE_PAD}")
+        stop = TABLE_PAD + n
         for leaves, row in zip(self.track_leaves, table):
             for i in range(cap + 1):
-                leaves[i].SetValue(float(row[i]) if i < n else 0.0)
-        for leaf, off in zip(self.wheel_offsets, offsets):
-            leaf.SetValue(float(off))
+                leaves[i].SetValue(float(row[i - TABLE_PAD]) if TABLE_PAD <= i < stop else 0.0)
         self.uf_values["dx"].SetValue(float(dx))
 
     def set_speed_table(self, speeds_per_sample: np.ndarray, dt: float) -> None:
-        """Odometer velocity (samples/s) at times k dt, for the variable-speed constraint."""
+        """Odometer velocity (samples/s) at times k dt, for the variable-speed constraint.
+
+        The last value is held to the end of the table (and extrapolated as a constant).
+        """
         cap = self.features.speed_capacity
-        if len(speeds_per_sample) > cap + 1:
+        if len(speeds_per_sample) > cap:
             raise ValueError("speed table exceeds its capacity")
         last = float(speeds_per_sample[-1])
         for i in range(cap + 1):
             self.speed_leaves[i].SetValue(float(speeds_per_sample[i]) if i < len(speeds_per_sample) else last)
         self.speed_step.SetValue(1.0 / dt)
+
+
+def _sparse(n: int, triplets) -> object:
+    """An exudyn MatrixContainer (n x n) in sparse triplet mode."""
+    import exudyn
+
+    mc = exudyn.MatrixContainer()
+    if triplets:
+        mc.SetWithSparseMatrix(np.array(triplets, dtype=float), numberOfRows=n, numberOfColumns=n,
+                               useDenseMatrix=False)
+    else:
+        mc.Initialize(n, n, useDenseMatrix=False)
+    return mc
 
 
 def _same(a, b) -> bool:
@@ -676,10 +743,13 @@ def _tree(esym, leaves, tau, lo: int, hi: int):
 
 
 def _lookup(esym, leaves, tau, n: int):
-    """Table value at fractional sample ``tau``: zero outside [0, n]."""
-    zero = esym.Real(0.0)
-    inside = esym.IfThenElse(tau < float(n), _tree(esym, leaves, tau, 0, n), zero)
-    return esym.IfThenElse(tau < 0.0, zero, inside)
+    """Table value at fractional sample ``tau`` by linear interpolation of ``leaves[0..n]``.
+
+    Outside [0, n] the first or last interval is extrapolated: tables keep
+    :data:`TABLE_PAD` equal leaves at both ends, so that the value stays
+    constant there (no range test needed).
+    """
+    return _tree(esym, leaves, tau, 0, n)
 
 
 def _saturation(esym, fx, fy, limit):

@@ -1,0 +1,274 @@
+"""The ``exudyn-train`` simulator: options, parameters, channels, simulate, modes."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal, Mapping, Sequence
+
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
+
+from suspid._options import parse_options
+from suspid.errors import ConfigError, SimulatorError
+from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
+
+from . import parameters as P
+from .model import BODIES, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
+from .modes import modes_summary
+from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
+                      simulate_frequency, simulate_time)
+
+
+class SensorOptions(BaseModel):
+    """One accelerometer channel."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, description="channel name")
+    body: Literal[BODIES] = Field(description="body the sensor is fixed to")
+    direction: Literal["vertical", "lateral", "longitudinal"] = "vertical"
+    position: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0), description="m, relative to the body's centre of mass (x forward, y left, z up)")
+
+
+class ContactOptions(BaseModel):
+    """Wheel-rail contact options."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    conicity: PositiveFloat | None = Field(default=None, le=1.0,
+                                           description="equivalent conicity (default: the parameter table's)")
+    creep_saturation: bool = Field(default=False, description="nonlinear creep saturation (time solver only)")
+    friction: PositiveFloat = Field(default=0.3, le=1.0, description="wheel-rail friction coefficient for saturation")
+    bump_stops: bool = Field(default=False, description="lateral bump stops carbody-bogie (time solver only)")
+    bump_gap_m: PositiveFloat = Field(default=0.025, description="free lateral play before the bump stop, m "
+                                      "(Manchester benchmark, railway-data.md §1)")
+    bump_stiffness: PositiveFloat = Field(default=2.0e6, description="bump stop stiffness, N/m (assumption)")
+
+
+class Options(BaseModel):
+    """The ``simulator.options`` of ``exudyn-train``."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    solver: Literal["time", "frequency"] = Field(
+        default="frequency", description="'frequency': linearised model, constant speed, fast; "
+        "'time': exudyn generalised-alpha, nonlinear options, variable speed")
+    fs_hz: PositiveFloat = Field(default=100.0, description="output sampling rate, Hz")
+    step_s: PositiveFloat = Field(default=0.002, le=0.01,
+                                  description="largest time step of the time solver, s (used: 1/(k fs))")
+    spectral_radius: float = Field(default=0.8, ge=0.0, le=1.0,
+                                   description="generalised-alpha spectral radius at infinite frequency")
+    speed_kmh: PositiveFloat = Field(default=320.0, description="speed for `modes` (segments carry their own), km/h")
+    sensors: list[SensorOptions] | None = Field(default=None, description="channels (default: 10, see docs)")
+    contact: ContactOptions = Field(default_factory=ContactOptions)
+    vehicle: dict[str, float] = Field(default_factory=dict,
+                                      description="nominal values of model parameters, name -> SI value")
+    taper_m: float = Field(default=20.0, ge=0.0, description="fade-in/out length of each segment's track, m")
+    settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: zero padding for the decay "
+                                    "of the impulse response, s")
+
+    @field_validator("vehicle")
+    @classmethod
+    def _known(cls, value: dict[str, float]) -> dict[str, float]:
+        problems = P.check_values(value)
+        if problems:
+            raise ValueError(problems[0] + f" (known: {', '.join(sorted(P.BY_NAME))})")
+        return value
+
+    @field_validator("sensors")
+    @classmethod
+    def _unique(cls, value):
+        if value is not None:
+            names = [s.name for s in value]
+            if not names:
+                raise ValueError("at least one sensor is needed")
+            dup = sorted({n for n in names if names.count(n) > 1})
+            if dup:
+                raise ValueError(f"sensor names must be unique, repeated: {', '.join(dup)}")
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Options":
+        if self.contact.conicity is not None and "conicity" in self.vehicle:
+            raise ValueError("conicity is given twice (contact.conicity and vehicle.conicity); keep one")
+        if self.solver == "frequency" and (self.contact.creep_saturation or self.contact.bump_stops):
+            raise ValueError("creep_saturation and bump_stops are nonlinear: they need solver: time")
+        return self
+
+
+class ExudynTrain(Simulator):
+    """High-speed car built with exudyn: 7 rigid bodies, suspension, linearised wheel-rail contact.
+
+    See :mod:`suspid.plugins.simulators.exudyn_train` for the model and
+    :mod:`.parameters` for every parameter's value and source. The
+    constructor only stores its options; models are built on first use and
+    kept (one per solver configuration), and are not pickled.
+    """
+
+    name = "exudyn-train"
+    Options = Options
+
+    def __init__(self, **options: Any) -> None:
+        super().__init__(**options)
+        self._opts: Options | None = None
+        self._models: dict = {}
+        self._spectra = InputSpectra()
+        self._frf: dict = {}
+
+    # ------------------------------------------------------------------ options and parameters
+    @property
+    def opts(self) -> Options:
+        """The validated options (validated on first use)."""
+        if self._opts is None:
+            self._opts = parse_options(Options, self.options, "simulator.options")
+        return self._opts
+
+    def _nominal(self) -> dict[str, float]:
+        values = P.nominal_values()
+        values.update(self.opts.vehicle)
+        if self.opts.contact.conicity is not None:
+            values["conicity"] = float(self.opts.contact.conicity)
+        return values
+
+    def parameters(self) -> list[Parameter]:
+        nominal = self._nominal()
+        out = []
+        for p in P.PARAMETERS:
+            v = nominal[p.name]
+            out.append(Parameter(p.name, p.unit, v, min(p.lower, v), max(p.upper, v),
+                                 f"{p.description}; source: {p.source}"))
+        return out
+
+    def default_parameters(self) -> list[str]:
+        return list(P.DEFAULT_IDENTIFIED)
+
+    def sensors(self, values: Mapping[str, float] | None = None) -> list[Sensor]:
+        """The sensors of the configured channels (defaults depend on the geometry ``values``)."""
+        if self.opts.sensors is None:
+            return default_sensors(dict(values or self._nominal()))
+        return [Sensor(s.name, s.body, s.direction, tuple(float(c) for c in s.position)) for s in self.opts.sensors]
+
+    def channels(self) -> list[str]:
+        return [s.name for s in self.sensors()]
+
+    def values(self, w: Mapping[str, float]) -> dict[str, float]:
+        """All parameter values for ``w`` (parameters not named keep their nominal values).
+
+        :raises SimulatorError: unknown names or non-positive values.
+        """
+        values = self._nominal()
+        unknown = [k for k in w if k not in values]
+        if unknown:
+            raise SimulatorError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for exudyn-train; "
+                                 f"known: {', '.join(sorted(values))}")
+        values.update({k: float(v) for k, v in w.items()})
+        problems = P.check_values(values)
+        if problems:
+            raise SimulatorError(problems[0])
+        return values
+
+    # ------------------------------------------------------------------ models
+    def _model(self, values: dict[str, float], speed: float, features: TimeFeatures) -> TrainModel:
+        sensors = self.sensors(values)
+        key = features.key()
+        model = self._models.get(key)
+        if model is None or model.needs_rebuild(values, sensors, features):
+            try:
+                model = TrainModel(values, sensors, speed, features)
+            except ValueError as exc:
+                raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
+            self._models[key] = model
+            if key == TimeFeatures().key():
+                self._frf.clear()
+        else:
+            model.update(values, speed)
+        return model
+
+    def _features(self, segments: Sequence[TrackSegment]) -> TimeFeatures:
+        c = self.opts.contact
+        n = max(len(s.distance) for s in segments) + 2 * TABLE_PAD
+        cap = 1 << max(4, int(math.ceil(math.log2(n))))
+        variable = not all(is_constant_speed(s) for s in segments)
+        longest = max(s.duration() for s in segments) + 5.0
+        speed_cap = (1 << max(4, int(math.ceil(math.log2(longest / 0.02 + 10))))) if variable else 0
+        return TimeFeatures(track_capacity=cap, variable_speed=variable, speed_capacity=speed_cap,
+                            saturation=c.creep_saturation, friction=c.friction, bump_stops=c.bump_stops,
+                            bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness)
+
+    # ------------------------------------------------------------------ simulate
+    def simulate(self, w: Mapping[str, float], segments: Sequence[TrackSegment]) -> list[Response]:
+        segments = list(segments)
+        if not segments:
+            return []
+        for s in segments:
+            check_segment(s)
+        values = self.values(w)
+        if self.opts.solver == "time":
+            return self._simulate_time(values, segments)
+        return self._simulate_frequency(values, segments)
+
+    def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
+        o = self.opts
+        features = self._features(segments)
+        settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
+                                newton=features.saturation or features.bump_stops)
+        out = []
+        for seg in segments:
+            speed = float(seg.mean_speed)
+            model = self._model(values, speed, features)
+            out.append(simulate_time(model, seg, settings))
+        return out
+
+    def _simulate_frequency(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
+        o = self.opts
+        varying = [s.name for s in segments if not is_constant_speed(s)]
+        if varying:
+            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
+                                 f"constant speed per segment; use solver: time")
+        groups: dict[float, list[int]] = {}
+        for i, s in enumerate(segments):
+            groups.setdefault(float(s.mean_speed), []).append(i)
+        out: list[Response | None] = [None] * len(segments)
+        channels = tuple(s.name for s in self.sensors(values))
+        for speed, idx in groups.items():
+            model = self._model(values, speed, TimeFeatures())
+            key = tuple(sorted(values.items()))
+            cached = self._frf.get(speed)
+            if cached is not None and cached[0] == key:
+                response, frf_cache = cached[1], cached[2]
+            else:   # once per parameter vector and speed, reused for every segment
+                response = FrequencyResponse(model.linear_system())
+                frf_cache = {}
+                self._frf[speed] = (key, response, frf_cache)
+            results = simulate_frequency(response, [segments[i] for i in idx], o.fs_hz, o.taper_m, o.settle_s,
+                                         self._spectra, channels, frf_cache)
+            for i, r in zip(idx, results):
+                out[i] = r
+        return out  # type: ignore[return-value]
+
+    # ------------------------------------------------------------------ modes
+    def linear_system(self, w: Mapping[str, float] | None = None, speed: float | None = None):
+        """exudyn's linearisation at ``speed`` (m/s; default the ``speed_kmh`` option)."""
+        v = float(speed) if speed is not None else self.opts.speed_kmh / 3.6
+        if not v > 0:
+            raise SimulatorError(f"speed must be positive, got {v}")
+        return self._model(self.values(w or {}), v, TimeFeatures()).linear_system()
+
+    def modes(self, speed: float | None = None, w: Mapping[str, float] | None = None) -> dict:
+        """Modes at ``speed`` (m/s; default the ``speed_kmh`` option): frequency (Hz), damping ratio,
+        dominant body and motion, and whether every mode is damped.
+
+        :returns: ``{"speed_mps", "speed_kmh", "stable", "least_damped", "modes": [...]}``.
+        """
+        return modes_summary(self.linear_system(w, speed))
+
+    # ------------------------------------------------------------------ identity, pickling
+    def identity(self) -> dict[str, Any]:
+        return {"plugin": self.name, "options": self.opts.model_dump(mode="json")}
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_models"] = {}
+        state["_spectra"] = InputSpectra()
+        state["_frf"] = {}
+        return state
