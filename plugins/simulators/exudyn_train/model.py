@@ -616,8 +616,8 @@ class TrainModel:
         ss.solution.sensors.active = False
         ss.timeIntegration.verboseMode = 0
         ss.staticSolver.verboseMode = 0
-        # the linearisation must not see the track (symbolic inputs are zero at rest anyway)
-        M, K, D = self.mbs.ComputeLinearizedSystem(ss)[:3]
+        with quiet(self.exu):
+            M, K, D = self.mbs.ComputeLinearizedSystem(ss)[:3]
         idx = self.free
         M = np.asarray(M)[np.ix_(idx, idx)]
         K = np.asarray(K)[np.ix_(idx, idx)]
@@ -631,6 +631,25 @@ class TrainModel:
                     G[j, row] = G6[k]
         return LinearSystem(M, K, D, G, self.sensor_matrix(), list(self.labels),
                             wheelset_positions(self.values), self.speed)
+
+    def static_residual(self) -> np.ndarray:
+        """Generalised forces (N, N m) on the free coordinates at the reference configuration.
+
+        Zero at static equilibrium: gravity and the spring preloads balance
+        (computed by exudyn's own right-hand side with every velocity zero).
+        """
+        exu = self.exu
+        ss = exu.SimulationSettings()
+        ss.solution.file.write = False
+        ss.solution.sensors.active = False
+        ss.staticSolver.verboseMode = 0
+        solver = exu.MainSolverStatic()
+        with quiet(exu):
+            solver.InitializeSolver(self.mbs, ss)
+            solver.ComputeODE2RHS(self.mbs)
+            residual = np.array(solver.GetSystemResidual())[: self.n_ode2]
+            solver.FinalizeSolver(self.mbs, ss)
+        return residual[self.free]
 
     def sensor_matrix(self) -> np.ndarray:
         """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration."""
@@ -713,6 +732,22 @@ class TrainModel:
         for i in range(cap + 1):
             self.speed_leaves[i].SetValue(float(speeds_per_sample[i]) if i < len(speeds_per_sample) else last)
         self.speed_step.SetValue(1.0 / dt)
+
+
+class quiet:
+    """Context manager: no exudyn console output and warnings (restored afterwards)."""
+
+    def __init__(self, exu) -> None:
+        self.cfg = exu.config
+
+    def __enter__(self) -> "quiet":
+        self.saved = (self.cfg.suppressWarnings, self.cfg.printToConsole)
+        self.cfg.suppressWarnings = True
+        self.cfg.printToConsole = False
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.cfg.suppressWarnings, self.cfg.printToConsole = self.saved
 
 
 def _sparse(n: int, triplets) -> object:

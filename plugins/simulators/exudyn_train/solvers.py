@@ -48,7 +48,7 @@ from scipy.signal import resample_poly
 from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
-from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, wheelset_positions
+from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
 
@@ -190,12 +190,15 @@ def simulate_time(model: TrainModel, segment: TrackSegment, settings: TimeSettin
     ti.generalizedAlpha.computeInitialAccelerations = True
     ti.newton.active = bool(settings.newton)
     ti.newton.useModifiedNewton = True
+    ti.newton.relativeTolerance = 1e-7
+    ti.newton.absoluteTolerance = 1e-4      # residual norm / n, in N: far below the forces (1e4-1e5 N)
+    ti.newton.maxIterations = 50
     ss.solution.file.write = False
     ss.solution.sensors.writePeriod = dt
     ss.solution.sensors.active = True
-    ss.displayStatistics = False
     try:
-        ok = mbs.SolveDynamic(ss, showHints=False, showCausingItems=False)
+        with quiet(exu):
+            ok = mbs.SolveDynamic(ss, showHints=False, showCausingItems=False)
     except Exception as exc:  # exudyn raises its own SolverError family
         raise SimulatorError(f"segment '{segment.name}': exudyn time integration failed: "
                              f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from exc
