@@ -35,8 +35,9 @@ frequency domain: Fourier coefficients c_k complex normal with
 E|c_k|^2 = 2 S(Omega_k) dOmega at Omega_k = 2 pi k / (N dx), then an inverse
 FFT (the periodogram of a realisation scatters about S like a measured one;
 the process is periodic over the segment; content below 2 pi / length_m is
-absent). Seeded through ``numpy.random.default_rng(seed)``: the same options
-give the same segments.
+absent; ``min_wavelength_m`` and ``max_wavelength_m`` restrict the band, e.g.
+to the 1-120 m of EN 13848 D1-D2). Seeded through
+``numpy.random.default_rng(seed)``: the same options give the same segments.
 
 CSV layout, one file per segment
 --------------------------------
@@ -184,6 +185,10 @@ class TrackOptions(BaseModel):
     dx_m: PositiveFloat = Field(default=0.25, le=5.0, description="distance step, m (recording cars: 0.2-0.25)")
     speed_kmh: PositiveFloat | None = Field(default=None, description="train speed, km/h")
     speed_mps: PositiveFloat | None = Field(default=None, description="train speed, m/s")
+    min_wavelength_m: PositiveFloat | None = Field(
+        default=None, description="shortest wavelength realised, m (default: all up to the sampling limit 2 dx)")
+    max_wavelength_m: PositiveFloat | None = Field(
+        default=None, description="longest wavelength realised, m (default: the segment length)")
     seed: int = Field(default=0, ge=0, description="seed of numpy.random.default_rng")
     name_prefix: str = Field(default="seg", min_length=1, description="segment names are <prefix>-001, ...")
 
@@ -193,6 +198,9 @@ class TrackOptions(BaseModel):
             raise ValueError("give the speed once: speed_kmh or speed_mps")
         if self.length_m < 4 * self.dx_m:
             raise ValueError(f"length_m = {self.length_m} holds fewer than 4 samples of dx_m = {self.dx_m}")
+        if (self.min_wavelength_m is not None and self.max_wavelength_m is not None
+                and self.min_wavelength_m >= self.max_wavelength_m):
+            raise ValueError("min_wavelength_m must be below max_wavelength_m")
         return self
 
     @property
@@ -203,15 +211,24 @@ class TrackOptions(BaseModel):
         return float(self.speed_kmh if self.speed_kmh is not None else 300.0) / 3.6
 
 
-def realise(spectrum: str, n: int, dx: float, rng: np.random.Generator) -> np.ndarray:
-    """``(4, n)`` one realisation of the four channels, m (see the module docstring)."""
+def realise(spectrum: str, n: int, dx: float, rng: np.random.Generator,
+            wavelengths: tuple[float | None, float | None] = (None, None)) -> np.ndarray:
+    """``(4, n)`` one realisation of the four channels, m (see the module docstring).
+
+    :param wavelengths: (shortest, longest) wavelength realised in m; ``None``: no limit.
+    """
     k = np.arange(n // 2 + 1)
     omega = 2 * math.pi * k / (n * dx)
     d_omega = 2 * math.pi / (n * dx)
+    keep = k > 0
+    if wavelengths[0] is not None:
+        keep &= omega <= 2 * math.pi / wavelengths[0]
+    if wavelengths[1] is not None:
+        keep &= omega >= 2 * math.pi / wavelengths[1]
     out = np.empty((len(IRREGULARITY_CHANNELS), n))
     for i, ch in enumerate(IRREGULARITY_CHANNELS):
         s = np.zeros_like(omega)
-        s[1:] = psd(spectrum, ch, omega[1:])
+        s[keep] = psd(spectrum, ch, omega[keep])
         if n % 2 == 0:
             s[-1] = 0.0   # the Nyquist line would be real: leave it out
         std = np.sqrt(2.0 * s * d_omega)          # E|c_k|^2 = 2 S dOmega
@@ -235,7 +252,7 @@ def synthetic_segments(options: TrackOptions | Mapping[str, Any] | None = None,
     width = max(3, len(str(opt.n_segments)))
     out = []
     for i in range(opt.n_segments):
-        irr = realise(opt.spectrum, n, opt.dx_m, rng)
+        irr = realise(opt.spectrum, n, opt.dx_m, rng, (opt.min_wavelength_m, opt.max_wavelength_m))
         out.append(TrackSegment(f"{opt.name_prefix}-{i + 1:0{width}d}", x.copy(), irr, opt.speed,
                                 meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i}))
     return out
