@@ -22,7 +22,7 @@ from suspid.errors import SuspidError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
-console = Console()
+console = Console(soft_wrap=True)
 err_console = Console(stderr=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
@@ -88,6 +88,72 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     out = run_pipeline(cfg, fresh=fresh, progress=not quiet,
                        log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
     _print_result(out.result, out.run_dir)
+
+
+def _segments(cfg):
+    """The configured segments: the measurement-date synthetic track, or the measured track file."""
+    from suspid.pipeline import synthetic_track
+    from suspid.track import read_track
+
+    if cfg.data.source == "experiment":
+        return synthetic_track(cfg, "measurement")
+    if cfg.data.track_file is None:
+        from suspid.errors import ConfigError
+
+        raise ConfigError("measured data need data.track_file", file=str(cfg.source_file), key="data.track_file")
+    return read_track(cfg.data.track_file)
+
+
+def _parse_params(items: list[str] | None, simulator) -> dict[str, float]:
+    from suspid.errors import ConfigError
+
+    known = {p.name for p in simulator.parameters()}
+    out = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        if not sep or name not in known:
+            raise ConfigError(f"--param expects name=value with a parameter of the simulator "
+                              f"({', '.join(sorted(known))}), got '{item}'")
+        try:
+            out[name] = float(value)
+        except ValueError:
+            raise ConfigError(f"--param {name}: '{value}' is not a number") from None
+    return out
+
+
+@app.command()
+def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+             out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: <run dir>/simulation)."),
+             param: Optional[List[str]] = typer.Option(None, "--param", help="name=value in SI units (repeatable); "
+                                                       "other parameters nominal.")) -> None:
+    """Simulate the nominal (or given) parameters on the configured segments; writes simulation.h5 and a PNG."""
+    from suspid.config import build_simulator, load_config
+    from suspid.simulate import write_simulation
+    from suspid.spectra import compute_spectra
+
+    cfg = load_config(config, set_ or [])
+    sim = build_simulator(cfg)
+    w = _parse_params(param, sim)
+    out_dir = out or cfg.run_dir() / "simulation"
+    path = write_simulation(sim, _segments(cfg), w, out_dir, lambda rs: compute_spectra(rs, cfg.spectra))
+    console.print(f"wrote {path} and {out_dir / 'spectra.png'}")
+
+
+@app.command()
+def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+          speed_kmh: Optional[float] = typer.Option(None, "--speed-kmh", help="Speed (default: the simulator's)."),
+          out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),
+          max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
+    """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
+    from suspid.config import build_simulator, load_config
+    from suspid.simulate import format_modes, modes_report
+
+    cfg = load_config(config, set_ or [])
+    sim = build_simulator(cfg)
+    out_dir = out or cfg.run_dir()
+    report = modes_report(sim, None if speed_kmh is None else speed_kmh / 3.6, out_dir)
+    console.print(format_modes(report, max_hz), markup=False, highlight=False)
+    console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(out_dir) / 'modes.json'}")
 
 
 @app.command()

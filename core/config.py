@@ -276,7 +276,7 @@ def validate_options(cls: type, options: Mapping[str, Any], *, file: str, key: s
         validated = model.model_validate(dict(options), context={"base_dir": base_dir})
     except ValidationError as exc:
         _raise_validation(exc, model, file, lines or {}, tuple(key.split(".")))
-    return {name: getattr(validated, name) for name in model.model_fields}
+    return validated.model_dump()  # plain data: hashable identity, picklable, YAML-dumpable
 
 
 def load_config(path: str | Path, overrides: Sequence[str] = (), *, check_plugins: bool = True) -> Config:

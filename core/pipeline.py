@@ -125,18 +125,45 @@ def _simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Seque
 
 def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
     """The synthetic track of one date of a numerical experiment (seeded by the config's seed)."""
-    from suspid.track import TrackOptions, synthetic_segments
+    from suspid.track import synthetic_segments
 
     options = dict(config.data.track)
     if n_segments is not None:
         options["n_segments"] = n_segments
     options.setdefault("seed", seed_for(config.seed, f"track-{date}"))
     try:
-        opt = TrackOptions.model_validate(options)
-    except Exception as exc:  # pydantic error -> one line naming the section
-        raise ConfigError(f"invalid track options: {exc}".splitlines()[0], file=str(config.source_file),
-                          key="data.track") from None
-    return synthetic_segments(opt)
+        return synthetic_segments(options)
+    except ConfigError as exc:
+        raise ConfigError(exc.detail, file=str(config.source_file), key=exc.key) from None
+
+
+def read_measurements(measurements: Path, track_file: Path | None, channels: Sequence[str]
+                      ) -> tuple[list[TrackSegment], list[Response]]:
+    """Measured accelerations and the track geometry measured with them, paired by segment name.
+
+    :raises DataError: naming the file, when a segment has no track, the
+        channels differ, or a record's duration does not match its segment.
+    """
+    from suspid.errors import DataError
+    from suspid.track import read_accelerations, read_track
+
+    if track_file is None:
+        raise DataError(f"{measurements}: measured accelerations need the track measured with them "
+                        f"(data.track_file)")
+    responses = read_accelerations(measurements, channels)
+    by_name = {s.name: s for s in read_track(track_file)}
+    segments = []
+    for r in responses:
+        seg = by_name.get(r.segment)
+        if seg is None:
+            raise DataError(f"{measurements}: record '{r.segment}' has no track segment of that name in "
+                            f"{track_file} (segments: {', '.join(sorted(by_name)) or 'none'})")
+        expected = seg.duration()
+        if abs(r.duration - expected) > max(0.02 * expected, 2.0 / r.fs):
+            raise DataError(f"{measurements}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
+                            f"segment takes {expected:.2f} s at the recorded speed")
+        segments.append(seg)
+    return segments, responses
 
 
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
@@ -186,8 +213,6 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement"))
         y_mes = y_sim_ref + b_ref
     else:
-        from suspid.track import read_measurements
-
         w_ref = None
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                                 channels=channels)
