@@ -83,6 +83,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
+from .threads import single_blas_thread
 
 TABLE_PAD = 2
 """Zero leaves before the first track sample (and at least as many after the last one)."""
@@ -616,7 +617,7 @@ class TrainModel:
         ss.solution.sensors.active = False
         ss.timeIntegration.verboseMode = 0
         ss.staticSolver.verboseMode = 0
-        with quiet(self.exu):
+        with quiet(self.exu), single_blas_thread():
             M, K, D = self.mbs.ComputeLinearizedSystem(ss)[:3]
         idx = self.free
         M = np.asarray(M)[np.ix_(idx, idx)]

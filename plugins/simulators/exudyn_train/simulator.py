@@ -64,7 +64,7 @@ class Options(BaseModel):
     vehicle: dict[str, float] = Field(default_factory=dict,
                                       description="nominal values of model parameters, name -> SI value")
     taper_m: float = Field(default=20.0, ge=0.0, description="fade-in/out length of each segment's track, m")
-    settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: zero padding for the decay "
+    settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: least zero padding for the decay "
                                     "of the impulse response, s")
 
     @field_validator("vehicle")
@@ -114,6 +114,7 @@ class ExudynTrain(Simulator):
         self._models: dict = {}
         self._spectra = InputSpectra()
         self._frf: dict = {}
+        self._checked: dict = {}
 
     # ------------------------------------------------------------------ options and parameters
     @property
@@ -201,7 +202,12 @@ class ExudynTrain(Simulator):
         if not segments:
             return []
         for s in segments:
-            check_segment(s)
+            key = InputSpectra._fingerprint(s)
+            if key not in self._checked:
+                check_segment(s)
+                self._checked[key] = (s.irregularities, s.distance)   # keep the arrays: ids stay unique
+                if len(self._checked) > 1024:
+                    self._checked.pop(next(iter(self._checked)))
         values = self.values(w)
         if self.opts.solver == "time":
             return self._simulate_time(values, segments)
@@ -271,4 +277,5 @@ class ExudynTrain(Simulator):
         state["_models"] = {}
         state["_spectra"] = InputSpectra()
         state["_frf"] = {}
+        state["_checked"] = {}
         return state

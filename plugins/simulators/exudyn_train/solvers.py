@@ -30,9 +30,10 @@ H(f) from the three track channels (vertical, lateral, cross-level at the
 car centre) to the sensor accelerations, including the wheelset delays
 exp(i 2 pi f a_j / v), evaluated for all frequencies in batched numpy
 products. Each segment's response is irfft(H U) with U the spectrum of its
-(tapered) track, zero padded by ``settle_s`` so that the circular
-convolution equals the linear one; the input spectra do not depend on the
-parameters and are cached.
+(tapered) track, zero padded so that the circular convolution is the linear
+one (to 5 % of the slowest mode's tail); the input spectra do not depend on
+the parameters and are cached. Small matrix products run on one BLAS thread
+(:mod:`.threads`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from scipy.signal import resample_poly
 from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
+from .threads import single_blas_thread
 from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
@@ -228,12 +230,14 @@ class FrequencyResponse:
         self.linear = linear
         M, K, D = linear.M, linear.K, linear.D
         n = M.shape[0]
-        Minv = np.linalg.inv(M)
-        A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n] = -Minv @ K
-        A[n:, n:] = -Minv @ D
-        lam, V = np.linalg.eig(A)
+        with single_blas_thread():
+            Minv = np.linalg.inv(M)
+            A = np.zeros((2 * n, 2 * n))
+            A[:n, n:] = np.eye(n)
+            A[n:, :n] = -Minv @ K
+            A[n:, n:] = -Minv @ D
+            lam, V = np.linalg.eig(A)
+            cond = np.linalg.cond(V)
         self.eigenvalues = lam
         unstable = lam[lam.real > 1e-9 * np.maximum(1.0, np.abs(lam))]
         if unstable.size:
@@ -242,7 +246,7 @@ class FrequencyResponse:
                 f"the linear model is unstable at {linear.speed * 3.6:.1f} km/h: a mode at "
                 f"{abs(worst) / (2 * math.pi):.2f} Hz grows (damping ratio {-worst.real / abs(worst):.3f}); "
                 f"check conicity, yaw dampers and creep parameters")
-        self.modal = bool(np.linalg.cond(V) < 1e8)
+        self.modal = bool(cond < 1e8)
         self.A = A
         self.n = n
         # inputs: B_j = [0; M^-1 G_j]; outputs: accelerations C q''
@@ -251,58 +255,86 @@ class FrequencyResponse:
         self.B = B
         self.Cq = np.hstack([linear.C, np.zeros_like(linear.C)])
         if self.modal:
-            Vinv = np.linalg.inv(V)
+            with single_blas_thread():
+                Vinv = np.linalg.inv(V)
             self.L = self.Cq @ V                               # (n_out, 2n)
-            self.R = np.einsum("ab,jbc->jac", Vinv, B)         # (n_w, 2n, n_in)
+            R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, 2n, n_in)
+            self.Rt = np.ascontiguousarray(R.transpose(1, 2, 0).reshape(2 * n * R.shape[2], R.shape[0]))
 
     def __call__(self, freqs: np.ndarray) -> np.ndarray:
         """H ``(n_freqs, n_sensors, 3)`` in (m/s^2) per m of track input at the car centre."""
+        return self.by_input(freqs).transpose(2, 1, 0)
+
+    def by_input(self, freqs: np.ndarray) -> np.ndarray:
+        """H in the layout of the per-segment products: ``(3, n_sensors, n_freqs)``."""
         f = np.asarray(freqs, dtype=float)
         w = 2 * math.pi * f
         delays = self.linear.wheelset_x / self.linear.speed                  # (n_w,)
-        E = np.exp(1j * w[:, None] * delays[None, :])                        # (n_f, n_w)
+        E = np.exp(1j * np.outer(delays, w))                                 # (n_w, n_f)
         nw, m2, nin = (self.B.shape[0], 2 * self.n, self.B.shape[2])
-        if self.modal:
-            Rflat = self.R.reshape(nw, m2 * nin)
-            S = (E @ Rflat).reshape(len(f), m2, nin)                         # sum_j e^{iwt_j} R_j
-            Z = 1.0 / (1j * w[:, None] - self.eigenvalues[None, :])         # (n_f, 2n)
-            S *= Z[:, :, None]
-            X = np.einsum("om,fmc->foc", self.L, S)
-        else:
-            Bw = np.einsum("fj,jac->fac", E, self.B)
-            lhs = 1j * w[:, None, None] * np.eye(m2)[None] - self.A[None]
-            X = np.einsum("om,fmc->foc", self.Cq, np.linalg.solve(lhs, Bw))
-        return -(w ** 2)[:, None, None] * X
+        nf = len(f)
+        with single_blas_thread():
+            if self.modal:
+                # S[m, c, f] = z_m(w) sum_j R_j[m, c] e^{i w t_j}, z_m = 1 / (i w - lambda_m)
+                S = (self.Rt @ E).reshape(m2, nin, nf)
+                S *= (1.0 / (1j * w[None, :] - self.eigenvalues[:, None]))[:, None, :]
+                X = (self.L @ S.reshape(m2, nin * nf)).reshape(-1, nin, nf)    # (n_out, 3, n_f)
+                X = X.transpose(1, 0, 2)
+            else:
+                Bw = np.einsum("jf,jac->fac", E, self.B)
+                lhs = 1j * w[:, None, None] * np.eye(m2)[None] - self.A[None]
+                X = np.einsum("om,fmc->cof", self.Cq, np.linalg.solve(lhs, Bw))
+        return np.ascontiguousarray(X * -(w ** 2))
+
+    @property
+    def settling_time(self) -> float:
+        """Time (s) for the slowest mode to decay to 5 % (e^-3): 3 / min |Re lambda|."""
+        return 3.0 / float(np.min(-self.eigenvalues.real))
 
 
 def fft_length(n_t: int, fs: float, delay_s: float, settle_s: float) -> int:
-    """FFT length so that the circular convolution equals the linear one (see the module docstring)."""
+    """FFT length so that the circular convolution equals the linear one (see the module docstring).
+
+    A power of two: the length then rarely changes from one parameter vector
+    to the next, and the cached input spectra stay valid.
+    """
     need = n_t + 2 * int(math.ceil(delay_s * fs)) + int(math.ceil(settle_s * fs)) + 2
-    return sfft.next_fast_len(need, real=True)
+    return 1 << int(math.ceil(math.log2(need)))
 
 
 class InputSpectra:
-    """Spectra of the tapered track under the car centre, cached by segment content."""
+    """Spectra of the tapered track under the car centre, cached per segment.
+
+    A segment is recognised by its arrays (identity, shape and a sample of
+    values): the cache keeps the arrays alive, so that an id cannot be reused.
+    """
 
     def __init__(self, maxsize: int = 512) -> None:
         self._cache: OrderedDict = OrderedDict()
         self.maxsize = maxsize
 
+    @staticmethod
+    def _fingerprint(segment: TrackSegment) -> tuple:
+        irr = segment.irregularities
+        x = segment.distance
+        sample = np.asarray(irr)[:, :: max(1, np.shape(irr)[1] // 64)]
+        return (id(irr), id(x), np.shape(irr), float(np.sum(sample)), float(x[0]), float(x[-1]))
+
     def get(self, segment: TrackSegment, fs: float, n_fft: int, taper_m: float) -> np.ndarray:
-        """U ``(n_fft // 2 + 1, 3)``: spectrum of the track inputs on the time grid j / fs.
+        """U ``(3, n_fft // 2 + 1)``: spectrum of the track inputs on the time grid j / fs.
 
         The track is sampled on a grid q times finer than fs (q so that the
         train moves at most half a track sample per point) and the first
         n_fft // 2 + 1 lines are kept: the lines above fs / 2 do not fold
         back into the band.
         """
-        x = np.asarray(segment.distance, dtype=float)
         v = float(np.asarray(segment.speed, dtype=float).flat[0])
-        key = (_digest(segment), fs, n_fft, taper_m, v)
+        key = (self._fingerprint(segment), fs, n_fft, taper_m, v)
         hit = self._cache.get(key)
         if hit is not None:
             self._cache.move_to_end(key)
-            return hit
+            return hit[0]
+        x = np.asarray(segment.distance, dtype=float)
         dx = float(x[1] - x[0])
         q = max(1, int(math.ceil(2.0 * v / (fs * dx))))
         n_hi = q * n_fft
@@ -316,40 +348,38 @@ class InputSpectra:
         U = sfft.rfft(u, axis=1)[:, : n_fft // 2 + 1] / q
         if n_fft % 2 == 0:
             U[:, -1] = 0.0   # the Nyquist line of an even-length record must be real: drop it
-        U = U.T.copy()
-        self._cache[key] = U
+        U = np.ascontiguousarray(U)
+        self._cache[key] = (U, segment.irregularities, segment.distance)
         if len(self._cache) > self.maxsize:
             self._cache.popitem(last=False)
         return U
 
 
-def _digest(segment: TrackSegment) -> tuple:
-    x = np.asarray(segment.distance, dtype=float)
-    irr = np.ascontiguousarray(np.asarray(segment.irregularities, dtype=float))
-    import hashlib
-
-    h = hashlib.blake2b(irr.tobytes(), digest_size=16)
-    h.update(np.asarray([x[0], x[1], x[-1], x.size], dtype=float).tobytes())
-    return (segment.name, h.hexdigest())
-
-
 def simulate_frequency(response: FrequencyResponse, segments: list[TrackSegment], fs: float, taper_m: float,
                        settle_s: float, spectra: InputSpectra, channels: tuple[str, ...],
                        frf_cache: dict) -> list[Response]:
-    """Responses of constant-speed segments at the speed of ``response`` (see the module docstring)."""
-    out = []
+    """Responses of constant-speed segments at the speed of ``response`` (see the module docstring).
+
+    All segments share one FFT length (the longest need); the zero padding
+    covers ``settle_s`` or three time constants of the slowest mode, whichever
+    is longer (at most 120 s): what leaks from the end of a record into its
+    start is below 5 % of the slowest mode's amplitude.
+    """
     lin = response.linear
     delay = float(np.max(np.abs(lin.wheelset_x))) / lin.speed
-    for seg in segments:
-        n_t = output_samples(seg, fs)
-        n_fft = fft_length(n_t, fs, delay, settle_s)
-        H = frf_cache.get(n_fft)
-        if H is None:
-            freqs = np.arange(n_fft // 2 + 1) * fs / n_fft
-            H = response(freqs)
-            frf_cache[n_fft] = H
-        U = spectra.get(seg, fs, n_fft, taper_m)
-        Y = np.einsum("foc,fc->of", H, U)
-        y = sfft.irfft(Y, n=n_fft, axis=1)[:, :n_t]
-        out.append(Response(channels, float(fs), np.ascontiguousarray(y), seg.name))
+    pad = min(max(settle_s, response.settling_time), 120.0)
+    n_ts = [output_samples(seg, fs) for seg in segments]
+    n_fft = fft_length(max(n_ts), fs, delay, pad)
+    H = frf_cache.get(n_fft)
+    if H is None:
+        H = response.by_input(np.arange(n_fft // 2 + 1) * fs / n_fft)         # (3, n_out, n_f)
+        frf_cache[n_fft] = H
+    out = []
+    for seg, n in zip(segments, n_ts):   # one segment at a time: its arrays stay in cache
+        U = spectra.get(seg, fs, n_fft, taper_m)                               # (3, n_f)
+        Y = H[0] * U[0]
+        Y += H[1] * U[1]
+        Y += H[2] * U[2]
+        y = sfft.irfft(Y, n=n_fft, axis=-1)
+        out.append(Response(channels, float(fs), np.ascontiguousarray(y[:, :n]), seg.name))
     return out
