@@ -1,0 +1,122 @@
+"""Speed of the exudyn-train simulator's two solvers (issue 5).
+
+Case: 2 km segments of synthetic track (German low disturbance, dx 0.25 m)
+at 300 km/h, i.e. 24 s simulated per segment, 10 channels at fs = 100 Hz.
+
+- **time solver**: exudyn generalised-alpha at a 2 ms step, linear contact,
+  one segment; the model (and its symbolic track tables) is built once, the
+  timed runs then only set the track and integrate. Target: >= 50x faster
+  than real time (<= 0.48 s per segment).
+- **frequency solver**: a run of 50 segments per parameter vector (random
+  vectors in the default identification box); the model is built and the
+  input spectra cached by a first call. Target: <= 30 ms per parameter
+  vector.
+
+Prints both, the ratio between them per segment, and the rms agreement of the
+two solvers on the time solver's segment. BLAS threads are pinned to one
+before numpy loads (the frequency solver also does this itself for its small
+products).
+
+    python benchmarks/bench_exudyn_train.py [--repeat 5] [--vectors 20] [--segments 50]
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import platform  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from suspid.plugins.simulators.exudyn_train import ExudynTrain  # noqa: E402
+from suspid.track import synthetic_segments  # noqa: E402
+
+LENGTH_M, SPEED_KMH, FS_HZ, STEP_S = 2000.0, 300.0, 100.0, 0.002
+
+
+def timed(fn, repeat: int) -> tuple[float, float, float]:
+    """(best wall, median wall, best CPU) seconds over ``repeat`` calls."""
+    wall, cpu = [], []
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - w0)
+        cpu.append(time.process_time() - c0)
+    return min(wall), float(np.median(wall)), min(cpu)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=5, help="timed runs of the time solver")
+    ap.add_argument("--vectors", type=int, default=20, help="parameter vectors for the frequency solver")
+    ap.add_argument("--segments", type=int, default=50, help="segments per frequency-solver run")
+    args = ap.parse_args()
+
+    import exudyn
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"# bench_exudyn_train  {datetime.date.today()}  python {platform.python_version()}  "
+          f"numpy {np.__version__}  exudyn {exudyn.__version__}  {platform.machine()}  "
+          f"{os.cpu_count()} cpus  load average {load:.2f}")
+    print(f"# case: {LENGTH_M:g} m segments, German low disturbance, {SPEED_KMH:g} km/h, "
+          f"{LENGTH_M / (SPEED_KMH / 3.6):.1f} s simulated each, fs {FS_HZ:g} Hz, 10 channels")
+
+    segments = synthetic_segments({"spectrum": "german-low", "n_segments": args.segments, "length_m": LENGTH_M,
+                                   "speed_kmh": SPEED_KMH, "seed": 1})
+    duration = segments[0].duration()
+
+    # ---- time solver
+    tsim = ExudynTrain(solver="time", fs_hz=FS_HZ, step_s=STEP_S)
+    w0 = time.perf_counter()
+    (rt,) = tsim.simulate({}, segments[:1])
+    first_t = time.perf_counter() - w0
+    best_t, med_t, cpu_t = timed(lambda: tsim.simulate({}, segments[:1]), args.repeat)
+    steps = int(round((duration + 0.5) / STEP_S))
+
+    # ---- frequency solver
+    fsim = ExudynTrain(solver="frequency", fs_hz=FS_HZ)
+    w0 = time.perf_counter()
+    rf_all = fsim.simulate({}, segments)
+    first_f = time.perf_counter() - w0
+    rng = np.random.default_rng(0)
+    bounds = {p.name: (p.lower, p.upper) for p in fsim.parameters()}
+    vectors = [{n: float(rng.uniform(*bounds[n])) for n in fsim.default_parameters()} for _ in range(args.vectors)]
+    for w in vectors:            # first pass: the input spectra of every FFT length get cached
+        fsim.simulate(w, segments)
+    walls, cpus = [], []
+    for w in vectors:            # each call is a new vector: linearisation and FRF are recomputed
+        w0, c0 = time.perf_counter(), time.process_time()
+        fsim.simulate(w, segments)
+        walls.append(time.perf_counter() - w0)
+        cpus.append(time.process_time() - c0)
+    best_f, med_f, cpu_f = min(walls), float(np.median(walls)), min(cpus)
+
+    # ---- agreement on the time solver's segment (nominal parameters)
+    rms_t = np.sqrt(np.mean(rt.accelerations ** 2, axis=1))
+    rms_f = np.sqrt(np.mean(rf_all[0].accelerations ** 2, axis=1))
+    worst = float(np.max(np.abs(rms_t / rms_f - 1)))
+
+    print()
+    print("| solver | case | first call (s) | best wall | median wall | best CPU | speed | target |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    print(f"| time | 1 segment, 2 ms step ({steps} steps) | {first_t:.2f} | {best_t:.3f} s | {med_t:.3f} s | "
+          f"{cpu_t:.3f} s | {duration / best_t:.0f}x real time (CPU: {duration / cpu_t:.0f}x; "
+          f"{1e6 * cpu_t / steps:.0f} us/step) | >= 50x |")
+    print(f"| frequency | {args.segments} segments per parameter vector | {first_f:.2f} | {1e3 * best_f:.1f} ms | "
+          f"{1e3 * med_f:.1f} ms | {1e3 * cpu_f:.1f} ms | {duration * args.segments / med_f:.0f}x real time "
+          f"({1e3 * med_f / args.segments:.2f} ms per segment) | <= 30 ms |")
+    print()
+    ratio = med_t / (med_f / args.segments)
+    print(f"ratio per segment (median wall): time solver / frequency solver = {ratio:.0f}")
+    print(f"time vs frequency solver, nominal parameters, rms of the 10 channels: worst difference "
+          f"{100 * worst:.2f} %")
+
+
+if __name__ == "__main__":
+    main()
