@@ -258,3 +258,30 @@ def test_bump_stops_act_on_a_large_lateral_kink():
     stop = ExudynTrain(solver="time", contact={"bump_stops": True, "bump_gap_m": 0.01}).simulate({}, [seg])[0]
     k = ExudynTrain().channels().index("carbody_middle_lateral")
     assert np.max(np.abs(stop.accelerations[k])) > 1.2 * np.max(np.abs(free.accelerations[k]))
+
+
+# ------------------------------------------------------------------------------------------ suspid simulate / modes
+def test_write_simulation_and_modes_report(tmp_path, freq_sim):
+    import json
+
+    from suspid.simulate import format_modes, modes_report, read_simulation, write_simulation
+
+    segs = track(1000.0, 300.0, n=2)        # 12 s records: long enough for the default 0.1 Hz grid
+    path = write_simulation(freq_sim, segs, {"c_sec_z": 25e3}, tmp_path / "sim")
+    responses, y, freqs = read_simulation(path)
+    assert [r.segment for r in responses] == [s.name for s in segs]
+    assert responses[0].channels == tuple(freq_sim.channels()) and responses[0].fs == 100.0
+    assert y.shape == (2, len(freq_sim.channels()), freqs.size) and np.all(np.isfinite(y))
+    assert (tmp_path / "sim" / "spectra.png").stat().st_size > 10_000
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        assert json.loads(f.attrs["parameters"])["c_sec_z"] == 25e3
+        assert f.attrs["simulator"] == "exudyn-train"
+
+    report = modes_report(ExudynTrain(), 320 * KMH, tmp_path / "modes")
+    saved = json.loads((tmp_path / "modes" / "modes.json").read_text())
+    assert saved["stable"] is True and saved["speed_kmh"] == pytest.approx(320.0)
+    assert {"frequency_hz", "damping_ratio", "body", "motion"} <= set(saved["modes"][0])
+    text = format_modes(report, max_hz=20.0)
+    assert "stable" in text and "carbody" in text
