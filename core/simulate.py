@@ -166,15 +166,17 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
     lines = [f"modes of {report.get('simulator', 'the model')} at {report['speed_kmh']:.1f} km/h "
              f"({report['speed_mps']:.2f} m/s): {'stable' if report['stable'] else 'UNSTABLE'}",
              f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<10} share"]
-    for m in report["modes"]:
-        if max_hz is not None and m["frequency_hz"] > max_hz:
-            continue
+    shown = [m for m in report["modes"] if max_hz is None or m["frequency_hz"] <= max_hz]
+    for m in shown:
         lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<10} "
                      f"{m['share']:.2f}")
-    least = report.get("least_damped")
-    if least:
-        lines.append(f"least damped: {least['frequency_hz']:.3f} Hz, damping ratio {least['damping_ratio']:.3f} "
-                     f"({least['body']} {least['motion']})")
+    for label, pool in (("least damped of these", shown), ("least damped of all", report["modes"])):
+        if pool:
+            least = min(pool, key=lambda m: m["damping_ratio"])
+            lines.append(f"{label}: {least['frequency_hz']:.3f} Hz, damping ratio {least['damping_ratio']:.3f} "
+                         f"({least['body']} {least['motion']})")
+        if len(shown) == len(report["modes"]):
+            break
     return "\n".join(lines)
 
 
