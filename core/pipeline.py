@@ -150,20 +150,43 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
     if track_file is None:
         raise DataError(f"{measurements}: measured accelerations need the track measured with them "
                         f"(data.track_file)")
-    responses = read_accelerations(measurements, channels)
+    files = sorted(Path(measurements).glob("*.csv")) if Path(measurements).is_dir() else [Path(measurements)]
+    records = [(f, r) for f in files for r in read_accelerations(f, channels)]  # each error names its file
+    if not records:
+        raise DataError(f"{measurements}: no acceleration records found")
     by_name = {s.name: s for s in read_track(track_file)}
     segments = []
-    for r in responses:
+    for f, r in records:
         seg = by_name.get(r.segment)
         if seg is None:
-            raise DataError(f"{measurements}: record '{r.segment}' has no track segment of that name in "
+            raise DataError(f"{f}: record '{r.segment}' has no track segment of that name in "
                             f"{track_file} (segments: {', '.join(sorted(by_name)) or 'none'})")
         expected = seg.duration()
         if abs(r.duration - expected) > max(0.02 * expected, 2.0 / r.fs):
-            raise DataError(f"{measurements}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
+            raise DataError(f"{f}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
                             f"segment takes {expected:.2f} s at the recorded speed")
         segments.append(seg)
-    return segments, responses
+    return segments, [r for _, r in records]
+
+
+def validate_data(config: Config) -> int:
+    """Read and check measured data as a run would (files, channels, durations, spectra grid).
+
+    :returns: the number of measured segments (0 for a numerical experiment).
+    :raises DataError: one line naming the file and what is wrong.
+    """
+    if config.data.source != "measured":
+        return 0
+    from suspid.spectra import compute_spectra
+
+    simulator = build_simulator(config)
+    if config.data.measurements is None:
+        raise ConfigError("measured data need data.measurements", file=str(config.source_file),
+                          key="data.measurements")
+    segments, responses = read_measurements(config.data.measurements, config.data.track_file,
+                                            simulator.channels())
+    compute_spectra(responses, config.spectra)
+    return len(segments)
 
 
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
