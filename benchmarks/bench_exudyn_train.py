@@ -34,21 +34,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from bench_objectives import best_time as timed  # noqa: E402  (same folder: best/median wall, best CPU)
 from suspid.plugins.simulators.exudyn_train import ExudynTrain  # noqa: E402
 from suspid.track import synthetic_segments  # noqa: E402
 
 LENGTH_M, SPEED_KMH, FS_HZ, STEP_S = 2000.0, 300.0, 100.0, 0.002
-
-
-def timed(fn, repeat: int) -> tuple[float, float, float]:
-    """(best wall, median wall, best CPU) seconds over ``repeat`` calls."""
-    wall, cpu = [], []
-    for _ in range(repeat):
-        w0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - w0)
-        cpu.append(time.process_time() - c0)
-    return min(wall), float(np.median(wall)), min(cpu)
 
 
 def main() -> None:

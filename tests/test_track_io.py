@@ -110,10 +110,14 @@ GOOD_HEADER = "distance_m,vertical_m,lateral_m,cross_level_m,gauge_m"
     (f"# speed_mps: 50\n{GOOD_HEADER},vertical_m\n", "repeated column names"),
 ])
 def test_bad_track_csv_raises_one_line_naming_the_file(tmp_path, text, message):
-    path = tmp_path / "bad.csv"
+    assert_one_line_error(read_track_csv, tmp_path / "bad.csv", text, message)
+
+
+def assert_one_line_error(reader, path, text, message):
+    """``reader(path)`` on a file holding ``text`` raises one DataError line: file name, then ``message``."""
     path.write_text(text)
     with pytest.raises(DataError) as err:
-        read_track_csv(path)
+        reader(path)
     msg = str(err.value)
     assert msg.startswith(str(path)) and message in msg and "\n" not in msg
 
@@ -130,12 +134,7 @@ def test_bad_track_csv_raises_one_line_naming_the_file(tmp_path, text, message):
     ("# fs_hz: 100\na\n1\n", "at least 2 samples"),
 ])
 def test_bad_acceleration_csv_raises_one_line_naming_the_file(tmp_path, text, message):
-    path = tmp_path / "acc.csv"
-    path.write_text(text)
-    with pytest.raises(DataError) as err:
-        read_accelerations_csv(path)
-    msg = str(err.value)
-    assert msg.startswith(str(path)) and message in msg and "\n" not in msg
+    assert_one_line_error(read_accelerations_csv, tmp_path / "acc.csv", text, message)
 
 
 def test_missing_channel_is_named(tmp_path, responses):
