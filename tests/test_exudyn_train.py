@@ -8,7 +8,6 @@ full 2 km segment, the nonlinear options) run in CI.
 from __future__ import annotations
 
 import itertools
-import math
 import pickle
 
 import numpy as np

@@ -2,20 +2,27 @@
 
 One :class:`TrainModel` owns one exudyn ``MainSystem``. It is built once and
 updated in place when parameters change (``SetObjectParameter``); only a
-change of geometry (positions of bodies and attachment points) rebuilds it.
-Both solvers use this same system: the time solver integrates it with
-exudyn's generalised-alpha solver, the frequency solver takes exudyn's
-linearisation ``ComputeLinearizedSystem`` (M, K, D) of it.
+change of geometry (positions of bodies and attachment points), of the
+sensors or of the time-solver features rebuilds it. Both solvers use this
+same system: the time solver integrates it with exudyn's generalised-alpha
+solver, the frequency solver takes exudyn's linearisation
+``ComputeLinearizedSystem`` (M, K, D) of it.
 
 Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
 x, y, z, roll, pitch, yaw relative to the reference position, small angles
-about x, y, z): carbody, front and rear bogie frame, wheelsets 1-4 (1 leads).
-The longitudinal coordinate of every body and the pitch (spin perturbation)
-of the wheelsets are not degrees of freedom of this model: stiff restraint
-springs to ground (``CoordinateSpringDamper``, natural frequency
-:data:`RESTRAINT_HZ`) hold them in the time solver, and the linear analysis
-treats them as fixed (rows and columns removed); the difference is of order
-(suspension stiffness / restraint stiffness), below 1e-4.
+about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
+frame, wheelsets 1-4 (1 leads). Degrees of freedom: lateral, vertical, roll,
+pitch and yaw of carbody and bogies, lateral, vertical, roll and yaw of the
+wheelsets (31). The longitudinal coordinate of every body and the pitch
+(spin perturbation) of the wheelsets are held by stiff restraint springs to
+ground (natural frequency :data:`RESTRAINT_HZ`) in the time solver; the
+linear analysis treats them as fixed (rows and columns removed), a
+difference of order suspension stiffness / restraint stiffness, below 1e-4.
+
+Ground element: gravity (-m g on each body's vertical coordinate) and the
+restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
+exudyn item instead of 7 loads and 11 connectors (exudyn's cost per item and
+time step dominates a model this small).
 
 Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
 attachment points):
@@ -33,11 +40,11 @@ attachment points):
   ``CartesianSpringDamper`` with a symbolic force law, zero inside the gap.
 
 Spring preloads are connector offsets, so the reference configuration under
-gravity is the static equilibrium (no static solve needed; a test checks the
-residual).
+gravity is the static equilibrium (no static solve; :meth:`TrainModel.static_residual`
+checks it with exudyn's own right-hand side).
 
 Wheel-rail contact, per wheelset: an ``ObjectGenericODE2`` force element on
-the wheelset coordinates and the odometer coordinate (below), with
+the wheelset's coordinates and its odometer (below), with
 
 - Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping):
   vertical force 2 k_H (V - z) and roll moment k_H l0 (C - 2 l0 roll);
@@ -50,34 +57,41 @@ the wheelset coordinates and the odometer coordinate (below), with
 V, Y and C are the track's vertical level, alignment and cross-level under
 the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does
 not act in an equivalent-conicity contact: the rolling-radius differences of
-the two rails cancel). The contact's stiffness and damping matrices hold the
-linear terms (damping f/v at the configured speed: creep damping is speed
+the two rails cancel). The element's stiffness and damping matrices hold the
+linear terms (damping f/v at the segment's speed: creep damping is speed
 dependent); the track enters as the force G r, with G the
-:meth:`TrainModel.input_matrix` (7 x 3). In the time solver a symbolic
-``forceUserFunction`` (exudyn.symbolic, evaluated in C++) adds G r(s), with
-r looked up in the track table at the wheelset's distance s; with creep
-saturation or a variable speed it computes the creep forces itself (then the
-speed is the odometer's velocity).
+:meth:`TrainModel.input_matrix` (6 x 3). In the time solver a symbolic
+``forceUserFunction`` (exudyn.symbolic, evaluated in C++, no Python call)
+adds G r(s), with r looked up in the track table at the wheelset's odometer;
+with creep saturation or a variable speed it computes the creep forces
+itself, with the odometer's velocity as the speed.
 
-Odometer: one extra coordinate (``NodeGenericODE2`` + ``ObjectMass1D``)
-holding the car centre's distance along the track in track samples. At
-constant speed it coasts (initial velocity v/dx, no force: exact in
-generalised-alpha); with a speed record a velocity-level ``CoordinateConstraint``
-prescribes its velocity from a symbolic speed table.
+Odometers: one coordinate per wheelset (``NodeGenericODE2``, unit mass in the
+contact element) holding the wheelset's position in the track table, in
+samples. At constant speed they coast (initial velocity v/dx, no force:
+exact in generalised-alpha); with a speed record a velocity-level
+``CoordinateConstraint`` prescribes the leading one's velocity from a
+symbolic speed table and the others keep their distance to it.
 
-Tables in exudyn.symbolic. Track tables are named ``Real`` leaves (one per
-distance sample and channel, shared by the four wheelsets) read by a
-balanced ``IfThenElse`` tree with linear interpolation: O(log n) operations
-per lookup, all in C++, and a new segment only sets leaf values (no model
-rebuild). Symbolic ``Vector`` indexing is not used: it is unreliable in
-exudyn 1.13 (crashes when indexed repeatedly).
+Tables in exudyn.symbolic: named ``Real`` leaves (one per distance sample and
+channel, shared by the four wheelsets) read by a balanced ``IfThenElse`` tree
+with linear interpolation: O(log n) operations per lookup, all in C++; a new
+segment only sets leaf values (no rebuild). Two exudyn 1.13 limits shape this:
+symbolic vectors of 8 or more entries crash when indexed (hence one contact
+element per wheelset, 7 coordinates) and a symbolic index into a table is
+not available (hence the trees).
+
+Sensors: exudyn records the accelerations of the nodes that carry sensors
+(``SensorNode``, ``Coordinates_tt``); a sensor's acceleration is J q''_node
+with J read back from exudyn's kinematics (:meth:`TrainModel._sensor_jacobians`),
+the same J that gives the frequency solver's output matrix.
 """
 
 from __future__ import annotations
 
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np

@@ -8,7 +8,7 @@ from typing import Any, Literal, Mapping, Sequence
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
 
 from suspid._options import parse_options
-from suspid.errors import ConfigError, SimulatorError
+from suspid.errors import SimulatorError
 from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 
 from . import parameters as P
