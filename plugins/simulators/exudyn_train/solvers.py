@@ -145,7 +145,7 @@ def simulate_time(model: TrainModel, segment: TrackSegment, settings: TimeSettin
     T = n_t / fs
     a = wheelset_positions(model.values)
     a_max = float(np.max(a))
-    t_post = 0.25 + 40.0 / (k * fs)   # margin for the decimation filter at the end
+    t_post = 0.05 + 12.0 / fs          # margin for the decimation filter (half length 10 k fine samples = 10 / fs)
 
     constant = is_constant_speed(segment)
     if constant:
