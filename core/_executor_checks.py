@@ -1,4 +1,4 @@
-"""Conformance check for executor plugins: :func:`check_executor` (to move into ``suspid.testing``).
+"""Conformance check for executor plugins: :func:`check_executor`, re-exported by ``suspid.testing``.
 
 The task functions are module-level so that every executor can pickle them
 by reference: a worker process or a dask worker imports this module to run

@@ -128,6 +128,7 @@ class Config(Section):
     executor: ExecutorSection = Field(default_factory=ExecutorSection)
     identifiability: dict[str, Any] = Field(default_factory=dict)
     study: dict[str, Any] = Field(default_factory=dict)
+    monitor: dict[str, Any] = Field(default_factory=dict)
     output: OutputSection = Field(default_factory=OutputSection)
 
     # set by load_config, not by the user
@@ -290,6 +291,8 @@ def load_config(path: str | Path, overrides: Sequence[str] = (), *, check_plugin
     """
     path = Path(path)
     file = str(path)
+    if check_plugins:
+        registry.registry()  # plugin load errors first (strict mode), whatever the config says
     data, lines = read_yaml(path)
     data = apply_overrides(data, overrides, file)
     base_dir = path.resolve().parent

@@ -18,6 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from suspid._executor_checks import check_executor  # noqa: F401  (part of the kit)
 from suspid.interfaces import (IRREGULARITY_CHANNELS, Objective, Parameter, Response, Simulator, Surrogate,
                                TrackSegment)
 

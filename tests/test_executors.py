@@ -1,6 +1,6 @@
 """Executors (issue 9): serial, processes and dask give the same results; dead workers; no process left.
 
-Task functions live at module level (here or in ``_conformance``) so that
+Task functions live at module level (here or in ``suspid._executor_checks``) so that
 worker processes can import them by reference: spawned workers, the pool's and
 the LocalCluster's, start with the driver's ``sys.path``, which holds this
 folder. The quarter-car workload adds the template's ``src`` folder to
@@ -23,7 +23,7 @@ import pytest
 from suspid import registry
 from suspid.errors import ConfigError, PluginError
 from suspid.plugins.executors._common import WorkerLostError
-from suspid.plugins.executors._conformance import DieOnce, check_executor, collect, square
+from suspid._executor_checks import DieOnce, check_executor, collect, square
 from suspid.plugins.executors.dask import DaskExecutor, DaskOptions, scheduler_address
 from suspid.plugins.executors.processes import ProcessExecutor, ProcessOptions, default_workers
 from suspid.plugins.executors.serial import SerialExecutor
