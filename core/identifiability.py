@@ -1,29 +1,33 @@
 """Identifiability and intervals of the identified parameters (paper §3.3, the second component).
 
 A component of w_opt is reported as known only when the data pin it down.
-Three symptoms flag a component as **not identifiable**, each from the
-metamodel J~ fitted on every evaluation:
+Three symptoms flag a component as **not identifiable**:
 
-- *no influence*: its total Sobol index S_T on J~ (over the whole box) is
-  below ``min_total_index``;
+- *no influence*: its total Sobol index S_T on the metamodel J~ (over the
+  whole box) is below ``min_total_index``;
 - *flat direction*: its interval (below) spans more than ``max_width`` of the
-  admissible interval;
-- *stuck on a bound*: w_opt lies within ``bound_margin`` of a bound and the
-  interval reaches that bound, so the optimum may lie beyond it (the paper's
-  second component under the overlap objective).
+  admissible interval (J~ is flat along it, or a combination of it and
+  another component, at the scale of the data's noise);
+- *stuck on a bound*: w_opt lies within ``bound_margin`` of a bound and J~
+  still rises towards it, so the optimum may lie beyond the admissible
+  interval (the paper's second component under the overlap objective).
 
-A strong correlation (|r| > ``max_correlation``) between two components over
-the near-optimal set is reported beside them: it is how a flat direction
-shared by two parameters shows (the paper's first and second components).
+A strong correlation (|r| > ``max_correlation``) between two components is
+reported beside them: it is how a flat direction shared by two parameters
+shows (the paper's first and second components).
 
-Interval. The threshold δ comes from the noise model: J is a Monte Carlo
-estimate made with v noise paths b_i, so redrawing the paths moves J(w_opt)
-by its standard deviation σ_J (estimated from ``n_redraws`` redraws, at no
-extra simulation cost: y_sim(w_opt) is reused). Points whose metamodel J
-stays within δ = ``delta_sigmas`` · σ_J of J_max cannot be told apart from
-w_opt at this sample size. The interval of component k is the range of that
-near-optimal set, found by sampling J~'s mean on a scrambled Sobol' set of the
-box plus a Gaussian cloud around w_opt, in normalised coordinates.
+Interval (a sandwich estimate, as for M-estimators). Near its maximum,
+J(w) ≈ J_max + g·Δ + ½ Δᵀ H Δ, with Δ = w - w_opt in [0, 1]^q
+coordinates, H the Hessian of the metamodel's mean at w_opt, and g the
+random tilt that other data of the same kind would give (zero on average).
+The maximum then moves by Δ = -H⁻¹ g, so Cov(w_opt) ≈ H⁻¹ Σ_g H⁻¹, where
+The diagonal of H comes from simulations at w_opt ± h e_k, its correlation
+structure from the metamodel. Σ_g, the covariance of the gradient of J at w_opt, comes from a bootstrap
+over segments with redrawn noise paths
+(:func:`suspid.pipeline.gradient_noise`). The interval of component k is
+w_opt,k ± ``n_sigmas`` σ_k, clipped to the box. Directions where H is not
+negative definite (flat or rising) get an unbounded spread, hence the whole
+interval.
 """
 
 from __future__ import annotations
@@ -37,63 +41,106 @@ from suspid.config import Section
 
 
 class IdentifiabilityOptions(Section):
-    """Thresholds of the identifiability verdict (``identifiability:`` in ``ego:``'s sibling section)."""
+    """Thresholds of the identifiability verdict (config section ``identifiability:``)."""
 
     min_total_index: float = Field(default=0.005, ge=0, le=1)
     max_width: float = Field(default=0.5, gt=0, le=1)
     bound_margin: float = Field(default=0.02, ge=0, lt=0.5)
     max_correlation: float = Field(default=0.9, gt=0, le=1)
-    n_redraws: int = Field(default=16, ge=2)
-    delta_sigmas: float = Field(default=2.0, gt=0)
-    n_samples: int = Field(default=8192, ge=256)
+    n_redraws: int = Field(default=32, ge=4, description="bootstrap replicates of the gradient noise")
+    step: float = Field(default=0.05, gt=0, le=0.25, description="finite-difference step in [0, 1]^q")
+    n_sigmas: float = Field(default=2.0, gt=0, description="half-width of the intervals, in standard deviations")
 
 
 @dataclass
 class Verdict:
-    """Per-component verdicts; arrays are ``(q,)``, intervals ``(q, 2)`` normalised."""
+    """Per-component verdicts; arrays are ``(q,)``, intervals ``(q, 2)`` and covariance ``(q, q)`` normalised."""
 
     identifiable: np.ndarray
     reasons: list[list[str]]
     interval_unit: np.ndarray
+    covariance: np.ndarray
     total_index: np.ndarray
     first_index: np.ndarray
     lengthscales: np.ndarray | None
     correlated_with: list[list[str]]
-    delta: float
-    sigma_J: float
 
 
-def near_optimal_set(mean_fn, u_opt: np.ndarray, j_max: float, delta: float, n: int,
-                     rng: np.random.Generator) -> np.ndarray:
-    """Points of [0, 1]^q where the metamodel mean is at least J_max - δ, ``(m, q)``; w_opt included."""
-    from scipy.stats import qmc
+def mean_hessian(mean_fn, u: np.ndarray, h: float = 0.02) -> np.ndarray:
+    """Hessian ``(q, q)`` of a scalar function at ``u`` by central differences (one batched call)."""
+    q = u.size
+    E = h * np.eye(q)
+    pts = [u]
+    for i in range(q):
+        for j in range(q):
+            pts += [u + E[i] + E[j], u + E[i] - E[j], u - E[i] + E[j], u - E[i] - E[j]]
+    f = np.asarray(mean_fn(np.array(pts)))
+    H = np.empty((q, q))
+    for i in range(q):
+        for j in range(q):
+            a = 1 + 4 * (i * q + j)
+            H[i, j] = (f[a] - f[a + 1] - f[a + 2] + f[a + 3]) / (4 * h * h)
+    return 0.5 * (H + H.T)
 
-    q = u_opt.size
-    m = 1 << int(np.ceil(np.log2(max(n // 2, 2))))
-    sobol = qmc.Sobol(q, scramble=True, seed=rng).random(m)
-    local = np.concatenate([u_opt + s * rng.standard_normal((n // 6, q)) for s in (0.02, 0.08, 0.25)])
-    U = np.clip(np.vstack([sobol, local]), 0.0, 1.0)
-    keep = U[np.asarray(mean_fn(U)) >= j_max - delta]
-    return np.vstack([u_opt[None, :], keep])
+
+def sandwich_covariance(H: np.ndarray, sigma_g: np.ndarray, big: float = 1e6) -> np.ndarray:
+    """H⁻¹ Σ_g H⁻¹ on the negative-definite part of H; other directions get variance ``big``."""
+    lam, V = np.linalg.eigh(H)
+    scale = np.abs(lam).max() if lam.size else 1.0
+    inv = np.where(lam < -1e-9 * scale, 1.0 / np.minimum(lam, -1e-300), 0.0)
+    Hinv = (V * inv) @ V.T
+    cov = Hinv @ sigma_g @ Hinv
+    flat = V[:, lam >= -1e-9 * scale]
+    return cov + big * flat @ flat.T
 
 
-def assess(names: list[str], u_opt: np.ndarray, j_max: float, sigma_J: float, surrogate,
-           options: IdentifiabilityOptions, rng: np.random.Generator) -> Verdict:
+def combine_hessian(H_model: np.ndarray, curvature: np.ndarray | None) -> np.ndarray:
+    """The Hessian with the simulated curvatures on its diagonal and the metamodel's correlations.
+
+    ``H_ij = r_ij sqrt(c_i c_j)`` with c the simulated curvatures (where
+    finite) and r the metamodel Hessian's correlation structure; a component
+    whose curvature is not negative keeps no coupling (flat).
+    """
+    if curvature is None:
+        return H_model
+    c = np.where(np.isfinite(curvature), curvature, np.diag(H_model))
+    d = np.diag(H_model)
+    H = np.diag(c).astype(float)
+    q = c.size
+    for i in range(q):
+        for j in range(q):
+            if i != j and c[i] < 0 and c[j] < 0 and d[i] < 0 and d[j] < 0:
+                r = np.clip(H_model[i, j] / np.sqrt(d[i] * d[j]), -0.999, 0.999)  # H = -D R D, R_ij = -r
+                H[i, j] = r * np.sqrt(c[i] * c[j])
+    return H
+
+
+def assess(names: list[str], u_opt: np.ndarray, sigma_g: np.ndarray, surrogate,
+           options: IdentifiabilityOptions, rng: np.random.Generator,
+           curvature: np.ndarray | None = None) -> Verdict:
     """The identifiability verdict of every component (see the module docstring).
 
     :param u_opt: ``(q,)`` w_opt in [0, 1]^q.
+    :param sigma_g: ``(q, q)`` covariance of the gradient of J at w_opt, [0, 1]^q coordinates.
     :param surrogate: a fitted surrogate whose inputs are normalised points.
+    :param curvature: ``(q,)`` d²J/du_k² at w_opt from simulations (NaN where unknown);
+        without it the metamodel's Hessian is used alone.
     """
-    from suspid.sensitivity import sobol_indices
+    from suspid.sensitivity import surrogate_sensitivity
 
     q = len(names)
     mean_fn = lambda U: surrogate.predict(np.atleast_2d(U))[0]  # noqa: E731
-    first, total = sobol_indices(mean_fn, q, seed=int(rng.integers(2**31)))
-    first, total = np.clip(np.asarray(first), 0, 1), np.clip(np.asarray(total), 0, 1)
-    delta = options.delta_sigmas * sigma_J
-    S = near_optimal_set(mean_fn, u_opt, j_max, delta, options.n_samples, rng)
-    interval = np.stack([S.min(axis=0), S.max(axis=0)], axis=1)
-    corr = np.corrcoef(S.T) if S.shape[0] > q + 2 else np.eye(q)
+    sens = surrogate_sensitivity(surrogate, q, seed=int(rng.integers(2**31)), names=names)
+    first, total = np.clip(sens.first_order, 0, 1), np.clip(sens.total, 0, 1)
+    H = combine_hessian(mean_hessian(mean_fn, u_opt), curvature)
+    cov = sandwich_covariance(H, sigma_g)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    interval = np.stack([np.clip(u_opt - options.n_sigmas * sd, 0, 1),
+                         np.clip(u_opt + options.n_sigmas * sd, 0, 1)], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    grad = np.array([(mean_fn(np.clip(u_opt + 0.01 * e, 0, 1)[None])[0]
+                      - mean_fn(np.clip(u_opt - 0.01 * e, 0, 1)[None])[0]) for e in np.eye(q)])
     identifiable = np.ones(q, dtype=bool)
     reasons: list[list[str]] = [[] for _ in range(q)]
     correlated: list[list[str]] = [[] for _ in range(q)]
@@ -102,15 +149,13 @@ def assess(names: list[str], u_opt: np.ndarray, j_max: float, sigma_J: float, su
         if total[k] < options.min_total_index:
             reasons[k].append(f"no influence on J (total Sobol index {total[k]:.3g})")
         if width > options.max_width:
-            reasons[k].append(f"flat direction: near-optimal set spans {100 * width:.0f} % of the interval")
-        for side, bound in (("lower", 0.0), ("upper", 1.0)):
-            if abs(u_opt[k] - bound) <= options.bound_margin and abs(interval[k, int(bound)] - bound) <= 1e-9:
-                reasons[k].append(f"stuck on the {side} bound")
+            reasons[k].append(f"flat direction: the interval spans {100 * width:.0f} % of the admissible one")
+        if u_opt[k] <= options.bound_margin and grad[k] < 0:
+            reasons[k].append("stuck on the lower bound (J still rises beyond it)")
+        if u_opt[k] >= 1 - options.bound_margin and grad[k] > 0:
+            reasons[k].append("stuck on the upper bound (J still rises beyond it)")
         for j in range(q):
             if j != k and np.isfinite(corr[k, j]) and abs(corr[k, j]) > options.max_correlation:
                 correlated[k].append(f"{names[j]} (r = {corr[k, j]:+.2f})")
         identifiable[k] = not reasons[k]
-    lengthscales = getattr(surrogate, "lengthscales_", None)
-    return Verdict(identifiable, reasons, interval, total, first,
-                   None if lengthscales is None else np.asarray(lengthscales, float), correlated, float(delta),
-                   float(sigma_J))
+    return Verdict(identifiable, reasons, interval, cov, total, first, sens.lengthscales, correlated)

@@ -278,12 +278,13 @@ def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:
 
 
 # -- J(w) through the ledger -------------------------------------------------------------
-def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (the run's fixed paths by default)."""
+def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
+                 y_mes: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra)."""
     from suspid.objective_function import ObjectiveFunction
 
-    fn = ObjectiveFunction(problem.objective, problem.y_mes, problem.freqs, problem.b if b is None else b,
-                           weights=problem.weights, channels=problem.channels)
+    fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
+                           problem.b if b is None else b, weights=problem.weights, channels=problem.channels)
     J, psi = fn.evaluate(y_sim)
     return J, psi
 
@@ -500,6 +501,58 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     return RunResult(result, run_dir, problem, ego)
 
 
+def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int
+                   ) -> tuple[np.ndarray, float]:
+    """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
+
+    J is estimated from v measured spectra and v modelled ones (y_sim_i + b_i).
+    Each of ``n_redraws`` replicates resamples the segments of both sets with
+    replacement (a bootstrap over segments: the finite measured data) and
+    draws new noise paths b_i (the finite Monte Carlo sample of Y_mod, §2.3),
+    then takes the central-difference gradient of J at w_opt from the 2q points
+    w_opt ± h e_k (clipped to the box). The spread of these gradients over the
+    replicates, Σ_g, is how far the data of the same kind could tilt J at its
+    maximum. The 2q spectra are simulated once (cached in the ledger).
+
+    The same 2q + 1 spectra with the run's own data give the curvature of J
+    along each axis, d²J/du_k² (central second differences).
+
+    :returns: ``(Σ_g (q, q), curvature (q,), σ_J)``, σ_J the scatter of J(w_opt) itself.
+    """
+    config = problem.config
+    q = problem.q
+
+    def y_sim_at(u: np.ndarray) -> np.ndarray:
+        w = problem.w_of(problem.from_unit(u))
+        key = stable_hash("y_sim", problem.simulator.identity(), w, segments_digest(problem.segments))
+        return _cached_spectra(ledger, key, lambda: _simulate_spectra(problem.simulator, w, problem.segments,
+                                                                       config.spectra))[0]
+
+    plus = np.clip(u_opt + h * np.eye(q), 0.0, 1.0)
+    minus = np.clip(u_opt - h * np.eye(q), 0.0, 1.0)
+    step = np.diag(plus - minus)
+    y_plus, y_minus, y_opt = [y_sim_at(u) for u in plus], [y_sim_at(u) for u in minus], y_sim_at(u_opt)
+    rng = named_rng(config.seed, "noise-redraws")
+    v = len(problem.segments)
+    grads, j_opt = np.empty((n_redraws, q)), np.empty(n_redraws)
+    for k in range(n_redraws):
+        b = problem.noise_model.sample(v, rng)
+        i_mes, i_mod = rng.integers(0, v, v), rng.integers(0, v, v)
+        y_mes = problem.y_mes[i_mes]
+        J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes)[0]  # noqa: E731
+        grads[k] = [(J(yp) - J(ym)) / step[i] for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
+        j_opt[k] = J(y_opt)
+    J0 = j_of_spectra(problem, y_opt)[0]
+    Jp = np.array([j_of_spectra(problem, y)[0] for y in y_plus])
+    Jm = np.array([j_of_spectra(problem, y)[0] for y in y_minus])
+    h_plus, h_minus = np.diag(plus) - u_opt, u_opt - np.diag(minus)
+    with np.errstate(divide="ignore", invalid="ignore"):  # one-sided at a bound: no curvature there
+        curvature = np.where((h_plus > 0) & (h_minus > 0),
+                             2 * (h_minus * Jp + h_plus * Jm - (h_plus + h_minus) * J0)
+                             / (h_plus * h_minus * (h_plus + h_minus)), np.nan)
+    return np.atleast_2d(np.cov(grads, rowvar=False)), curvature, float(np.std(j_opt, ddof=1))
+
+
 def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], config: Config) -> dict[str, Any]:
     """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict."""
     from suspid.identifiability import IdentifiabilityOptions, assess
@@ -508,15 +561,9 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
     x_opt = np.asarray(ego.x_opt, float)
     u_opt = problem.to_unit(x_opt)
-    # σ_J: J(w_opt) with redrawn noise paths, y_sim(w_opt) simulated once (paper §2.3 noise model)
-    key = stable_hash("y_sim_opt", problem.simulator.identity(), problem.w_of(x_opt), segments_digest(problem.segments))
-    y_opt, _ = _cached_spectra(ledger, key, lambda: _simulate_spectra(
-        problem.simulator, problem.w_of(x_opt), problem.segments, config.spectra))
+    sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws)
     rng = named_rng(config.seed, "identifiability")
-    redraws = [j_of_spectra(problem, y_opt, problem.noise_model.sample(len(problem.segments), rng))[0]
-               for _ in range(opts.n_redraws)]
-    sigma_J = float(np.std(redraws, ddof=1))
-    verdict = assess(names, u_opt, float(ego.y_opt), sigma_J, ego.surrogate, opts, rng)
+    verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     interval_si = lo[:, None] + verdict.interval_unit * (hi - lo)[:, None]
     units = {p.name: p.unit for p in problem.simulator.parameters()}
     result: dict[str, Any] = {
@@ -531,7 +578,9 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
         "correlated_with": {n: c for n, c in zip(names, verdict.correlated_with) if c},
         "interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_si)},
         "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, verdict.interval_unit)},
-        "interval_threshold": {"sigma_J": sigma_J, "delta": verdict.delta, "n_redraws": opts.n_redraws},
+        "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
+                            "n_sigmas": opts.n_sigmas,
+                            "covariance_normalized": verdict.covariance.tolist()},
         "sensitivity": {
             "total_sobol": {n: float(v) for n, v in zip(names, verdict.total_index)},
             "first_sobol": {n: float(v) for n, v in zip(names, verdict.first_index)},
@@ -611,8 +660,9 @@ J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 {markdown_table(header, rows)}
 
 Components marked **no** are not identifiable from these data: their value is not a finding.
-Intervals: the range of the parameters whose metamodel J stays within δ = {result['interval_threshold']['delta']:.3g}
-(2 σ_J, σ_J = {result['interval_threshold']['sigma_J']:.3g} the scatter of J(w_opt) under redrawn noise paths) of J_max.
+Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
+H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
+bootstrap over segments with redrawn noise paths), clipped to the admissible box.
 
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
 
