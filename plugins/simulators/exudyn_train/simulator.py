@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Literal, Mapping, Sequence
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
 
 from suspid._options import parse_options
@@ -190,8 +191,10 @@ class ExudynTrain(Simulator):
         n = max(len(s.distance) for s in segments) + 2 * TABLE_PAD
         cap = 1 << max(4, int(math.ceil(math.log2(n))))
         variable = not all(is_constant_speed(s) for s in segments)
-        longest = max(s.duration() for s in segments) + 5.0
-        speed_cap = (1 << max(4, int(math.ceil(math.log2(longest / 0.02 + 10))))) if variable else 0
+        # the speed table spans the run-in (leading wheelset up to 15 m ahead of the car centre),
+        # the record and the run-out, at 0.02 s
+        longest = max(s.duration() + 15.0 / float(np.atleast_1d(s.speed)[0]) + 1.0 for s in segments)
+        speed_cap = (1 << max(6, int(math.ceil(math.log2(longest / 0.02 + 60))))) if variable else 0
         return TimeFeatures(track_capacity=cap, variable_speed=variable, speed_capacity=speed_cap,
                             saturation=c.creep_saturation, friction=c.friction, bump_stops=c.bump_stops,
                             bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness)

@@ -163,7 +163,7 @@ def simulate_time(model: TrainModel, segment: TrackSegment, settings: TimeSettin
         odo_v = v_start / dx
         # speed of the car centre on a time grid from the start of the integration
         t_end = t_pre + T + t_post
-        dt_v = min(0.02, T / 50.0)
+        dt_v = 0.02                                    # speed records vary slowly
         tg = np.arange(0.0, t_end + 2 * dt_v, dt_v)
         tc = tg - t_pre                                  # record time of each grid point
         speeds = np.interp(tc, t_x, v_x, left=v_start, right=v_end)
