@@ -73,3 +73,17 @@ def suspid_register_executors(register: Register) -> None:
         ``name``; configs select it as ``executor: {plugin: <name>}``.
     :returns: nothing; the return value is ignored.
     """
+
+
+@hookspec
+def suspid_register_effects(register: Register) -> None:
+    """Register model effects: named extensions missing from rigid models (discrepancy workflow).
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each effect class. ``cls``
+        subclasses :class:`suspid.interfaces.Effect` and has a unique ``name``;
+        configs enable it as ``simulator.options.effects: [{name: <name>, ...}]``
+        for simulators that support it.
+    :returns: nothing; the return value is ignored.
+    """

@@ -37,6 +37,7 @@ KINDS: dict[str, str] = {
     "objective": "suspid_register_objectives",
     "surrogate": "suspid_register_surrogates",
     "executor": "suspid_register_executors",
+    "effect": "suspid_register_effects",
 }
 """Plugin kind -> the register hook that provides it."""
 
