@@ -40,8 +40,11 @@ Conditioning. Near-duplicate points (scaled distance < ``duplicate_tol``) are
 reported with a :class:`ConditioningWarning`; if their values disagree, the
 noise floor is raised to the variance of the disagreement. After the fit the
 condition number of ``K + σ²I`` is checked; above ``max_condition`` the jitter
-(added to σ²) is raised just enough, with a warning, and raised further if the
-Cholesky factorisation still fails. Duplicates never crash.
+(added to σ²) is raised just enough, and raised further if the Cholesky
+factorisation still fails. A jitter above ``jitter_warning`` (1e-6 of the
+output variance, enough to change predictions) comes with a warning; smaller
+ones, routine for smooth kernels on clustered EGO points, are only recorded
+in ``hyperparameters_["jitter_standardised"]``. Duplicates never crash.
 
 Predictions. GPy fits the hyperparameters; the posterior (Cholesky factor,
 α) and the predictions with their gradients are computed here in numpy with
@@ -101,6 +104,7 @@ class GPyKrigingOptions(BaseModel):
     variance_bounds: tuple[float, float] = (1e-3, 1e3)
     max_iters: int = Field(default=1000, ge=1)
     max_condition: float = Field(default=1e12, gt=10)
+    jitter_warning: float = Field(default=1e-6, ge=0)
     duplicate_tol: float = Field(default=1e-8, ge=0)
     bounds: list[tuple[float, float]] | None = None
 
@@ -319,6 +323,7 @@ class GPyKriging(Surrogate):
         jitter = 0.0
         if not (lmin > 0 and lmax <= c * lmin):
             jitter = 1.01 * (lmax - c * lmin) / (c - 1.0)
+        if jitter > opts.jitter_warning:
             warnings.warn(f"gpy-kriging: ill-conditioned covariance ({K.shape[0]} points, "
                           f"condition {lmax / max(lmin, 1e-300):.2g}); jitter {jitter:.3g} added "
                           f"to the noise variance (standardised)", ConditioningWarning, stacklevel=3)

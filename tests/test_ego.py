@@ -1,0 +1,218 @@
+"""EGO loop (issue 4, part 3): EI in closed form, the paper's stop rule, determinism, quality."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import norm
+
+from suspid.ego import (EGOOptions, _log_ei_and_grad, expected_improvement,
+                        log_expected_improvement, maximize, run_ego)
+from suspid.errors import ConfigError, SuspidError, UnknownPluginError
+from suspid.interfaces import Surrogate
+from suspid.plugins.surrogates.gpy_kriging import GPyKriging
+from suspid.testfunctions import FUNCTIONS
+
+BOX = [[-1.0, 2.0], [0.0, 1.0]]
+
+
+def bowl(w):
+    """Concave, maximum 1 at (0.5, 0.3)."""
+    return 1.0 - (w[0] - 0.5) ** 2 - 4 * (w[1] - 0.3) ** 2
+
+
+def relative_error(name, X):
+    f = FUNCTIONS[name]
+    return abs(f.func(X).min() - f.f_min) / abs(f.f_min)
+
+
+# -- expected improvement -------------------------------------------------------------
+
+def test_ei_closed_form_known_values():
+    # at mean == J_max the improvement is sigma * phi(0)
+    assert expected_improvement(np.array([1.0]), np.array([4.0]), 1.0)[0] == pytest.approx(
+        2.0 * norm.pdf(0.0))
+    # no uncertainty: EI is the plain improvement
+    np.testing.assert_allclose(expected_improvement(np.array([3.0, 0.0]), np.zeros(2), 1.0), [2.0, 0.0])
+    mean, var, jmax = np.array([0.3, -2.0, 5.0]), np.array([0.5, 0.1, 2.0]), 0.7
+    s = np.sqrt(var)
+    z = (mean - jmax) / s
+    expected = (mean - jmax) * norm.cdf(z) + s * norm.pdf(z)
+    np.testing.assert_allclose(expected_improvement(mean, var, jmax), expected, rtol=1e-12)
+
+
+def test_ei_matches_monte_carlo_for_maximisation():
+    rng = np.random.default_rng(0)
+    mean, sd, jmax = 1.2, 0.7, 1.5
+    samples = mean + sd * rng.standard_normal(2_000_000)
+    mc = np.mean(np.maximum(samples - jmax, 0.0))
+    assert expected_improvement(np.array([mean]), np.array([sd ** 2]), jmax)[0] == pytest.approx(mc, rel=5e-3)
+
+
+def test_log_ei_does_not_underflow():
+    # z = -40: EI ~ 1e-350 underflows, its log does not and decreases smoothly
+    logs = log_expected_improvement(np.array([-40.0, -41.0, -1e4]), np.ones(3), 0.0)
+    assert np.all(np.isfinite(logs)) and logs[0] > logs[1] > logs[2]
+    z = -30.0
+    direct = math.log(norm.pdf(z) + z * norm.cdf(z)) if norm.pdf(z) + z * norm.cdf(z) > 0 else None
+    approx = log_expected_improvement(np.array([z]), np.ones(1), 0.0)[0]
+    if direct is not None:
+        assert approx == pytest.approx(direct, rel=1e-6)
+
+
+class Quadratic(Surrogate):
+    """A fake surrogate with analytic mean, variance and gradients."""
+
+    name = "quadratic-test"
+
+    def fit(self, X, y):
+        return self
+
+    def predict(self, X):
+        return -np.sum((X - 0.3) ** 2, axis=1), 0.01 + np.sum(X ** 2, axis=1) * 0.05
+
+    def predict_gradients(self, X):
+        return -2 * (X - 0.3), 0.1 * X
+
+
+@pytest.mark.parametrize("u", [[0.2, 0.9], [0.9, 0.1], [0.95, 0.95]])
+def test_log_ei_gradient_matches_finite_differences(u):
+    model, u, jmax = Quadratic(), np.array(u), 0.05
+    val, grad = _log_ei_and_grad(model, u, jmax, with_grad=True)
+    h = 1e-6
+    for k in range(2):
+        e = np.zeros(2)
+        e[k] = h
+        fd = (_log_ei_and_grad(model, u + e, jmax, False)[0] - _log_ei_and_grad(model, u - e, jmax, False)[0]) / (2 * h)
+        assert grad[k] == pytest.approx(fd, rel=1e-5, abs=1e-7)
+
+
+# -- the loop -----------------------------------------------------------------------------
+
+def test_max_iter_caps_the_new_points():
+    res = maximize(bowl, BOX, n_initial=5, max_iter=3, tol=0.0, seed=1)
+    assert res.n_initial == 5 and res.n_evaluations == 8 and res.n_iterations == 3
+    assert res.stop_reason == "max_iter"
+    assert res.X.shape == (8, 2) and res.y.shape == (8,)
+    np.testing.assert_allclose(res.y, [bowl(x) for x in res.X])
+    assert res.y_opt == res.y.max() and np.array_equal(res.x_opt, res.X[np.argmax(res.y)])
+
+
+def test_stops_when_max_ei_falls_below_epsilon():
+    records = []
+    res = maximize(bowl, BOX, n_initial=6, max_iter=40, tol=1e-3, seed=0, callback=records.append)
+    assert res.stop_reason == "ei_below_tol"
+    assert res.n_evaluations < 6 + 40
+    stop = records[-1]
+    assert stop.phase == "stop" and stop.J is None
+    ego = [r for r in records if r.phase == "ego"]
+    assert len(ego) == res.n_iterations
+    # eps = tol * (max J - min J) over the data at that iteration
+    y_then = res.y[:stop.index]
+    assert stop.epsilon == pytest.approx(1e-3 * (y_then.max() - y_then.min()))
+    assert stop.EI < stop.epsilon
+    assert all(r.EI >= r.epsilon for r in ego)
+    assert res.y_opt > 1.0 - 1e-3
+
+
+def test_records_for_the_ledger():
+    records = []
+    res = maximize(bowl, BOX, n_initial=4, max_iter=2, tol=0.0, seed=2, callback=records.append)
+    assert [r.phase for r in records] == ["initial"] * 4 + ["ego"] * 2
+    assert [r.index for r in records] == list(range(6))
+    assert [r.iteration for r in records] == [0, 0, 0, 0, 1, 2]
+    for r in records[4:]:
+        assert r.EI > 0 and r.J_max == pytest.approx(max(res.y[:r.index]))
+        assert r.hyperparameters["kernel"] == "matern52" and len(r.hyperparameters["lengthscales"]) == 2
+        assert r.fit_seconds >= 0 and r.search_seconds >= 0 and r.eval_seconds >= 0
+        np.testing.assert_allclose(r.x, res.X[r.index])
+        np.testing.assert_allclose(r.x_unit, res.X_unit[r.index])
+
+
+def test_same_seed_same_points_and_replay_of_a_killed_run():
+    a = maximize(bowl, BOX, n_initial=5, max_iter=4, tol=0.0, seed=3)
+    b = maximize(bowl, BOX, n_initial=5, max_iter=4, tol=0.0, seed=3)
+    np.testing.assert_array_equal(a.X, b.X)
+    c = maximize(bowl, BOX, n_initial=5, max_iter=4, tol=0.0, seed=4)
+    assert not np.array_equal(a.X, c.X)
+
+    # a run killed after 2 EGO points, replayed with cached values, retraces the points
+    cache, calls = {}, []
+
+    def cached(w):
+        key = tuple(np.round(w, 12))
+        if key not in cache:
+            calls.append(key)
+            cache[key] = bowl(w)
+        return cache[key]
+
+    killed = maximize(cached, BOX, n_initial=5, max_iter=4, tol=0.0, seed=3,
+                      callback=lambda r: r.phase == "ego" and r.iteration == 2)
+    assert killed.stop_reason == "callback" and killed.n_evaluations == 7
+    replay = maximize(cached, BOX, n_initial=5, max_iter=4, tol=0.0, seed=3)
+    np.testing.assert_array_equal(replay.X, a.X)
+    assert len(calls) == 9  # 7 before the kill, 2 new ones
+
+
+def test_own_initial_points_and_known_values():
+    X0 = np.array([[-1.0, 0.0], [2.0, 1.0], [0.0, 0.5], [1.5, 0.2], [0.5, 0.9]])
+    y0 = np.array([bowl(X0[0]), np.nan, bowl(X0[2]), np.nan, bowl(X0[4])])
+    calls = []
+    res = maximize(lambda w: calls.append(w) or bowl(w), BOX, max_iter=2, tol=0.0, seed=0,
+                   X_init=X0, y_init=y0)
+    np.testing.assert_array_equal(res.X[:5], X0)
+    np.testing.assert_allclose(res.y[:5], [bowl(x) for x in X0])
+    assert res.n_function_calls == 4 == len(calls)  # 2 missing initial values + 2 EGO points
+    assert res.n_evaluations == 7
+
+
+def test_objective_in_unit_coordinates_and_a_surrogate_without_gradients():
+    class NoGradients(GPyKriging):
+        name = "no-gradients"
+
+        def predict_gradients(self, X):
+            raise NotImplementedError
+
+    res = run_ego(lambda u: -np.sum((u - 0.4) ** 2), [[0.0, 1.0]] * 2,
+                  ego=EGOOptions(max_iter=3, tol=0.0, n_candidates=256, n_starts=2),
+                  surrogate=NoGradients(seed=0))
+    assert res.n_evaluations == res.n_initial + 3
+    assert np.all((res.X >= 0) & (res.X <= 1))
+
+
+def test_global_random_state_is_left_alone():
+    np.random.seed(99)
+    state = np.random.get_state()
+    maximize(bowl, BOX, n_initial=4, max_iter=1, tol=0.0, seed=0)
+    assert np.array_equal(np.random.get_state()[1], state[1])
+
+
+def test_user_errors_are_suspid_errors():
+    with pytest.raises(ConfigError):
+        maximize(bowl, [[1.0, 0.0]], max_iter=1)
+    with pytest.raises(ConfigError, match="outside"):
+        maximize(bowl, BOX, X_init=np.array([[5.0, 0.5], [0.0, 0.5]]), max_iter=1)
+    with pytest.raises(ConfigError, match="ego.max_iter"):
+        maximize(bowl, BOX, max_iter=-1)
+    with pytest.raises(ConfigError, match="ego.n_startz"):
+        maximize(bowl, BOX, max_iter=1, n_startz=3)
+    with pytest.raises(UnknownPluginError, match="gpy-kriging"):
+        maximize(bowl, BOX, max_iter=1, surrogate="no-such-model")
+    with pytest.raises(SuspidError, match="finite"):
+        maximize(lambda w: float("nan"), BOX, n_initial=3, max_iter=1)
+
+
+# -- quality on standard functions (paper-independent) -------------------------------------
+
+def test_branin_minimum_within_one_percent():
+    f = FUNCTIONS["branin"]
+    res = maximize(lambda x: -f.func(x), f.bounds, max_iter=34, tol=0.0, seed=0)
+    assert relative_error("branin", res.X) <= 0.01
+    assert res.n_evaluations <= 40
+
+
+@pytest.mark.slow
+def test_hartmann6_minimum_within_one_percent():
+    f = FUNCTIONS["hartmann6"]
+    res = maximize(lambda x: -f.func(x), f.bounds, max_iter=130, tol=0.0, seed=0)
+    assert relative_error("hartmann6", res.X) <= 0.01
