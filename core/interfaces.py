@@ -244,3 +244,142 @@ class Executor(ABC):
         worker that dies loses only its task in flight, which is retried.
         ``fn`` and the items must be picklable for out-of-process executors.
         """
+
+
+# ---------------------------------------------------------------------------------------------------
+# Effects: named model extensions for the discrepancy workflow (``suspid diagnose``)
+# ---------------------------------------------------------------------------------------------------
+SPEED_DEPENDENCES = ("none", "proportional", "kinematic")
+"""How the band of an effect moves with the speed v.
+
+- ``none``: a structural or sensor resonance, fixed in Hz;
+- ``proportional``: a wavelength fixed on the wheel or the track, f = v / wavelength
+  (wheel polygon of order k: wavelength πD/k; sleeper passing: the sleeper spacing);
+- ``kinematic``: the hunting family, f = v/(2π) sqrt(λ/(r0 l0)) (∝ v, and moving with the conicity λ).
+"""
+
+CHANNEL_BODIES = ("carbody", "bogie", "axlebox", "wheelset")
+"""Body words an effect signature uses; a channel belongs to a body when its name contains the word."""
+
+CHANNEL_DIRECTIONS = ("vertical", "lateral", "longitudinal")
+"""Direction words an effect signature uses, matched in channel names like :data:`CHANNEL_BODIES`."""
+
+
+@dataclass(frozen=True)
+class EffectSignature:
+    """Where an effect shows in the spectra Y (paper eq. 1) at one speed.
+
+    :ivar bodies: bodies whose channels show it, words of :data:`CHANNEL_BODIES`.
+    :ivar directions: directions of those channels, words of :data:`CHANNEL_DIRECTIONS`.
+    :ivar band_hz: ``(low, high)`` in Hz, the band where it can show at this
+        speed over the admissible range of its parameters (``high`` may be ``inf``).
+    :ivar speed_dependence: how the band moves with speed, one of :data:`SPEED_DEPENDENCES`.
+    """
+
+    bodies: tuple[str, ...]
+    directions: tuple[str, ...]
+    band_hz: tuple[float, float]
+    speed_dependence: str = "none"
+
+    def matches_channel(self, channel: str) -> bool:
+        """True when the channel name shows one of the bodies and one of the directions.
+
+        A name with no body word (or no direction word) at all is not excluded
+        on that count: the signature cannot tell, so it does not rule it out.
+        """
+        name = channel.lower()
+        bodies = [b for b in CHANNEL_BODIES if b in name]
+        directions = [d for d in CHANNEL_DIRECTIONS if d in name]
+        body_ok = not bodies or any(b in self.bodies for b in bodies)
+        direction_ok = not directions or any(d in self.directions for d in directions)
+        return body_ok and direction_ok
+
+    def overlaps(self, f_low: float, f_high: float) -> bool:
+        """True when the band ``[f_low, f_high]`` (Hz) meets :attr:`band_hz`."""
+        return f_high >= self.band_hz[0] and f_low <= self.band_hz[1]
+
+
+class Effect(ABC):
+    """A named model extension missing from rigid-body models (the discrepancy catalogue).
+
+    An effect is physics with a few parameters, e.g. the first vertical bending
+    mode of the carbody (frequency, damping). It is *declared* here,
+    independently of any simulator: its parameters (``Options``, a pydantic
+    model whose fields carry units and bounds ``ge``/``le``), its signature
+    (which channels, which band, how the band moves with speed) and which
+    parameters the diagnosis fits. A simulator *implements* the effects it
+    supports, looked up by ``name``; configs enable them as::
+
+        simulator: {plugin: exudyn-train, options: {effects: [{name: carbody-bending, frequency_hz: 9.5}]}}
+
+    Contract for simulators that support effects: ``options["effects"]`` is a
+    list of ``{name: <effect>, <parameter>: value, ...}`` validated against the
+    effect's ``Options``; an effect the simulator does not implement is an
+    error naming it; the parameters of :attr:`fitted` of every enabled effect
+    are exposed as simulator parameters named ``<effect>/<parameter>`` (nominal:
+    the configured value; bounds: the ``Options`` bounds), so that the
+    diagnosis, or an identification, can vary them without rebuilding.
+
+    Class attributes:
+
+    - ``name``: registered name (``carbody-bending``);
+    - ``Options``: pydantic model of the parameters (without ``name``);
+    - ``main_parameter``: the parameter a diagnosis reports and is judged on
+      (frequency for modes, order for a polygon, angle for a tilt);
+    - ``fitted``: continuous parameters fitted by the diagnosis; a field with
+      ``json_schema_extra={"scale": "log"}`` is searched on a log scale;
+    - ``description``: one line for reports.
+
+    Constructors store the options (``Effect(**options)``); methods work.
+    """
+
+    name: ClassVar[str]
+    Options: ClassVar[type]
+    main_parameter: ClassVar[str]
+    fitted: ClassVar[tuple[str, ...]] = ()
+    description: ClassVar[str] = ""
+
+    def __init__(self, **options: Any) -> None:
+        self.options = options
+
+    @abstractmethod
+    def signature(self, speed_mps: float) -> EffectSignature:
+        """Where the effect can show at speed ``speed_mps`` (m/s), over its admissible parameters."""
+
+    def candidates(self, speeds_mps: Sequence[float], flagged: Sequence[tuple[str, float, float, float]],
+                   channels: Sequence[str]) -> list[dict[str, Any]]:
+        """Starting points of the fit: parameter dicts (partial: other parameters keep their defaults).
+
+        :param speeds_mps: the speeds of the data, m/s.
+        :param flagged: ``(channel, f_low_hz, f_high_hz, speed_mps)`` of the cells
+            where model and measurements disagree.
+        :param channels: every channel name.
+        :returns: by default five values of :attr:`main_parameter` spread over its bounds.
+        """
+        lo, hi = self.bounds(self.main_parameter)
+        return [{self.main_parameter: float(v)} for v in np.linspace(lo, hi, 7)[1:-1]]
+
+    @classmethod
+    def bounds(cls, parameter: str) -> tuple[float, float]:
+        """``(lower, upper)`` of a parameter, from the ``ge``/``gt``/``le``/``lt`` of its field."""
+        field_info = cls.Options.model_fields[parameter]
+        lo, hi = -np.inf, np.inf
+        for meta in field_info.metadata:
+            for attr in ("ge", "gt"):
+                if getattr(meta, attr, None) is not None:
+                    lo = float(getattr(meta, attr))
+            for attr in ("le", "lt"):
+                if getattr(meta, attr, None) is not None:
+                    hi = float(getattr(meta, attr))
+        return lo, hi
+
+    @classmethod
+    def log_scale(cls, parameter: str) -> bool:
+        """True when the parameter is searched on a log scale (``json_schema_extra={"scale": "log"}``)."""
+        extra = cls.Options.model_fields[parameter].json_schema_extra
+        return isinstance(extra, dict) and extra.get("scale") == "log"
+
+    @classmethod
+    def defaults(cls) -> dict[str, Any]:
+        """Every parameter at its default value."""
+        return cls.Options().model_dump()

@@ -84,7 +84,16 @@ not available (hence the trees).
 Sensors: exudyn records the accelerations of the nodes that carry sensors
 (``SensorNode``, ``Coordinates_tt``); a sensor's acceleration is J q''_node
 with J read back from exudyn's kinematics (:meth:`TrainModel._sensor_jacobians`),
-the same J that gives the frequency solver's output matrix.
+the same J that gives the frequency solver's output matrix. Both solvers
+compute the sensors as C q'' + C_disp q on the free coordinates
+(:meth:`TrainModel.sensor_matrices`; C_disp is zero unless an effect reads
+displacements).
+
+Effects (``simulator.options.effects``, :mod:`.effects`) extend this system:
+extra nodes and linear elements (carbody bending mode, Maxwell yaw dampers,
+track masses), changed values (conicity), changed outputs (sensor tilt) and
+periodic wheel inputs (polygons). Their coordinates are free coordinates
+labelled (effect name, coordinate).
 """
 
 from __future__ import annotations
@@ -203,6 +212,9 @@ class LinearSystem:
     :ivar labels: ``(n,)`` (body, motion) of each free coordinate.
     :ivar wheelset_x: ``(n_wheelsets,)`` wheelset positions relative to the car centre, m.
     :ivar speed: m/s.
+    :ivar C_disp: ``(n_sensors, n)`` displacement part of the sensor outputs (sensor = C q'' + C_disp q),
+        or ``None`` (zero); effects such as a sensor tilt set it.
+    :ivar periodic: periodic wheel inputs of effects (:class:`.effects.PeriodicInput`).
     """
 
     M: np.ndarray
@@ -213,17 +225,21 @@ class LinearSystem:
     labels: list[tuple[str, str]]
     wheelset_x: np.ndarray
     speed: float
+    C_disp: np.ndarray | None = None
+    periodic: tuple = ()
 
 
 class TrainModel:
     """The exudyn system of the car for given parameter values, sensors and time-solver features."""
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
-                 features: TimeFeatures | None = None) -> None:
+                 features: TimeFeatures | None = None, effects: Sequence = ()) -> None:
         self.features = features or TimeFeatures()
         self.sensors = list(sensors)
         self.values = dict(values)
         self.speed = float(speed)
+        self.effects = list(effects)
+        self.replaced = set().union(*(e.replaces for e in self.effects))
         self._build()
 
     # ------------------------------------------------------------------ building
@@ -313,7 +329,8 @@ class TrainModel:
             for side in (1.0, -1.0):
                 m0 = self._marker(self.objects[bogie], (0.0, side * p["b_yaw"], p["h_yaw"] - p["h_bogie"]))
                 m1 = self._marker(car, (xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))
-                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0), lambda q: (q["c_yaw"], 0.0, 0.0),
+                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0),
+                                lambda q: (0.0 if "yaw_damper" in self.replaced else q["c_yaw"], 0.0, 0.0),
                                 lambda q: (0.0, 0.0, 0.0))
             # --- anti-roll bar: relative roll of carbody and bogie frame
             mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
@@ -350,16 +367,29 @@ class TrainModel:
                 raise ValueError(f"sensor '{s.name}': unknown body '{s.body}'")
             if s.direction not in DIRECTIONS:
                 raise ValueError(f"sensor '{s.name}': unknown direction '{s.direction}'")
+        # --- effects: extra nodes and linear elements
+        self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
+        for e in self.effects:
+            e.check(self.sensors, 4)
+            e.build(self)
+
         self.sensor_bodies = sorted({s.body for s in self.sensors}, key=BODIES.index)
-        self.sensor_items = [mbs.AddSensor(ii.SensorNode(
-            nodeNumber=self.nodes[b], storeInternal=True, writeToFile=False,
-            outputVariableType=exu.OutputVariableType.Coordinates_tt)) for b in self.sensor_bodies]
+        recorded = [self.nodes[b] for b in self.sensor_bodies] + [n for n, _, _ in self.effect_nodes]
+        self.sensor_items = [(node, "acceleration", mbs.AddSensor(ii.SensorNode(
+            nodeNumber=node, storeInternal=True, writeToFile=False,
+            outputVariableType=exu.OutputVariableType.Coordinates_tt))) for node in recorded]
+        if any(e.needs_coordinates for e in self.effects):
+            self.sensor_items += [(node, "displacement", mbs.AddSensor(ii.SensorNode(
+                nodeNumber=node, storeInternal=True, writeToFile=False,
+                outputVariableType=exu.OutputVariableType.Coordinates))) for node in recorded]
 
         self._time_extras()
         self._apply(p, force=True)
         mbs.Assemble()
         self._coordinate_map()
-        self.point_jacobians = self._sensor_jacobians()
+        self.point_jacobians_xyz = self._sensor_jacobians()
+        self.point_jacobians = np.array([self.point_jacobians_xyz[i, DIRECTIONS[s.direction]]
+                                         for i, s in enumerate(self.sensors)]).reshape(len(self.sensors), 6)
 
     def _track(self, setter: Callable[[object], None], getter: Callable[[dict], object]) -> None:
         """Register an item field that depends on parameter values."""
@@ -380,6 +410,35 @@ class TrainModel:
         self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "damping", list(v)), damping)
         self._track(lambda v, o=csd: mbs.SetObjectParameter(o, "offset", list(v)), offset)
         return csd
+
+    def add_effect_node(self, effect: str, labels: tuple[str, ...]) -> object:
+        """A node of an effect with ``len(labels)`` free coordinates, labelled (effect, label)."""
+        from exudyn import itemInterface as ii
+
+        n = len(labels)
+        node = self.mbs.AddNode(ii.NodeGenericODE2(referenceCoordinates=[0.0] * n, initialCoordinates=[0.0] * n,
+                                                   initialCoordinates_t=[0.0] * n, numberOfODE2Coordinates=n))
+        self.effect_nodes.append((node, effect, tuple(labels)))
+        return node
+
+    def add_linear_element(self, nodes: Sequence[object], n: int,
+                           matrices: Callable[[dict], tuple[np.ndarray, np.ndarray, np.ndarray]]) -> object:
+        """A linear ``ObjectGenericODE2`` on ``nodes`` (``n`` coordinates in all) whose mass, stiffness and
+        damping matrices ``matrices(values)`` follow the parameter values."""
+        from exudyn import itemInterface as ii
+
+        mbs = self.mbs
+        zeros = np.zeros((n, n))
+        obj = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=list(nodes), massMatrix=zeros, stiffnessMatrix=zeros,
+                                                 dampingMatrix=zeros, forceVector=[0.0] * n))
+        for k, field in enumerate(("massMatrix", "stiffnessMatrix", "dampingMatrix")):
+            self._track(lambda v, o=obj, f=field: mbs.SetObjectParameter(o, f, v), lambda q, k=k: matrices(q)[k])
+        return obj
+
+    def periodic_inputs(self, values: dict[str, float] | None = None) -> tuple:
+        """The effects' periodic wheel inputs at ``values`` (default: the model's)."""
+        values = self.values if values is None else values
+        return tuple(pi for e in self.effects for pi in e.periodic_inputs(values))
 
     @staticmethod
     def _body_positions(p: dict[str, float]) -> dict[str, np.ndarray]:
@@ -479,11 +538,14 @@ class TrainModel:
         n = feat.track_capacity
         self.track_leaves = [[esym.Real(f"{ch}_{i}", 0.0) for i in range(n + 1)] for ch in TRACK_INPUTS]
         self._uf_constants()
+        self._periodic_leaves()
         sys.setrecursionlimit(max(sys.getrecursionlimit(), 10000))
-        for contact in self.contacts:
-            uf = CreateSymbolicUserFunction(self.mbs, self._contact_force_function(), "forceUserFunction", contact)
+        for j, contact in enumerate(self.contacts):
+            uf = CreateSymbolicUserFunction(self.mbs, self._contact_force_function(j), "forceUserFunction", contact)
             self.mbs.SetObjectParameter(contact, "forceUserFunction", uf)
             self._keep.append(uf)
+        for e in self.effects:
+            e.build_time(self)
         if feat.variable_speed:
             m = feat.speed_capacity
             self.speed_leaves = [esym.Real(f"speed_{i}", 0.0) for i in range(m + 1)]
@@ -504,8 +566,31 @@ class TrainModel:
             self._keep.append(uf)
             self.speed_constraint = con
 
-    def _contact_force_function(self):
-        """The symbolic force function of a contact element (track input, creep laws).
+    def _periodic_leaves(self) -> None:
+        """Symbolic amplitude, wavenumber and phase of each periodic wheel input, following the values."""
+        esym = self.exu.symbolic
+        self.periodic_leaves: list[tuple[int, object, object, object]] = []
+        for i, pi in enumerate(self.periodic_inputs()):
+            leaves = tuple(esym.Real(f"periodic_{i}_{what}", 0.0) for what in ("amplitude", "wavenumber", "phase"))
+            self.periodic_leaves.append((pi.wheelset,) + leaves)
+            for k, leaf in enumerate(leaves):
+                self._track(lambda v, r=leaf: r.SetValue(float(v)),
+                            lambda q, i=i, k=k: (lambda x: (x.amplitude, 2 * math.pi / x.wavelength, x.phase)[k])(
+                                self.periodic_inputs(q)[i]))
+
+    def vertical_input(self, j: int, where):
+        """Symbolic vertical track level (m) under wheelset ``j`` at odometer ``where`` (track samples):
+        the track table plus the periodic inputs of effects on that wheelset."""
+        esym = self.exu.symbolic
+        V = _lookup(esym, self.track_leaves[0], where, self.features.track_capacity)
+        s = (where - float(TABLE_PAD)) * self.uf_values["dx"]     # distance from the segment start, m
+        for wheelset, amplitude, wavenumber, phase in self.periodic_leaves:
+            if wheelset == j:
+                V = V + amplitude * esym.cos(wavenumber * s + phase)
+        return V
+
+    def _contact_force_function(self, j: int = 0):
+        """The symbolic force function of the contact element of wheelset ``j`` (track input, creep laws).
 
         Element coordinates: the wheelset's x, y, z, roll, pitch, yaw (0-5) and
         its odometer (distance in track samples, 6). Parameter-dependent
@@ -522,7 +607,7 @@ class TrainModel:
             q.SetVector([0.0] * 7)
             q_t.SetVector([0.0] * 7)
             where = q[6]
-            V = _lookup(esym, leaves[0], where, n)
+            V = self.vertical_input(j, where)
             Y = _lookup(esym, leaves[1], where, n)
             C = _lookup(esym, leaves[2], where, n)
             if not feat.creep_in_user_function:
@@ -614,9 +699,16 @@ class TrainModel:
                     continue
                 free.append(start + k)
                 labels.append((name, motion))
+        for node, effect, node_labels in self.effect_nodes:
+            start = mbs.GetNodeODE2Index(node)
+            for k, label in enumerate(node_labels):
+                free.append(start + k)
+                labels.append((effect, label))
         self.free = np.array(free)
         self.labels = labels
         position = {g: i for i, g in enumerate(free)}
+        self.ode2_to_free = position
+        self.free_position = {label: i for i, label in enumerate(labels)}
         # coordinate k of wheelset j -> free index (or -1)
         self.contact_rows = []
         for j in range(4):
@@ -644,8 +736,11 @@ class TrainModel:
             for k, row in enumerate(self.contact_rows[j]):
                 if row >= 0:
                     G[j, row] = G6[k]
-        return LinearSystem(M, K, D, G, self.sensor_matrix(), list(self.labels),
-                            wheelset_positions(self.values), self.speed)
+        for e in self.effects:
+            e.input_rows(self, G, self.values)
+        C, C_disp = self.sensor_matrices()
+        return LinearSystem(M, K, D, G, C, list(self.labels), wheelset_positions(self.values), self.speed,
+                            C_disp=C_disp if np.any(C_disp) else None, periodic=self.periodic_inputs())
 
     def static_residual(self) -> np.ndarray:
         """Generalised forces (N, N m) on the free coordinates at the reference configuration.
@@ -668,17 +763,34 @@ class TrainModel:
 
     def sensor_matrix(self) -> np.ndarray:
         """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration."""
-        C = np.zeros((len(self.sensors), len(self.free)))
-        column = {g: i for i, g in enumerate(self.free)}
+        return self.sensor_matrices()[0]
+
+    def sensor_matrices(self, values: dict[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(C, C_disp)``, each ``(n_sensors, n_free)``: sensor = C q'' + C_disp q on the free coordinates.
+
+        Built from the acceleration of each sensor point in x, y, z (rigid
+        kinematics, then the effects' additions, e.g. a flexible mode), the
+        row of the sensor's direction, then the effects' output changes (tilt).
+        """
+        values = self.values if values is None else values
+        n_s, n = len(self.sensors), len(self.free)
+        R = np.zeros((n_s, 3, n))
         for i, s in enumerate(self.sensors):
             start = self.node_index[s.body]
             for k in range(6):
-                if start + k in column:
-                    C[i, column[start + k]] = self.point_jacobians[i, k]
-        return C
+                col = self.ode2_to_free.get(start + k)
+                if col is not None:
+                    R[i, :, col] = self.point_jacobians_xyz[i, :, k]
+        for e in self.effects:
+            e.kinematic_rows(self, R, values)
+        C = np.array([R[i, DIRECTIONS[s.direction]] for i, s in enumerate(self.sensors)]).reshape(n_s, n)
+        C_disp = np.zeros((n_s, n))
+        for e in self.effects:
+            e.outputs(self, R, C, C_disp, values)
+        return C, C_disp
 
     def _sensor_jacobians(self) -> np.ndarray:
-        """``(n_sensors, 6)``: d(sensor position component)/d(coordinate) of the sensor's body node.
+        """``(n_sensors, 3, 6)``: d(sensor position x, y, z)/d(coordinate) of the sensor's body node.
 
         Read back from exudyn's kinematics for small perturbations of each
         coordinate: the sensor acceleration is J q''_body to first order in
@@ -689,12 +801,11 @@ class TrainModel:
         mbs = self.mbs
         cfg = exu.ConfigurationType.Current
         q0 = np.array(mbs.systemData.GetODE2Coordinates(configuration=cfg))
-        J = np.zeros((len(self.sensors), 6))
+        J = np.zeros((len(self.sensors), 3, 6))
         eps = 1e-6
         try:
             for i, s in enumerate(self.sensors):
                 obj = self.objects[s.body]
-                comp = DIRECTIONS[s.direction]
                 start = self.node_index[s.body]
                 for k in range(6):
                     vals = []
@@ -702,20 +813,36 @@ class TrainModel:
                         q = q0.copy()
                         q[start + k] += sign * eps
                         mbs.systemData.SetODE2Coordinates(list(q), configuration=cfg)
-                        vals.append(mbs.GetObjectOutputBody(obj, exu.OutputVariableType.Position,
-                                                            localPosition=list(s.position),
-                                                            configuration=cfg)[comp])
-                    J[i, k] = (vals[0] - vals[1]) / (2 * eps)
+                        vals.append(np.asarray(mbs.GetObjectOutputBody(obj, exu.OutputVariableType.Position,
+                                                                       localPosition=list(s.position),
+                                                                       configuration=cfg)))
+                    J[i, :, k] = (vals[0] - vals[1]) / (2 * eps)
         finally:
             mbs.systemData.SetODE2Coordinates(list(q0), configuration=cfg)
         return J
 
     def sensor_accelerations(self) -> np.ndarray:
-        """``(n_sensors, n_records)`` accelerations from the stored node accelerations of the last run."""
-        node_acc = {}
-        for body, item in zip(self.sensor_bodies, self.sensor_items):
-            node_acc[body] = np.asarray(self.mbs.GetSensorStoredData(item))[:, 1:7]
-        return np.array([node_acc[s.body] @ self.point_jacobians[i] for i, s in enumerate(self.sensors)])
+        """``(n_sensors, n_records)`` accelerations from the node records of the last run: C q'' + C_disp q.
+
+        The free coordinates only, like the frequency solver (the restrained
+        longitudinal coordinates move by less than 1e-4 of the suspension motions).
+        """
+        C, C_disp = self.sensor_matrices()
+        out = None
+        for node, kind, item in self.sensor_items:
+            data = np.asarray(self.mbs.GetSensorStoredData(item))
+            start = self.mbs.GetNodeODE2Index(node)
+            matrix = C if kind == "acceleration" else C_disp
+            for k in range(data.shape[1] - 1):
+                col = self.ode2_to_free.get(start + k)
+                if col is None or not np.any(matrix[:, col]):
+                    continue
+                term = np.outer(matrix[:, col], data[:, 1 + k])
+                out = term if out is None else out + term
+        if out is None:
+            n_rec = np.asarray(self.mbs.GetSensorStoredData(self.sensor_items[0][2])).shape[0]
+            out = np.zeros((len(self.sensors), n_rec))
+        return out
 
     # ------------------------------------------------------------------ track tables
     def set_track(self, table: np.ndarray, dx: float) -> None:

@@ -6,12 +6,14 @@ import math
 from typing import Any, Literal, Mapping, Sequence
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails
 
 from suspid._options import parse_options
 from suspid.errors import SimulatorError
 from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 
+from . import effects as E
 from . import parameters as P
 from .model import BODIES, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import modes_summary
@@ -67,6 +69,14 @@ class Options(BaseModel):
     taper_m: float = Field(default=20.0, ge=0.0, description="fade-in/out length of each segment's track, m")
     settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: least zero padding for the decay "
                                     "of the impulse response, s")
+    effects: list[dict[str, Any]] = Field(
+        default_factory=list, description="model extensions, each {name: <registered effect>, <parameter>: value}; "
+        f"supported here: {', '.join(E.supported())}")
+
+    @field_validator("effects")
+    @classmethod
+    def _effects(cls, value: list[dict[str, Any]]) -> list[dict[str, Any]]:
+        return validate_effects(value)
 
     @field_validator("vehicle")
     @classmethod
@@ -94,7 +104,62 @@ class Options(BaseModel):
             raise ValueError("conicity is given twice (contact.conicity and vehicle.conicity); keep one")
         if self.solver == "frequency" and (self.contact.creep_saturation or self.contact.bump_stops):
             raise ValueError("creep_saturation and bump_stops are nonlinear: they need solver: time")
+        sensors = (default_sensors(P.nominal_values()) if self.sensors is None else
+                   [Sensor(s.name, s.body, s.direction, tuple(s.position)) for s in self.sensors])
+        for i, spec in enumerate(self.effects):
+            try:
+                E.make(spec).check(sensors, 4)
+            except ValueError as exc:
+                raise ValueError(f"effect {i}: {exc}") from None
         return self
+
+
+def validate_effects(value: list[Any]) -> list[dict[str, Any]]:
+    """Each entry against its registered effect's ``Options`` (errors located as ``effects.<i>.<field>``).
+
+    :returns: ``[{name, **every parameter}]`` with defaults filled in.
+    """
+    from suspid import registry
+    from suspid.errors import UnknownPluginError
+
+    out, names = [], []
+    for i, item in enumerate(value):
+        if not isinstance(item, dict) or not isinstance(item.get("name"), str):
+            raise ValueError(f"effect {i}: expected a mapping with a 'name' (one of: {', '.join(E.supported())})")
+        params = dict(item)
+        name = params.pop("name")
+        try:
+            effect_cls = registry.get("effect", name)
+        except UnknownPluginError as exc:
+            raise ValueError(f"effect {i}: {exc}") from None
+        if name not in E.IMPLEMENTATIONS:
+            raise ValueError(f"effect {i}: '{name}' is not supported by exudyn-train (supported: "
+                             f"{', '.join(E.supported())})")
+        if name in names:
+            raise ValueError(f"effect {i}: '{name}' is enabled twice; enable each effect once")
+        names.append(name)
+        try:
+            validated = effect_cls.Options.model_validate(params).model_dump()
+        except ValidationError as exc:
+            allowed = ", ".join(["name", *effect_cls.Options.model_fields])
+            raise ValidationError.from_exception_data("effects", [
+                InitErrorDetails(type="value_error", loc=(i, *e["loc"]), input=e["input"],
+                                 ctx={"error": ValueError(f"unknown parameter of effect '{name}'; expected one of: "
+                                                          f"{allowed}")})
+                if e["type"] == "extra_forbidden" else
+                InitErrorDetails(type=e["type"], loc=(i, *e["loc"]), input=e["input"], ctx=e.get("ctx", {}))
+                for e in exc.errors()]) from None
+        out.append({"name": name, **validated})
+    return out
+
+
+def _unit(parameter: str) -> str:
+    """Unit of an effect parameter from its name's suffix."""
+    for suffix, unit in (("_n_per_m", "N/m"), ("_hz", "Hz"), ("_kg", "kg"), ("_deg", "deg"), ("_rad", "rad"),
+                         ("_m", "m")):
+        if parameter.endswith(suffix):
+            return unit
+    return "1"
 
 
 class ExudynTrain(Simulator):
@@ -112,6 +177,7 @@ class ExudynTrain(Simulator):
     def __init__(self, **options: Any) -> None:
         super().__init__(**options)
         self._opts: Options | None = None
+        self._effects: list[E.ExudynEffect] | None = None
         self._models: dict = {}
         self._spectra = InputSpectra()
         self._frf: dict = {}
@@ -132,6 +198,27 @@ class ExudynTrain(Simulator):
             values["conicity"] = float(self.opts.contact.conicity)
         return values
 
+    def effects(self) -> list[E.ExudynEffect]:
+        """The implementations of the enabled effects (``options.effects``), in order."""
+        if self._effects is None:
+            self._effects = [E.make(spec) for spec in self.opts.effects]
+        return self._effects
+
+    def _effect_parameters(self) -> list[Parameter]:
+        """The fitted parameters of the enabled effects, named ``<effect>/<parameter>``."""
+        from suspid import registry
+
+        out = []
+        for spec, effect in zip(self.opts.effects, self.effects()):
+            cls = registry.get("effect", spec["name"])
+            for name in effect.fitted:
+                lo, hi = cls.bounds(name)
+                v = float(spec[name])
+                field = cls.Options.model_fields[name]
+                out.append(Parameter(effect.key(name), _unit(name), v, min(lo, v), max(hi, v),
+                                     f"effect {spec['name']}: {field.description or name}"))
+        return out
+
     def parameters(self) -> list[Parameter]:
         nominal = self._nominal()
         out = []
@@ -139,7 +226,7 @@ class ExudynTrain(Simulator):
             v = nominal[p.name]
             out.append(Parameter(p.name, p.unit, v, min(p.lower, v), max(p.upper, v),
                                  f"{p.description}; source: {p.source}"))
-        return out
+        return out + self._effect_parameters()
 
     def default_parameters(self) -> list[str]:
         return list(P.DEFAULT_IDENTIFIED)
@@ -159,14 +246,21 @@ class ExudynTrain(Simulator):
         :raises SimulatorError: unknown names or non-positive values.
         """
         values = self._nominal()
-        unknown = [k for k in w if k not in values]
+        effect_values = {p.name: p.nominal for p in self._effect_parameters()}
+        unknown = [k for k in w if k not in values and k not in effect_values]
         if unknown:
             raise SimulatorError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for exudyn-train; "
-                                 f"known: {', '.join(sorted(values))}")
-        values.update({k: float(v) for k, v in w.items()})
+                                 f"known: {', '.join(sorted(values) + sorted(effect_values))}")
+        values.update({k: float(v) for k, v in w.items() if k in values})
         problems = P.check_values(values)
+        effect_values.update({k: float(v) for k, v in w.items() if k in effect_values})
+        problems += [f"effect parameter '{k}' = {v!r} must be finite" for k, v in effect_values.items()
+                     if not math.isfinite(v)]
         if problems:
             raise SimulatorError(problems[0])
+        values.update(effect_values)
+        for effect in self.effects():
+            effect.adjust_values(values)
         return values
 
     # ------------------------------------------------------------------ models
@@ -176,7 +270,7 @@ class ExudynTrain(Simulator):
         model = self._models.get(key)
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
-                model = TrainModel(values, sensors, speed, features)
+                model = TrainModel(values, sensors, speed, features, self.effects())
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
@@ -278,6 +372,7 @@ class ExudynTrain(Simulator):
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
         state["_models"] = {}
+        state["_effects"] = None
         state["_spectra"] = InputSpectra()
         state["_frf"] = {}
         state["_checked"] = {}

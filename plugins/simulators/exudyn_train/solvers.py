@@ -33,7 +33,10 @@ products. Each segment's response is irfft(H U) with U the spectrum of its
 (tapered) track, zero padded so that the circular convolution is the linear
 one (to 5 % of the slowest mode's tail); the input spectra do not depend on
 the parameters and are cached. Small matrix products run on one BLAS thread
-(:mod:`.threads`).
+(:mod:`.threads`). Sensors read C q'' + C_disp q (C_disp from effects such as a
+sensor tilt); periodic wheel inputs of effects (polygons) add their
+steady-state sinusoidal response, H_j(f) A e^{i(2π s_j / wavelength + φ)} with
+s_j = a_j + v t the distance of wheelset j from the segment start.
 """
 
 from __future__ import annotations
@@ -254,11 +257,14 @@ class FrequencyResponse:
         B[:, n:, :] = np.einsum("ab,jbc->jac", Minv, linear.G)
         self.B = B
         self.Cq = np.hstack([linear.C, np.zeros_like(linear.C)])
+        self.Cd = None if linear.C_disp is None else np.hstack([linear.C_disp, np.zeros_like(linear.C_disp)])
         if self.modal:
             with single_blas_thread():
                 Vinv = np.linalg.inv(V)
             self.L = self.Cq @ V                               # (n_out, 2n)
+            self.Ld = None if self.Cd is None else self.Cd @ V
             R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, 2n, n_in)
+            self.R = R
             self.Rt = np.ascontiguousarray(R.transpose(1, 2, 0).reshape(2 * n * R.shape[2], R.shape[0]))
 
     def __call__(self, freqs: np.ndarray) -> np.ndarray:
@@ -279,12 +285,52 @@ class FrequencyResponse:
                 S = (self.Rt @ E).reshape(m2, nin, nf)
                 S *= (1.0 / (1j * w[None, :] - self.eigenvalues[:, None]))[:, None, :]
                 X = (self.L @ S.reshape(m2, nin * nf)).reshape(-1, nin, nf)    # (n_out, 3, n_f)
-                X = X.transpose(1, 0, 2)
+                X = X.transpose(1, 0, 2) * -(w ** 2)
+                if self.Ld is not None:
+                    X += (self.Ld @ S.reshape(m2, nin * nf)).reshape(-1, nin, nf).transpose(1, 0, 2)
             else:
                 Bw = np.einsum("jf,jac->fac", E, self.B)
                 lhs = 1j * w[:, None, None] * np.eye(m2)[None] - self.A[None]
-                X = np.einsum("om,fmc->cof", self.Cq, np.linalg.solve(lhs, Bw))
-        return np.ascontiguousarray(X * -(w ** 2))
+                state = np.linalg.solve(lhs, Bw)
+                X = np.einsum("om,fmc->cof", self.Cq, state) * -(w ** 2)
+                if self.Cd is not None:
+                    X += np.einsum("om,fmc->cof", self.Cd, state)
+        return np.ascontiguousarray(X)
+
+    def wheelset_response(self, f: float, j: int) -> np.ndarray:
+        """``(n_sensors, 3)``: response at ``f`` Hz to the track channels under wheelset ``j`` alone (no delay)."""
+        w = 2 * math.pi * float(f)
+        with single_blas_thread():
+            if self.modal:
+                S = self.R[j] / (1j * w - self.eigenvalues)[:, None]          # (2n, 3)
+                X = -(w ** 2) * (self.L @ S)
+                if self.Ld is not None:
+                    X = X + self.Ld @ S
+            else:
+                state = np.linalg.solve(1j * w * np.eye(2 * self.n) - self.A, self.B[j])
+                X = -(w ** 2) * (self.Cq @ state)
+                if self.Cd is not None:
+                    X = X + self.Cd @ state
+        return X
+
+    def periodic_response(self, n_t: int, fs: float) -> np.ndarray | None:
+        """``(n_sensors, n_t)`` steady-state response to the periodic wheel inputs, or ``None`` without any.
+
+        Inputs above fs / 2 are left out (the time solver's decimation filter removes them too).
+        """
+        lin = self.linear
+        if not lin.periodic:
+            return None
+        t = np.arange(n_t) / fs
+        out = np.zeros((lin.C.shape[0], n_t))
+        for pi in lin.periodic:
+            f = lin.speed / pi.wavelength
+            if f >= fs / 2:
+                continue
+            h = self.wheelset_response(f, pi.wheelset)[:, 0]                    # vertical input
+            a = pi.amplitude * np.exp(1j * (2 * math.pi * lin.wheelset_x[pi.wheelset] / pi.wavelength + pi.phase))
+            out += np.real(np.outer(h * a, np.exp(2j * math.pi * f * t)))
+        return out
 
     @property
     def settling_time(self) -> float:
@@ -380,6 +426,9 @@ def simulate_frequency(response: FrequencyResponse, segments: list[TrackSegment]
         Y = H[0] * U[0]
         Y += H[1] * U[1]
         Y += H[2] * U[2]
-        y = sfft.irfft(Y, n=n_fft, axis=-1)
-        out.append(Response(channels, float(fs), np.ascontiguousarray(y[:, :n]), seg.name))
+        y = sfft.irfft(Y, n=n_fft, axis=-1)[:, :n]
+        periodic = response.periodic_response(n, fs)
+        if periodic is not None:
+            y = y + periodic
+        out.append(Response(channels, float(fs), np.ascontiguousarray(y), seg.name))
     return out
