@@ -100,6 +100,9 @@ class DataSection(Section):
     w_ref: dict[str, float] = Field(default_factory=dict, description="known 'damaged' parameters (experiment)")
     reference: dict[str, Any] = Field(default_factory=dict,
                                       description="how the reference-date measurements for the noise model are made")
+    measurement: dict[str, Any] = Field(
+        default_factory=dict, description="how the measurement-date 'measurements' are simulated (experiment), "
+        "e.g. simulator_options with a hidden effect")
     measurements: ConfigPath | None = Field(default=None, description="measured data file or folder")
     track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
 
@@ -129,6 +132,7 @@ class Config(Section):
     identifiability: dict[str, Any] = Field(default_factory=dict)
     study: dict[str, Any] = Field(default_factory=dict)
     monitor: dict[str, Any] = Field(default_factory=dict)
+    diagnose: dict[str, Any] = Field(default_factory=dict)
     output: OutputSection = Field(default_factory=OutputSection)
 
     # set by load_config, not by the user

@@ -49,6 +49,19 @@ class ReferenceOptions(Section):
         description="options merged into the simulator's for the reference date (a richer model, e.g. effects)")
 
 
+class MeasurementOptions(Section):
+    """``data.measurement``: how the measurement-date 'measurements' of eq. 10 are simulated (numerical experiment).
+
+    ``simulator_options`` are merged into the simulator's options for y_sim(w_ref)
+    only: the "real" vehicle may have what the identification model lacks, e.g.
+    a hidden effect (``{effects: [{name: carbody-bending, frequency_hz: 9.5}]}``),
+    the test case of ``suspid diagnose``.
+    """
+
+    simulator_options: dict = Field(
+        default_factory=dict, description="options merged into the simulator's for the measurement-date data")
+
+
 def smooth_gain_db(rng: np.random.Generator, freqs: np.ndarray, n_channels: int, rms_db: float,
                    correlation_octaves: float, f_floor: float = 0.05) -> np.ndarray:
     """Random smooth gains in dB, ``(n_channels, n_freqs)``, a stationary GP in log2(f).

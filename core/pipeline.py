@@ -191,7 +191,7 @@ def validate_data(config: Config) -> int:
 
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
     """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3)."""
-    from suspid.experiment import ReferenceOptions, apply_model_error
+    from suspid.experiment import MeasurementOptions, ReferenceOptions, apply_model_error
     from suspid.noise import NoiseModel, fit_noise_model
     from suspid.spectra import SpectraOptions
 
@@ -230,9 +230,20 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           freqs=freqs, channels=channels)
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
         log("measurement date: simulating w_ref (eq. 10)")
-        key = stable_hash("measurement", sim_id, w_ref, segments_digest(segments), spectra_options.model_dump())
+        meas_opt = _section_with_seed(MeasurementOptions, config.data.measurement, 0, "data.measurement", file)
+        meas_sim, meas_id = simulator, sim_id
+        if meas_opt.simulator_options:   # the "real" vehicle: e.g. with an effect the model lacks
+            from suspid.config import validate_options
+
+            merged = validate_options(type(simulator), dict(config.simulator.options) | meas_opt.simulator_options,
+                                      file=file, key="data.measurement.simulator_options")
+            meas_sim = type(simulator)(**merged)
+            meas_id = meas_sim.identity()
+        # identified effect parameters (<effect>/<parameter>) keep the measurement simulator's own values
+        w_meas = {k: v for k, v in w_ref.items() if meas_sim is simulator or "/" not in k or k in config.data.w_ref}
+        key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump())
         y_sim_ref, freqs = _cached_spectra(ledger, key, lambda: _simulate_spectra(
-            simulator, w_ref, segments, spectra_options))
+            meas_sim, w_meas, segments, spectra_options))
         b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement"))
         y_mes = y_sim_ref + b_ref
     else:

@@ -131,6 +131,9 @@ class WheelPolygonOptions(_Params):
 class WheelPolygon(Effect):
     """Out-of-round wheel, a polygon of order k: a periodic vertical input on the wheel.
 
+    Shows on axlebox and bogie vertical channels, and on the carbody where the
+    secondary suspension filters it less (low orders at low speed).
+
     Radius deviation A cos(2π s / (πD/k) + φ) with s the distance rolled: a
     vertical input at f = k v / (π D) (28.8 Hz per order at 300 km/h).
     """
@@ -150,7 +153,7 @@ class WheelPolygon(Effect):
         d = self.Options.model_validate(self.options).wheel_diameter_m
         k_lo, k_hi = self.bounds("order")
         f1 = speed_mps / (math.pi * d)
-        return EffectSignature(("axlebox", "wheelset", "bogie"), ("vertical",), (k_lo * f1, k_hi * f1),
+        return EffectSignature(("axlebox", "wheelset", "bogie", "carbody"), ("vertical",), (k_lo * f1, k_hi * f1),
                                "proportional")
 
     def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:

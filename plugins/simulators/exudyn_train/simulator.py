@@ -204,6 +204,10 @@ class ExudynTrain(Simulator):
             self._effects = [E.make(spec) for spec in self.opts.effects]
         return self._effects
 
+    def supported_effects(self) -> list[str]:
+        """Names of the registered effects this model implements (``options.effects``)."""
+        return E.supported()
+
     def _effect_parameters(self) -> list[Parameter]:
         """The fitted parameters of the enabled effects, named ``<effect>/<parameter>``."""
         from suspid import registry
