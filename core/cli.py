@@ -94,6 +94,22 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     _print_result(out.result, out.run_dir)
 
 
+@app.command()
+def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+             fresh: bool = typer.Option(False, "--fresh", help="Start the identifications over."),
+             quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
+    """Find where model and measurements disagree, name the missing effect, add it and show the gap shrink.
+
+    Writes diagnosis.json, diagnosis.md (with PNG maps), augmented.yaml and the
+    identifications before/ and after/ in the run directory; see docs/diagnose.md.
+    """
+    from suspid.diagnose import run_diagnose
+
+    out = run_diagnose(config, set_ or [], fresh=fresh, progress=not quiet,
+                       log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+    console.print((out / "diagnosis.md").read_text(), markup=False, highlight=False)
+
+
 def _segments(cfg):
     """The configured segments: the measurement-date synthetic track, or the measured track file."""
     from suspid.pipeline import synthetic_track
