@@ -95,6 +95,23 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
 
 @app.command()
+def monitor(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+            fresh: bool = typer.Option(False, "--fresh", help="Start every date (and the reference date) over."),
+            quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
+    """Identify at every date of the config's monitor: section and flag parameters leaving their acceptable domain.
+
+    Writes monitor.csv, monitor.json, monitor.md and a plot per parameter. The
+    noise model of the reference date is reused at every date; each date runs
+    in <run dir>/dates/<date>/ with its own ledger, so running again resumes.
+    """
+    from suspid.monitor import run_monitor
+
+    out = run_monitor(config, set_ or [], fresh=fresh, progress=not quiet,
+                      log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+    console.print((out / "monitor.md").read_text(), markup=False, highlight=False)
+
+
+@app.command()
 def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
              fresh: bool = typer.Option(False, "--fresh", help="Start the identifications over."),
              quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
