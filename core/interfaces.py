@@ -318,7 +318,8 @@ class Effect(ABC):
     error naming it; the parameters of :attr:`fitted` of every enabled effect
     are exposed as simulator parameters named ``<effect>/<parameter>`` (nominal:
     the configured value; bounds: the ``Options`` bounds), so that the
-    diagnosis, or an identification, can vary them without rebuilding.
+    diagnosis, or an identification, can vary them without rebuilding; a
+    method ``supported_effects() -> list[str]`` names the effects it implements.
 
     Class attributes:
 

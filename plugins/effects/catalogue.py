@@ -74,6 +74,26 @@ def _frequencies_in_cells(effect: Effect, parameter: str, flagged, per_cell: int
     return values
 
 
+class _Resonance(Effect):
+    """An added resonance with ``frequency_hz`` and ``damping``: fixed in Hz, shows on ``bodies`` x ``directions``.
+
+    Fit starts: frequencies spread over the flagged cells its signature covers.
+    """
+
+    main_parameter = "frequency_hz"
+    fitted = ("frequency_hz", "damping")
+    bodies: tuple[str, ...] = ()
+    directions: tuple[str, ...] = ("vertical",)
+    starts_per_cell = 4
+
+    def signature(self, speed_mps: float) -> EffectSignature:
+        return EffectSignature(self.bodies, self.directions, self.bounds("frequency_hz"), "none")
+
+    def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
+        freqs = _frequencies_in_cells(self, "frequency_hz", flagged, self.starts_per_cell)
+        return [{"frequency_hz": f} for f in freqs] or super().candidates(speeds_mps, flagged, channels)
+
+
 # ------------------------------------------------------------------------------------------ carbody bending
 class CarbodyBendingOptions(_Params):
     frequency_hz: float = Field(default=10.0, ge=5.0, le=20.0,
@@ -87,7 +107,7 @@ class CarbodyBendingOptions(_Params):
         "carbody's mass, 0.677 m_car)")
 
 
-class CarbodyBending(Effect):
+class CarbodyBending(_Resonance):
     """First vertical bending mode of the carbody (free-free beam shape).
 
     A modal coordinate q (deflection at mid-car, m) driven by the secondary
@@ -98,16 +118,8 @@ class CarbodyBending(Effect):
 
     name = "carbody-bending"
     Options = CarbodyBendingOptions
-    main_parameter = "frequency_hz"
-    fitted = ("frequency_hz", "damping")
     description = "carbody first vertical bending mode (modal coordinate driven through the pivots)"
-
-    def signature(self, speed_mps: float) -> EffectSignature:
-        return EffectSignature(("carbody",), ("vertical",), self.bounds("frequency_hz"), "none")
-
-    def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
-        freqs = _frequencies_in_cells(self, "frequency_hz", flagged)
-        return [{"frequency_hz": f} for f in freqs] or super().candidates(speeds_mps, flagged, channels)
+    bodies = ("carbody",)
 
 
 # ------------------------------------------------------------------------------------------ wheel polygon
@@ -270,7 +282,7 @@ class TrackFlexibilityOptions(_Params):
                                  description="rail and sleeper mass moving with one wheelset, kg (assumption)")
 
 
-class TrackFlexibility(Effect):
+class TrackFlexibility(_Resonance):
     """Track flexibility under each wheelset: a track mass on the pad and ballast support.
 
     The wheelset rests on the track mass through the Hertzian contact, the
@@ -280,13 +292,6 @@ class TrackFlexibility(Effect):
 
     name = "track-flexibility"
     Options = TrackFlexibilityOptions
-    main_parameter = "frequency_hz"
-    fitted = ("frequency_hz", "damping")
     description = "track flexibility (rail pad and ballast): P2 resonance of wheelset and track mass"
-
-    def signature(self, speed_mps: float) -> EffectSignature:
-        return EffectSignature(("axlebox", "wheelset", "bogie"), ("vertical",), self.bounds("frequency_hz"), "none")
-
-    def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
-        freqs = _frequencies_in_cells(self, "frequency_hz", flagged, per_cell=3)
-        return [{"frequency_hz": f} for f in freqs] or super().candidates(speeds_mps, flagged, channels)
+    bodies = ("axlebox", "wheelset", "bogie")
+    starts_per_cell = 3
