@@ -184,6 +184,8 @@ def read_yaml(path: Path) -> tuple[dict[str, Any], dict[tuple, int]]:
                           line=mark.line + 1 if mark else None) from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"YAML error: {exc}", file=file) from None
+    except (ValueError, TypeError, OverflowError) as exc:  # e.g. an impossible date such as 2026-13-01
+        raise ConfigError(f"YAML value error: {exc}", file=file) from None
     if data is None:
         data, node = {}, None
     if not isinstance(data, dict):

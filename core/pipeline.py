@@ -33,6 +33,7 @@ from suspid.interfaces import Response, Simulator, TrackSegment
 from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
 from suspid.seeds import rng as named_rng
 from suspid.seeds import seed_for
+from suspid.threads import single_blas_thread
 
 
 def array_digest(*arrays: np.ndarray) -> str:
@@ -244,7 +245,9 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump())
         y_sim_ref, freqs = _cached_spectra(ledger, key, lambda: _simulate_spectra(
             meas_sim, w_meas, segments, spectra_options))
-        b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement"))
+        # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
+        b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
+                                                            + segments_digest(segments)[:16]))
         y_mes = y_sim_ref + b_ref
     else:
         w_ref = None
@@ -455,7 +458,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     U0 = make_design(design_opts, problem.q)
     X0 = from_unit(U0, problem.bounds)
     ei_history: list[float] = []
-    with make_progress(progress) as bars:
+    # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.threads)
+    with make_progress(progress) as bars, single_blas_thread():
         design_task = bars.add_task("initial design", total=len(X0), status="")
         n_reused = 0
 
@@ -499,7 +503,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
                       X_init=X0[ok], y_init=y0, callback=callback)
         bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
 
-    result = analyse(problem, ledger, ego, ei_history, config)
+    with single_blas_thread():
+        result = analyse(problem, ledger, ego, ei_history, config)
     result.update({
         "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),
