@@ -57,7 +57,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -78,7 +78,8 @@ class EGOOptions(BaseModel):
     """The ``ego:`` config section.
 
     :ivar max_iter: m1, the largest number of EGO points after the initial design.
-    :ivar tol: the EI stop: eps = tol * (max J - min J) over the current data.
+    :ivar tol: the EI stop: eps = tol * (max J - min J) over the current data;
+        with tol = 0 (or all J equal) the loop runs to ``max_iter``.
     :ivar seed: seeds the EI candidate sets (one stream per iteration).
     :ivar n_candidates: size of the space-filling (Sobol') candidate set.
     :ivar n_best: how many of the best evaluated points seed local candidates.
@@ -100,6 +101,7 @@ class EGOOptions(BaseModel):
     n_starts: int = Field(default=8, ge=1)
     search_maxiter: int = Field(default=200, ge=1)
     refit_final: bool = True
+    batch: int = Field(default=1, ge=1, description="points per iteration (kriging believer); 1 = the paper's loop")
 
 
 @dataclass
@@ -112,7 +114,8 @@ class IterationRecord:
     :ivar phase: ``"initial"``, ``"ego"`` or ``"stop"``.
     :ivar x: ``(q,)`` the point in SI units; :ivar x_unit: the same in ``[0, 1]^q``.
     :ivar J: the objective there (None for ``"stop"``).
-    :ivar EI: the expected improvement that chose the point (None for initial points).
+    :ivar EI: the expected improvement that chose the point (None for initial
+        points); :ivar log_EI: its logarithm, which does not underflow.
     :ivar J_max: best J before this point; :ivar epsilon: the EI threshold then.
     :ivar hyperparameters: the surrogate's ``hyperparameters_`` dict (may be empty).
     :ivar fit_seconds, search_seconds, eval_seconds: wall times in s
@@ -126,6 +129,7 @@ class IterationRecord:
     x_unit: np.ndarray
     J: float | None
     EI: float | None = None
+    log_EI: float | None = None
     J_max: float | None = None
     epsilon: float | None = None
     hyperparameters: dict[str, Any] = field(default_factory=dict)
@@ -345,8 +349,17 @@ def _evaluate(func: Callable[[np.ndarray], float], x: np.ndarray) -> tuple[float
 def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | None = None,
             design: DesignOptions | None = None, surrogate: Surrogate | None = None,
             X_init: np.ndarray | None = None, y_init: np.ndarray | None = None,
-            callback: Callable[[IterationRecord], bool | None] | None = None) -> EGOResult:
+            callback: Callable[[IterationRecord], bool | None] | None = None,
+            func_batch: Callable[[np.ndarray], Sequence[float]] | None = None) -> EGOResult:
     """Maximise ``func`` over the box ``bounds`` by EGO (see the module docstring).
+
+    Batch EGO (``ego.batch = k > 1``): each iteration chooses k points by the
+    *kriging believer* heuristic — maximise EI, pretend J there equals the
+    surrogate's mean, refit, maximise EI again, k times — then evaluates the
+    k points together through ``func_batch(X (k, q)) -> k values`` (so that k
+    workers stay busy), or one by one through ``func`` when it is None. The
+    EI stop applies to the first point of a batch; later points whose EI
+    falls below ε are not evaluated. ``batch = 1`` is the paper's loop exactly.
 
     :param func: ``func(w) -> float`` with ``w (q,)`` in SI units inside ``bounds``.
     :param bounds: ``(q, 2)`` lower and upper bounds, SI units.
@@ -356,6 +369,7 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
     :param X_init: ``(n0, q)`` initial points in SI units, instead of the design.
     :param y_init: ``(n0,)`` their J where known, NaN where still to be evaluated.
     :param callback: called with each :class:`IterationRecord`; returning True stops.
+    :param func_batch: evaluates a batch of points ``(k, q)`` SI at once (batch EGO).
     :returns: an :class:`EGOResult`.
     :raises ConfigError: bad bounds, initial points outside the box or fewer than 2.
     :raises SuspidError: ``func`` returned a non-finite value.
@@ -428,21 +442,59 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
         ei = math.exp(log_ei) if log_ei > -745 else 0.0
         hyper = dict(getattr(model, "hyperparameters_", {}) or {})
         x_new = from_unit(u_new, b)
-        if ei < eps or ei <= 0.0:
+        if eps > 0 and log_ei < math.log(eps):  # EI(w_l) < eps, compared in log space
             stop_reason = "ei_below_tol"
             report(IterationRecord(iteration=it, index=len(ys), phase="stop", x=x_new, x_unit=u_new,
-                                   J=None, EI=ei, J_max=j_max, epsilon=eps, hyperparameters=hyper,
-                                   fit_seconds=t_fit, search_seconds=t_search))
+                                   J=None, EI=ei, log_EI=log_ei, J_max=j_max, epsilon=eps,
+                                   hyperparameters=hyper, fit_seconds=t_fit,
+                                   search_seconds=t_search))
             break
-        J, dt = _evaluate(func, x_new)
-        n_calls += 1
-        U_all.append(u_new)
-        ys.append(J)
-        if report(IterationRecord(iteration=it, index=len(ys) - 1, phase="ego", x=x_new,
-                                  x_unit=u_new, J=J, EI=ei, J_max=j_max, epsilon=eps,
-                                  hyperparameters=hyper, fit_seconds=t_fit, search_seconds=t_search,
-                                  eval_seconds=dt)):
-            stop_reason = "callback"
+        if opts.batch == 1:
+            J, dt = _evaluate(func, x_new)
+            n_calls += 1
+            U_all.append(u_new)
+            ys.append(J)
+            if report(IterationRecord(iteration=it, index=len(ys) - 1, phase="ego", x=x_new,
+                                      x_unit=u_new, J=J, EI=ei, log_EI=log_ei, J_max=j_max, epsilon=eps,
+                                      hyperparameters=hyper, fit_seconds=t_fit, search_seconds=t_search,
+                                      eval_seconds=dt)):
+                stop_reason = "callback"
+                break
+            continue
+        # batch EGO, kriging believer: the next points as if J were the mean at the chosen ones
+        chosen = [(u_new, ei, log_ei)]
+        budget = opts.max_iter - (len(ys) - n_initial)
+        U_b, y_b = list(Ua), list(ya)
+        while len(chosen) < min(opts.batch, budget):
+            u_prev = chosen[-1][0]
+            U_b.append(u_prev)
+            y_b.append(float(model.predict(u_prev[None, :])[0][0]))
+            model.fit(np.array(U_b), np.array(y_b))
+            rng_j = np.random.default_rng([opts.seed, 1, len(ys), len(chosen)])
+            u_j, log_ei_j = _search(model, np.array(U_b), np.array(y_b), j_max, opts, rng_j)
+            if eps > 0 and log_ei_j < math.log(eps):
+                break
+            chosen.append((u_j, math.exp(log_ei_j) if log_ei_j > -745 else 0.0, log_ei_j))
+        t_search = time.perf_counter() - t0
+        X_batch = np.array([from_unit(u, b) for u, _, _ in chosen])
+        t0 = time.perf_counter()
+        if func_batch is not None:
+            values = [float(v) for v in func_batch(X_batch)]
+            if len(values) != len(chosen) or not all(math.isfinite(v) for v in values):
+                raise SuspidError(f"func_batch returned {values!r} for {len(chosen)} points")
+        else:
+            values = [_evaluate(func, x)[0] for x in X_batch]
+        dt = (time.perf_counter() - t0) / len(chosen)
+        n_calls += len(chosen)
+        for (u_j, ei_j, log_ei_j), x_j, J in zip(chosen, X_batch, values):
+            U_all.append(u_j)
+            ys.append(J)
+            if report(IterationRecord(iteration=it, index=len(ys) - 1, phase="ego", x=x_j, x_unit=u_j, J=J,
+                                      EI=ei_j, log_EI=log_ei_j, J_max=j_max, epsilon=eps,
+                                      hyperparameters=hyper, fit_seconds=t_fit, search_seconds=t_search,
+                                      eval_seconds=dt)):
+                stopped, stop_reason = True, "callback"
+        if len(ys) - n_initial >= opts.max_iter:
             break
 
     Ua, ya = np.array(U_all), np.array(ys)

@@ -98,9 +98,12 @@ def test_inputs_and_outputs_in_any_units(kernel):
 def test_irrelevant_input_gets_a_long_lengthscale():
     rng = np.random.default_rng(4)
     X = rng.random((30, 3))
-    y = np.sin(4 * X[:, 0]) + X[:, 1] ** 2
+    y = np.sin(4 * X[:, 0]) + np.cos(5 * X[:, 1])
     model = GPyKriging(seed=0).fit(X, y)
-    assert model.lengthscales_[2] > 3 * max(model.lengthscales_[0], model.lengthscales_[1])
+    assert model.lengthscales_[2] > 2 * max(model.lengthscales_[0], model.lengthscales_[1])
+    # the irrelevant one sits at the upper bound, 2 scaled units (x its data range)
+    x_range = X[:, 2].max() - X[:, 2].min()
+    assert model.lengthscales_[2] == pytest.approx(2.0 * x_range, rel=1e-3)
 
 
 def test_same_seed_same_fit_and_global_random_state_untouched(data):

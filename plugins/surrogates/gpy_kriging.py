@@ -86,7 +86,11 @@ class GPyKrigingOptions(BaseModel):
     Variances (``noise_variance``, ``nugget``, ``noise_bounds``,
     ``variance_bounds``) are relative to the variance of the standardised
     outputs (i.e. in units of var(y)); length-scale bounds are in units of the
-    scaled inputs (the box or data range is 1).
+    scaled inputs (the box or data range is 1). The upper length-scale bound
+    2 (twice the range, DiceKriging's default) matters for EGO: beyond it the
+    kernel is nearly flat over the box anyway, and unbounded length-scales let
+    a model fitted to points clustered in a flat local basin declare a
+    direction irrelevant and stop exploring it (seen on Hartmann 6).
     """
 
     model_config = ConfigDict(extra="forbid")
@@ -100,7 +104,7 @@ class GPyKrigingOptions(BaseModel):
     n_restarts_warm: int = Field(default=1, ge=0)
     seed: int = 0
     warm_start: bool = True
-    lengthscale_bounds: tuple[float, float] = (1e-3, 1e3)
+    lengthscale_bounds: tuple[float, float] = (1e-3, 2.0)
     variance_bounds: tuple[float, float] = (1e-3, 1e3)
     max_iters: int = Field(default=1000, ge=1)
     max_condition: float = Field(default=1e12, gt=10)
