@@ -893,6 +893,7 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
     """The whole workflow (module docstring): writes diagnosis.json, diagnosis.md and figures; returns the folder."""
     from suspid.pipeline import j_of_spectra
     from suspid.seeds import rng as named_rng
+    from suspid.threads import single_blas_thread
 
     t_start = time.perf_counter()
     config = load_config(path, list(overrides))
@@ -905,15 +906,17 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
     grid = make_cells(problem.channels, problem.freqs, [s.mean_speed for s in problem.segments],
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
-    null = calibrate_null(grid, problem.noise_model, opts.n_bootstrap, named_rng(config.seed, "diagnose-bootstrap"))
-    mu = problem.noise_model.mean_
-    before.dmap = locate(grid, null, problem.y_mes, before.y_sim, mu, opts.alpha)
-    before.dmap.J = j_of_spectra(problem, before.y_sim)[0]
-    log(f"located: {int(before.dmap.flagged.sum())} flagged cells; ranking the effects")
-    t_rank = time.perf_counter()
-    ranking, bumps, named, reason = rank_effects(config, problem, before.w, before.y_sim, before.dmap, null, opts,
-                                                 log)
-    rank_s = time.perf_counter() - t_rank
+    with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.threads)
+        null = calibrate_null(grid, problem.noise_model, opts.n_bootstrap,
+                              named_rng(config.seed, "diagnose-bootstrap"))
+        mu = problem.noise_model.mean_
+        before.dmap = locate(grid, null, problem.y_mes, before.y_sim, mu, opts.alpha)
+        before.dmap.J = j_of_spectra(problem, before.y_sim)[0]
+        log(f"located: {int(before.dmap.flagged.sum())} flagged cells; ranking the effects")
+        t_rank = time.perf_counter()
+        ranking, bumps, named, reason = rank_effects(config, problem, before.w, before.y_sim, before.dmap, null,
+                                                     opts, log)
+        rank_s = time.perf_counter() - t_rank
     log(f"named: {named or 'nothing'} ({reason})")
     after, aug_path = None, None
     if named is not None:

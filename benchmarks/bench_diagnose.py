@@ -1,0 +1,135 @@
+"""The discrepancy workflow on hidden-effect experiments (issue 8): the table of benchmarks/RESULTS.md.
+
+For each effect of the catalogue, the measurement-date data are simulated
+with the effect (``data.measurement.simulator_options``) and the
+identification model lacks it; the cases, data and checks are those of
+``tests/test_diagnose.py`` (v = 32 segments of 600 m, v0 = 48 reference
+segments, reference model error 1.5 dB systematic and 0.5 dB per segment;
+the diagnosis at the nominal parameters, the gap after with the fitted effect
+at the same parameters). Also the null case, the two confounders and,
+with ``--demo``, ``configs/diagnose-hidden-bending.yaml`` (identification
+before and after).
+
+    python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("SUSPID_DISABLE_PLUGIN_AUTOLOAD", "1")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from test_diagnose import CASES, KMH, _config, _main_error, _shrink  # noqa: E402
+
+from suspid.diagnose import run_diagnose  # noqa: E402
+
+
+def _run(path: Path) -> tuple[dict, float]:
+    t0 = time.perf_counter()
+    out = run_diagnose(path, progress=False, log=lambda s: None)
+    return json.loads((out / "diagnosis.json").read_text()), time.perf_counter() - t0
+
+
+def _located(d: dict, frequency: float | None) -> str:
+    if not d["flagged"]:
+        return "nothing"
+    rows = d["flagged"]
+    if frequency is not None:
+        rows = [r for r in rows if r["f_low_hz"] <= frequency <= r["f_high_hz"]] or rows
+    best = max(rows, key=lambda r: abs(r["magnitude_db"]))
+    return (f"{best['channel']} {best['f_low_hz']:.3g}-{best['f_high_hz']:.3g} Hz ({best['sign']}"
+            f"{abs(best['magnitude_db']):.1f} dB); {len(d['flagged'])} cells")
+
+
+def _row(label: str, d: dict, truth_name: str | None, truth: float | None, frequency: float | None,
+         seconds: float) -> str:
+    named = d["named"] or "(nothing)"
+    if d["named"] and truth_name == d["named"]:
+        from suspid import registry
+
+        main = registry.get("effect", d["named"]).main_parameter
+        est = d["named_parameters"][main]
+        err = f"{main} {est:.4g} vs {truth:g}: {100 * _main_error(d, d['named'], truth):.2f} %"
+    else:
+        err = "-"
+    gb, ga = d["gap_before"], d["gap_after"]
+    if ga:
+        share, integ = _shrink(d)
+        gap = (f"{100 * gb['share_flagged']:.1f} % → {100 * ga['share_flagged']:.1f} % ({100 * share:.0f} %) | "
+               f"{gb['integrated_db_hz']:.1f} → {ga['integrated_db_hz']:.1f} ({100 * integ:.0f} %)")
+    else:
+        gap = f"{100 * gb['share_flagged']:.1f} % → - | {gb['integrated_db_hz']:.1f} → -"
+    return f"| {label} | {_located(d, frequency)} | {named} | {err} | {gap} | {seconds:.0f} |"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--demo", action="store_true", help="also run configs/diagnose-hidden-bending.yaml")
+    ap.add_argument("--seeds", type=int, nargs="*", default=[3], help="experiment seeds (the tests use 3)")
+    args = ap.parse_args()
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"# bench_diagnose  {datetime.date.today()}  python {platform.python_version()}  {platform.machine()}  "
+          f"{os.cpu_count()} cpus  load average {load:.2f}")
+    print("| hidden effect (seed) | located: strongest flagged cell at the effect's frequency | named | "
+          "main parameter error | flagged cells before → after (shrink) | integrated dB·Hz before → after "
+          "(shrink) | s |")
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for seed in args.seeds:
+            for name, (hidden, truth, overrides, (_, _, frequency)) in CASES.items():
+                path = _config(tmp, f"{name.replace('-', '_')}_{seed}", [{"name": name, **hidden}], **overrides)
+                _reseed(path, seed)
+                d, s = _run(path)
+                print(_row(f"{name} {_describe(hidden)} ({seed})", d, name, truth, frequency, s), flush=True)
+            for hidden, label in (({"name": "wheel-polygon", "order": 1, "amplitude_m": 1e-4, "wheelsets": [3]},
+                                   "confounder: polygon k=1 at 120 km/h (11.5 Hz)"),
+                                  ({"name": "carbody-bending", "frequency_hz": 11.5, "damping": 0.02},
+                                   "confounder: bending 11.5 Hz at 120 km/h")):
+                path = _config(tmp, f"conf_{hidden['name']}_{seed}", [hidden], speed_kmh=120.0)
+                _reseed(path, seed)
+                d, s = _run(path)
+                truth = hidden.get("order", hidden.get("frequency_hz"))
+                f = 120 * KMH / (math.pi * 0.92) if hidden["name"] == "wheel-polygon" else 11.5
+                print(_row(f"{label} ({seed})", d, hidden["name"], truth, f, s), flush=True)
+            path = _config(tmp, f"null_{seed}", [])
+            _reseed(path, seed)
+            d, s = _run(path)
+            print(_row(f"null case: no hidden effect ({seed})", d, None, None, None, s), flush=True)
+        if args.demo:
+            d, s = _run(ROOT / "configs" / "diagnose-hidden-bending.yaml")
+            print()
+            print(_row("demo configs/diagnose-hidden-bending.yaml (identified before and after)", d,
+                       "carbody-bending", 9.5, 9.5, s))
+            gb, ga = d["gap_before"], d["gap_after"]
+            print(f"# demo J {gb['J']:.5f} -> {ga['J']:.5f}; errors (% of interval) before "
+                  f"{json.dumps({k: round(v, 2) for k, v in gb['errors_percent'].items()})} after "
+                  f"{json.dumps({k: round(v, 2) for k, v in ga['errors_percent'].items()})}")
+
+
+def _describe(hidden: dict) -> str:
+    keep = {k: v for k, v in hidden.items() if k not in ("channels", "wheelsets")}
+    return "(" + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in keep.items()) + ")"
+
+
+def _reseed(path: Path, seed: int) -> None:
+    import yaml
+
+    cfg = yaml.safe_load(path.read_text())
+    cfg["seed"] = seed
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+
+
+if __name__ == "__main__":
+    main()
