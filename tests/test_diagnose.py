@@ -309,3 +309,43 @@ def test_whole_workflow_with_identification_before_and_after(tmp_path):
     assert (tmp_path / "runs" / "full" / "after" / "result.json").exists()
     assert _shrink(d)[0] >= 0.7 and _shrink(d)[1] >= 0.7
     assert ga["J"] > gb["J"]
+
+
+@pytest.mark.slow
+def test_speed_signature_with_data_at_two_speeds(tmp_path):
+    """Half the segments at 200 km/h, half at 300 km/h: a polygon's line moves with speed (19.2 and 28.8 Hz),
+    cells are per speed group, the polygon explains both, a bump fixed in Hz cannot."""
+    from dataclasses import replace
+
+    from suspid.config import load_config
+    from suspid.diagnose import DiagnoseOptions, calibrate_null, locate, make_cells, rank_effects
+    from suspid.interfaces import TrackSegment
+    from suspid.ledger import Ledger
+    from suspid.pipeline import _simulate_spectra, build_problem
+    from suspid.plugins.simulators.exudyn_train import ExudynTrain
+
+    cfg = load_config(_config(tmp_path, "speeds", [], n_segments=32))
+    problem = build_problem(cfg, Ledger(tmp_path / "ledger.sqlite"))
+    speeds = [(200.0 if i % 2 else 300.0) * KMH for i in range(len(problem.segments))]
+    segments = [TrackSegment(s.name, s.distance, s.irregularities, v) for s, v in zip(problem.segments, speeds)]
+    hidden = ExudynTrain(**(dict(cfg.simulator.options) | {"effects": [
+        {"name": "wheel-polygon", "order": 1, "amplitude_m": 1e-4, "wheelsets": [2]}]}))
+    rng = np.random.default_rng(7)
+    y_mes = _simulate_spectra(hidden, {}, segments, cfg.spectra)[0] + problem.noise_model.sample(len(segments), rng)
+    problem = replace(problem, segments=segments, y_mes=y_mes)
+    y_sim = _simulate_spectra(problem.simulator, {}, segments, cfg.spectra)[0]
+    grid = make_cells(problem.channels, problem.freqs, speeds)
+    assert len(grid.speeds) == 2
+    null = calibrate_null(grid, problem.noise_model, 100, rng)
+    dmap = locate(grid, null, y_mes, y_sim, problem.noise_model.mean_)
+    rows = dmap.rows(only_flagged=True)
+    for kmh in (200.0, 300.0):
+        f_line = kmh * KMH / (math.pi * 0.92)
+        assert any(abs(r["speed_kmh"] - kmh) < 0.1 and r["channel"] == "bogie_front_vertical"
+                   and r["f_low_hz"] <= f_line <= r["f_high_hz"] for r in rows), (kmh, rows)
+    ranking, bumps, named, reason = rank_effects(cfg, problem, {}, y_sim, dmap, null, DiagnoseOptions(),
+                                                 lambda s: None)
+    assert named == "wheel-polygon", reason
+    polygon = ranking[0]
+    assert polygon.parameters["order"] == 1 and polygon.signature["200.0 km/h"]["speed_dependence"] == "proportional"
+    assert bumps[polygon.n_parameters].explained < 0.75 * polygon.explained   # one frequency in Hz: half the story
