@@ -473,34 +473,45 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
                 evs_seen.append(ev)
 
         evs_seen: list[Evaluation] = []
-        with executor_cls(**config.executor.options) as executor:
+        executor = executor_cls(**config.executor.options)
+        with executor:
             evs = evaluate_many(problem, ledger, X0, executor, design_done)
-        ok = np.array([e is not None for e in evs])
-        if ok.sum() < 2:
-            raise SimulatorError(f"only {int(ok.sum())} of {len(evs)} design points could be simulated; "
-                                 f"see the failures in {ledger.path}")
-        for i, e in enumerate(evs):
-            if e is not None:
-                ledger.put_iteration("design", i, {"w": e.w, "J": e.J})
-        y0 = np.array([e.J for e in evs if e is not None])
+            ok = np.array([e is not None for e in evs])
+            if ok.sum() < 2:
+                raise SimulatorError(f"only {int(ok.sum())} of {len(evs)} design points could be simulated; "
+                                     f"see the failures in {ledger.path}")
+            for i, e in enumerate(evs):
+                if e is not None:
+                    ledger.put_iteration("design", i, {"w": e.w, "J": e.J})
+            y0 = np.array([e.J for e in evs if e is not None])
 
-        ego_task = bars.add_task("EGO", total=ego_opts.max_iter, status="")
+            ego_task = bars.add_task("EGO", total=ego_opts.max_iter, status="")
 
-        def func(x: np.ndarray) -> float:
-            return evaluate(problem, ledger, x)[0].J
+            def func(x: np.ndarray) -> float:
+                return evaluate(problem, ledger, x)[0].J
 
-        def callback(record) -> None:
-            if record.phase in ("ego", "stop"):
-                ei_history.append(float(record.EI) if record.EI is not None else float("nan"))
-                ledger.put_iteration("ego", record.iteration, {
-                    "phase": record.phase, "w": problem.w_of(record.x), "J": record.J, "EI": record.EI,
-                    "J_max": record.J_max, "epsilon": record.epsilon, "hyperparameters": record.hyperparameters,
-                    "fit_s": record.fit_seconds, "search_s": record.search_seconds, "eval_s": record.eval_seconds})
-                bars.update(ego_task, advance=1 if record.phase == "ego" else 0,
-                            status=f"J_max {record.J_max:.4g}  EI {record.EI:.2e}" if record.EI is not None else "")
+            def func_batch(X: np.ndarray) -> list[float]:
+                """A batch of EGO points simulated in parallel by the executor (``ego.batch`` > 1)."""
+                out = evaluate_many(problem, ledger, X, executor)
+                if any(e is None for e in out):
+                    raise SimulatorError(f"a simulation of an EGO batch failed; see the failures in {ledger.path}")
+                return [e.J for e in out]
 
-        ego = run_ego(func, problem.bounds, ego=ego_opts, design=design_opts, surrogate=surrogate,
-                      X_init=X0[ok], y_init=y0, callback=callback)
+            def callback(record) -> None:
+                if record.phase in ("ego", "stop"):
+                    ei_history.append(float(record.EI) if record.EI is not None else float("nan"))
+                    ledger.put_iteration("ego", record.index, {
+                        "iteration": record.iteration, "phase": record.phase, "w": problem.w_of(record.x),
+                        "J": record.J, "EI": record.EI, "J_max": record.J_max, "epsilon": record.epsilon,
+                        "hyperparameters": record.hyperparameters, "fit_s": record.fit_seconds,
+                        "search_s": record.search_seconds, "eval_s": record.eval_seconds})
+                    bars.update(ego_task, advance=1 if record.phase == "ego" else 0,
+                                status=f"J_max {record.J_max:.4g}  EI {record.EI:.2e}"
+                                if record.EI is not None else "")
+
+            ego = run_ego(func, problem.bounds, ego=ego_opts, design=design_opts, surrogate=surrogate,
+                          X_init=X0[ok], y_init=y0, callback=callback,
+                          func_batch=func_batch if ego_opts.batch > 1 else None)
         bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
 
     with single_blas_thread():
