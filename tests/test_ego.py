@@ -130,7 +130,8 @@ def test_records_for_the_ledger():
 
 
 def test_same_seed_same_points_and_replay_of_a_killed_run():
-    fast = dict(n_initial=5, max_iter=4, tol=0.0, n_candidates=256, n_starts=3)
+    fast = dict(n_initial=5, max_iter=4, tol=0.0, n_candidates=256, n_starts=3,
+                surrogate_options={"n_restarts": 1})
     a = maximize(bowl, BOX, seed=3, **fast)
     c = maximize(bowl, BOX, seed=4, **fast)
     assert not np.array_equal(a.X, c.X)
