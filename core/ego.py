@@ -76,6 +76,7 @@ from suspid import registry
 from suspid.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
 from suspid.errors import ConfigError, SuspidError
 from suspid.interfaces import Surrogate
+from suspid.threads import single_blas_thread
 
 __all__ = ["EGOOptions", "IterationRecord", "EGOResult", "run_ego", "maximize", "make_surrogate",
            "expected_improvement", "log_expected_improvement"]
@@ -157,7 +158,8 @@ class EGOResult:
     :ivar n_initial: m0, the number of initial points.
     :ivar stop_reason: ``"ei_below_tol"``, ``"max_iter"`` or ``"callback"``.
     :ivar history: every :class:`IterationRecord`, in order.
-    :ivar surrogate: the surrogate fitted on all (or all but the last) points.
+    :ivar surrogate: the surrogate fitted on all points (on all but the last
+        with ``refit_final=False``); None if it was never fitted.
     :ivar bounds: ``(q, 2)`` the parameter box.
     :ivar design_min_distance: smallest pairwise distance of the initial
         points in ``[0, 1]^q``.
@@ -381,6 +383,12 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
     :raises ConfigError: bad bounds, initial points outside the box or fewer than 2.
     :raises SuspidError: ``func`` returned a non-finite value.
     """
+    # The fits and the EI search work on small matrices: OpenBLAS threads only contend
+    with single_blas_thread():
+        return _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback)
+
+
+def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback) -> EGOResult:
     opts = ego or EGOOptions()
     b = check_bounds(bounds)
     q = b.shape[0]
@@ -505,12 +513,13 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
             break
 
     Ua, ya = np.array(U_all), np.array(ys)
-    if opts.refit_final and fitted_on != len(ys):
+    if opts.refit_final and fitted_on != len(ys) and len(ys) >= 2:
         model.fit(Ua, ya)
+        fitted_on = len(ys)
     best = int(np.argmax(ya))
     return EGOResult(x_opt=from_unit(Ua[best], b), y_opt=float(ya[best]), X=from_unit(Ua, b), y=ya,
                      X_unit=Ua, n_initial=n_initial, stop_reason=stop_reason, history=history,
-                     surrogate=model, bounds=b, design_min_distance=min_distance(Ua[:n_initial]),
+                     surrogate=model if fitted_on else None, bounds=b, design_min_distance=min_distance(Ua[:n_initial]),
                      n_function_calls=n_calls)
 
 

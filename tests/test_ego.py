@@ -129,6 +129,12 @@ def test_records_for_the_ledger():
         np.testing.assert_allclose(r.x_unit, res.X_unit[r.index])
 
 
+def test_callback_can_stop_during_the_initial_design():
+    res = maximize(bowl, BOX, n_initial=5, max_iter=3, seed=0, callback=lambda r: r.index == 0)
+    assert res.stop_reason == "callback" and res.n_evaluations == 1 and res.surrogate is None
+    assert res.y_opt == res.y[0]
+
+
 def test_same_seed_same_points_and_replay_of_a_killed_run():
     fast = dict(n_initial=5, max_iter=4, tol=0.0, n_candidates=256, n_starts=3,
                 surrogate_options={"n_restarts": 1})

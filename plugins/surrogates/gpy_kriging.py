@@ -72,6 +72,7 @@ from scipy.spatial.distance import cdist, pdist, squareform
 from suspid import hookimpl
 from suspid.errors import ConfigError
 from suspid.interfaces import Surrogate
+from suspid.threads import single_blas_thread
 
 __all__ = ["GPyKriging", "GPyKrigingOptions", "ConditioningWarning", "suspid_register_surrogates"]
 
@@ -194,7 +195,13 @@ class GPyKriging(Surrogate):
         self.y_std_ = std if std > 0 else 1.0
         Xs = (X - self.x_lower_) / self.x_range_
         ys = ((y - self.y_mean_) / self.y_std_)[:, None]
+        # small matrices: OpenBLAS threads only contend (suspid.threads)
+        with single_blas_thread():
+            self._fit(GPy, Xs, ys, opts)
+        return self
 
+    def _fit(self, GPy, Xs: np.ndarray, ys: np.ndarray, opts: GPyKrigingOptions) -> None:
+        n, q = Xs.shape
         rng = np.random.default_rng([opts.seed, n])
         self.jitter_ = 0.0
         noise_floor = {"fixed": opts.noise_variance, "nugget": opts.nugget,
@@ -219,16 +226,15 @@ class GPyKriging(Surrogate):
             noise_floor = min(max(noise_floor * 100.0, 1e-8), 1.0)
             warnings.warn(f"gpy-kriging: every hyperparameter start failed ({n} points); noise "
                           f"floor raised to {noise_floor:.3g} (standardised) and trying again",
-                          ConditioningWarning, stacklevel=2)
+                          ConditioningWarning, stacklevel=3)
         if model is None:  # last resort: default hyperparameters, no optimisation
             warnings.warn("gpy-kriging: hyperparameter optimisation failed; keeping the default "
-                          "hyperparameters", ConditioningWarning, stacklevel=2)
+                          "hyperparameters", ConditioningWarning, stacklevel=3)
             model = self._build(GPy, kern_cls, Xs, ys, opts, noise_floor)
             self.log_likelihood_ = float("nan")
         self.model_ = model
         self._posterior(opts, ys[:, 0])
         self._record(opts)
-        return self
 
     def _build(self, GPy, kern_cls, Xs, ys, opts, noise, start=None):
         q = Xs.shape[1]
@@ -302,7 +308,7 @@ class GPyKriging(Surrogate):
                f"<= {opts.duplicate_tol:g}, first: rows {i[0]} and {j[0]})")
         if noise > 0:
             msg += f"; their values differ, noise floor raised to {noise:.3g} (standardised)"
-        warnings.warn(msg, ConditioningWarning, stacklevel=3)
+        warnings.warn(msg, ConditioningWarning, stacklevel=4)
         return noise
 
     def _posterior(self, opts: GPyKrigingOptions, ys: np.ndarray) -> None:
@@ -330,7 +336,7 @@ class GPyKriging(Surrogate):
         if jitter > opts.jitter_warning:
             warnings.warn(f"gpy-kriging: ill-conditioned covariance ({K.shape[0]} points, "
                           f"condition {lmax / max(lmin, 1e-300):.2g}); jitter {jitter:.3g} added "
-                          f"to the noise variance (standardised)", ConditioningWarning, stacklevel=3)
+                          f"to the noise variance (standardised)", ConditioningWarning, stacklevel=4)
         n = K.shape[0]
         while True:
             try:
@@ -339,7 +345,7 @@ class GPyKriging(Surrogate):
             except np.linalg.LinAlgError:
                 jitter = max(10.0 * jitter, 1e-12 * max(lmax, 1.0))
                 warnings.warn(f"gpy-kriging: Cholesky factorisation failed; jitter raised to "
-                              f"{jitter:.3g} (standardised)", ConditioningWarning, stacklevel=3)
+                              f"{jitter:.3g} (standardised)", ConditioningWarning, stacklevel=4)
         self._L = L
         self._alpha = cho_solve((L, True), ys)
         self.jitter_ = float(jitter)
