@@ -15,6 +15,9 @@ from pathlib import Path
 import pytest
 
 os.environ["SUSPID_DISABLE_PLUGIN_AUTOLOAD"] = "1"
+# the suite's matrices are small: BLAS threads only contend on a 2-core runner (set before numpy loads)
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 for _var in ("SUSPID_STRICT_PLUGINS", "SUSPID_DISABLE_PLUGINS"):
     os.environ.pop(_var, None)
 
