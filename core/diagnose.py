@@ -102,7 +102,7 @@ from pydantic import Field, ValidationError
 
 from suspid import registry
 from suspid.config import Config, OutputSection, Section, load_config, validate_options
-from suspid.errors import ConfigError, SimulatorError
+from suspid.errors import ConfigError, SimulatorError, UnknownPluginError
 
 Z95 = 1.959963984540054
 """Two-sided 95 % normal quantile."""
@@ -746,7 +746,7 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
     for name in names:
         try:
             cls = registry.get("effect", name)
-        except Exception as exc:
+        except UnknownPluginError as exc:
             raise ConfigError(str(exc), file=str(config.source_file), key="diagnose.effects") from None
         if supported is not None and name not in supported:
             ranking.append(Candidate(name, f"not supported by simulator {config.simulator.plugin}"))
