@@ -385,10 +385,10 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
     """
     # The fits and the EI search work on small matrices: OpenBLAS threads only contend
     with single_blas_thread():
-        return _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback)
+        return _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, func_batch)
 
 
-def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback) -> EGOResult:
+def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, func_batch) -> EGOResult:
     opts = ego or EGOOptions()
     b = check_bounds(bounds)
     q = b.shape[0]
