@@ -350,15 +350,14 @@ def check_parameters(config: Config, simulator, lines: Mapping[tuple, int] = {})
                     f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
                     f"known: {', '.join(sorted(known))}",
                     file=file, key=f"{group}.{name}", line=lines.get(tuple(group.split(".")) + (name,)))
-    for name, bounds in config.parameters.items():
-        p = known[name]
-        lower = bounds.lower if bounds and bounds.lower is not None else p.lower
-        upper = bounds.upper if bounds and bounds.upper is not None else p.upper
+    bounds = identified_bounds(config, simulator)
+    for name in config.parameters:
+        lower, upper = bounds[name]
         if not lower < upper:
-            raise ConfigError(f"lower bound {lower:g} must be below upper bound {upper:g} ({p.unit})",
+            raise ConfigError(f"lower bound {lower:g} must be below upper bound {upper:g} ({known[name].unit})",
                               file=file, key=f"parameters.{name}", line=lines.get(("parameters", name)))
     for name, value in config.data.w_ref.items():
-        lower, upper = identified_bounds(config, simulator).get(name, (known[name].lower, known[name].upper))
+        lower, upper = bounds.get(name, (known[name].lower, known[name].upper))
         if not lower <= value <= upper:
             raise ConfigError(f"w_ref value {value:g} lies outside the admissible interval "
                               f"[{lower:g}, {upper:g}] {known[name].unit}",

@@ -310,9 +310,21 @@ def simulate_spectra_task(task: tuple) -> np.ndarray:
     executors can run it; the simulator is rebuilt from the registry.
     """
     plugin, options, w, segments, spectra_options = task
-    simulator = registry.get("simulator", plugin)(**options)
-    y_sim, _ = _simulate_spectra(simulator, w, segments, spectra_options)
+    y_sim, _ = _simulate_spectra(_simulator(plugin, options), w, segments, spectra_options)
     return y_sim
+
+
+_SIMULATORS: dict[str, Simulator] = {}
+
+
+def _simulator(plugin: str, options: dict) -> Simulator:
+    """The simulator for ``(plugin, options)``, built once per process (models keep caches per instance)."""
+    key = stable_hash(plugin, options)
+    if key not in _SIMULATORS:
+        if len(_SIMULATORS) >= 4:
+            _SIMULATORS.pop(next(iter(_SIMULATORS)))
+        _SIMULATORS[key] = registry.get("simulator", plugin)(**options)
+    return _SIMULATORS[key]
 
 
 def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str, float]]:
@@ -363,28 +375,17 @@ def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor,
     return out
 
 
-def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray) -> tuple[Evaluation, bool]:
-    """J at one parameter vector, from the ledger or computed in this process and committed at once.
+def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray) -> Evaluation:
+    """J at one parameter vector in this process: :func:`evaluate_many` with the serial executor.
 
     :param x_si: ``(q,)`` SI values in the order of ``problem.names``.
-    :returns: the evaluation and whether it was reused from the ledger.
     :raises SimulatorError: when the simulator fails (the failure is recorded first).
     """
-    key, w = evaluation_key_of(problem, x_si)
-    found = ledger.get(key)
-    if found is not None and found.ok:
-        return found, True
-    t0 = time.perf_counter()
-    try:
-        y_sim, _ = _simulate_spectra(problem.simulator, w, problem.segments, problem.config.spectra)
-    except SuspidError as exc:
-        ledger.put(Evaluation(key, w, None, None, status="failed", error=f"{type(exc).__name__}: {exc}",
-                              wall_time_s=time.perf_counter() - t0))
-        raise
-    J, psi = j_of_spectra(problem, y_sim)
-    ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=time.perf_counter() - t0)
-    ledger.put(ev)
-    return ev, False
+    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], registry.get("executor", "serial")())[0]
+    if ev is None:
+        key, _ = evaluation_key_of(problem, x_si)
+        raise SimulatorError(ledger.get(key).error)
+    return ev
 
 
 # -- the run ---------------------------------------------------------------------------
@@ -461,18 +462,14 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.threads)
     with make_progress(progress) as bars, single_blas_thread():
         design_task = bars.add_task("initial design", total=len(X0), status="")
-        n_reused = 0
+        j_max = -np.inf
 
         def design_done(i: int, ev: Evaluation | None, reused: bool) -> None:
-            nonlocal n_reused
-            n_reused += reused
-            bars.update(design_task, advance=1,
-                        status=f"J_max {max([e.J for e in evs_seen if e] + [ev.J if ev else -np.inf]):.4g}"
-                        if ev else "failed point")
+            nonlocal j_max
             if ev is not None:
-                evs_seen.append(ev)
+                j_max = max(j_max, ev.J)
+            bars.update(design_task, advance=1, status=f"J_max {j_max:.4g}" if ev else "failed point")
 
-        evs_seen: list[Evaluation] = []
         executor = executor_cls(**config.executor.options)
         with executor:
             evs = evaluate_many(problem, ledger, X0, executor, design_done)
@@ -488,7 +485,7 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
             ego_task = bars.add_task("EGO", total=ego_opts.max_iter, status="")
 
             def func(x: np.ndarray) -> float:
-                return evaluate(problem, ledger, x)[0].J
+                return evaluate(problem, ledger, x).J
 
             def func_batch(X: np.ndarray) -> list[float]:
                 """A batch of EGO points simulated in parallel by the executor (``ego.batch`` > 1)."""
