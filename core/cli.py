@@ -206,7 +206,10 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
 
 def _print_result(result: dict, run_dir: Path) -> None:
-    table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({result['stop_reason']}, "
+    stop = result["stop_reason"]
+    if result.get("refine_stop_reason"):
+        stop += f", then {result['n_refine_iterations']} refinement steps: {result['refine_stop_reason']}"
+    table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
                         f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
     for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable"):
         table.add_column(col)

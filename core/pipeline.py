@@ -482,7 +482,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
                     ledger.put_iteration("design", i, {"w": e.w, "J": e.J})
             y0 = np.array([e.J for e in evs if e is not None])
 
-            ego_task = bars.add_task("EGO", total=ego_opts.max_iter, status="")
+            ego_task = bars.add_task("EGO", total=ego_opts.max_iter + (ego_opts.refine.max_iter
+                                                                       if ego_opts.refine.enabled else 0), status="")
 
             def func(x: np.ndarray) -> float:
                 return evaluate(problem, ledger, x).J
@@ -495,14 +496,15 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
                 return [e.J for e in out]
 
             def callback(record) -> None:
-                if record.phase in ("ego", "stop"):
+                if record.phase != "initial":
                     ei_history.append(float(record.EI) if record.EI is not None else float("nan"))
-                    ledger.put_iteration("ego", record.index, {
+                    run_key = "refine" if record.phase.startswith("refine") else "ego"
+                    ledger.put_iteration(run_key, record.index, {
                         "iteration": record.iteration, "phase": record.phase, "w": problem.w_of(record.x),
                         "J": record.J, "EI": record.EI, "J_max": record.J_max, "epsilon": record.epsilon,
                         "hyperparameters": record.hyperparameters, "fit_s": record.fit_seconds,
                         "search_s": record.search_seconds, "eval_s": record.eval_seconds})
-                    bars.update(ego_task, advance=1 if record.phase == "ego" else 0,
+                    bars.update(ego_task, advance=1 if record.phase in ("ego", "refine") else 0,
                                 status=f"J_max {record.J_max:.4g}  EI {record.EI:.2e}"
                                 if record.EI is not None else "")
 
@@ -517,7 +519,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
         "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),
         "n_simulator_calls_this_session": int(ledger.count() - n_before),
-        "stop_reason": ego.stop_reason, "wall_time_s": round(time.perf_counter() - t_start, 3),
+        "stop_reason": ego.stop_reason, "n_refine_iterations": int(ego.n_refine),
+        "refine_stop_reason": ego.refine_stop_reason, "wall_time_s": round(time.perf_counter() - t_start, 3),
         "design_min_distance": float(ego.design_min_distance),
     })
     (run_dir / "result.json").write_text(json.dumps(result, indent=2))
@@ -623,7 +626,26 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
         result["w_ref_normalized"] = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
         result["errors_percent"] = {n: float(100 * abs(a - b) / (h - l))
                                     for n, a, b, l, h in zip(names, x_opt, w_ref, lo, hi)}
+    if ego.n_refine:
+        result["paper_loop"] = _paper_loop(problem, ego)
     return result
+
+
+def _paper_loop(problem: Problem, ego) -> dict[str, Any]:
+    """Where the paper's loop stood when it stopped, before the local refinement (``ego.refine``)."""
+    names = problem.names
+    n_loop = ego.n_evaluations - ego.n_refine
+    best = int(np.argmax(ego.y[:n_loop]))
+    x = np.asarray(ego.X[best], float)
+    out: dict[str, Any] = {
+        "n_iterations": n_loop - ego.n_initial, "n_simulator_calls": n_loop, "J_max": float(ego.y[best]),
+        "w_opt": {n: float(v) for n, v in zip(names, x)},
+        "w_opt_normalized": {n: float(v) for n, v in zip(names, problem.to_unit(x))}}
+    if problem.w_ref is not None:
+        lo, hi = problem.bounds[:, 0], problem.bounds[:, 1]
+        out["errors_percent"] = {n: float(100 * abs(a - problem.w_ref[n]) / (h - l))
+                                 for n, a, l, h in zip(names, x, lo, hi)}
+    return out
 
 
 def _figure_channel(config: Config, channels: Sequence[str]) -> int:
@@ -674,11 +696,15 @@ def write_report(run_dir: Path, problem: Problem, ego, result: dict[str, Any], e
         rows.append(row)
     header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
         + ["interval", "identifiable", "total Sobol index"]
+    refine = ""
+    if result.get("refine_stop_reason"):
+        refine = (f" (the last {result['n_refine_iterations']} in the local refinement, stop: "
+                  f"`{result['refine_stop_reason']}`)")
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
 seed {config.seed}. {result['n_initial']} initial points (maximin design, minimum distance
-{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} EGO iterations, stop: `{result['stop_reason']}`,
+{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} iterations, stop: `{result['stop_reason']}`{refine},
 J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 
 {markdown_table(header, rows)}

@@ -100,6 +100,8 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
               "J_max", "stop_reason", "wall_time_s"]
     fields += [f"error_{n}" for n in names] if has_ref else []
     fields += [f"identifiable_{n}" for n in names] + [f"w_opt_{n}" for n in names]
+    fields += ["paper_loop_n_iterations", "paper_loop_n_simulator_calls"]  # empty without ego.refine
+    fields += [f"paper_loop_error_{n}" for n in names] if has_ref else []
     with open(study_dir / "study.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
@@ -112,20 +114,37 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
                     row[f"error_{n}"] = round(r["errors_percent"][n], 3)
                 row[f"identifiable_{n}"] = r["identifiable"][n]
                 row[f"w_opt_{n}"] = r["w_opt"][n]
+            if "paper_loop" in r:
+                p = r["paper_loop"]
+                row.update(paper_loop_n_iterations=p["n_iterations"], paper_loop_n_simulator_calls=p["n_simulator_calls"])
+                row.update({f"paper_loop_error_{n}": round(p["errors_percent"][n], 3) for n in names if has_ref})
             writer.writerow(row)
     header = ["variant", "iterations", "simulator calls"] + [f"{i + 1}: {n}" for i, n in enumerate(names)] \
         + ["wall time (s)"]
     table = []
-    for label, r in rows:
+
+    def cells_of(r: dict[str, Any], values: dict[str, Any]) -> list[str]:
         cells = []
         for n in names:
-            cell = f"{r['errors_percent'][n]:.2f}" if has_ref else f"{r['w_opt'][n]:.4g}"
+            cell = f"{values['errors_percent'][n]:.2f}" if has_ref else f"{values['w_opt'][n]:.4g}"
             cells.append(cell if r["identifiable"][n] else f"({cell}) n.i.")
-        table.append([label, r["n_iterations"], r["n_simulator_calls"], *cells, f"{r['wall_time_s']:.0f}"])
+        return cells
+
+    for label, r in rows:
+        if "paper_loop" in r:  # the paper's loop alone, then with the local refinement
+            p = r["paper_loop"]
+            table.append([f"{label}: paper's loop", p["n_iterations"], p["n_simulator_calls"], *cells_of(r, p), ""])
+            label = f"{label}: + refinement"
+        table.append([label, r["n_iterations"], r["n_simulator_calls"], *cells_of(r, r), f"{r['wall_time_s']:.0f}"])
     what = "error in % of the admissible interval" if has_ref else "w_opt"
+    refined = ""
+    if any("paper_loop" in r for _, r in rows):
+        refined = ("Variants with `ego.refine` show two rows: where the paper's EGO loop stopped (EI < eps), "
+                   "and the same run after the local refinement (its iterations and calls include the loop's); "
+                   "the identifiability flags are those of the final analysis.\n\n")
     text = (f"# Study\n\nPer component: {what}; `n.i.` marks a component flagged not identifiable "
-            f"(its value is shown in brackets and is not a finding).\n\n{markdown_table(header, table)}\n\n"
-            f"![parameters](study_parameters.png)\n")
+            f"(its value is shown in brackets and is not a finding).\n\n{refined}{markdown_table(header, table)}"
+            f"\n\n![parameters](study_parameters.png)\n")
     (study_dir / "study.md").write_text(text)
     variants = {label: np.array([r["w_opt_normalized"][n] for n in names]) for label, r in rows}
     intervals = {label: np.array([r["interval_normalized"][n] for n in names]) for label, r in rows}

@@ -162,6 +162,57 @@ def test_same_seed_same_points_and_replay_of_a_killed_run():
     assert len(calls) == 9  # 7 before the kill, 2 new ones
 
 
+# -- local refinement (ego.refine, beyond the paper) ----------------------------------
+
+U_STAR = np.array([0.62, 0.35, 0.48])
+RIDGE = np.array([[30.0, 27.0, 0.0], [27.0, 30.0, 0.0], [0.0, 0.0, 10.0]])  # condition number 19
+
+
+def ridge(u):
+    """Concave quadratic with a correlated, flat direction (like k_sec_z with k_prim_z); max 0 at U_STAR."""
+    d = np.asarray(u) - U_STAR
+    return -float(d @ RIDGE @ d)
+
+
+def test_refinement_climbs_the_ridge_to_the_maximiser():
+    records = []
+    res = maximize(ridge, [[0.0, 1.0]] * 3, n_initial=12, max_iter=0, seed=1, callback=records.append,
+                   refine={"enabled": True, "max_iter": 40})
+    start = res.X[np.argmax(res.y[:12])]
+    assert np.max(np.abs(start - U_STAR)) > 0.05  # the design alone is far off
+    assert res.refine_stop_reason in ("radius_below_min", "max_iter") and res.n_refine == res.n_iterations
+    assert np.max(np.abs(res.x_opt - U_STAR)) < 0.01
+    refine = [r for r in records if r.phase == "refine"]
+    assert len(refine) == res.n_refine and [r.index for r in refine] == list(range(12, 12 + res.n_refine))
+    assert all(r.J_max == pytest.approx(max(res.y[:r.index])) for r in refine)
+
+
+@pytest.mark.parametrize("patience, expected", [(1, 4), (2, 8)])
+def test_refinement_halves_the_radius_after_failures(patience, expected):
+    # the best point is the maximiser itself: every step fails, the radius goes
+    # 0.1 -> 0.05 -> 0.025 -> 0.0125 -> 0.00625 < 0.01 after 4 halvings
+    X = np.vstack([U_STAR, np.random.default_rng(0).random((9, 3))])
+    res = maximize(ridge, [[0.0, 1.0]] * 3, X_init=X, y_init=[ridge(x) for x in X], max_iter=0, seed=1,
+                   refine={"enabled": True, "patience": patience})
+    assert res.refine_stop_reason == "radius_below_min" and res.n_refine == expected
+    np.testing.assert_array_equal(res.x_opt, U_STAR)
+    assert np.max(np.abs(res.X[10:] - U_STAR)) <= 0.1 + 1e-12  # inside the first trust region
+
+
+def test_refinement_leaves_the_papers_loop_unchanged():
+    fast = dict(n_initial=6, max_iter=6, tol=0.0, n_candidates=256, n_starts=3, seed=2,
+                surrogate_options={"n_restarts": 1})
+    paper = maximize(ridge, [[0.0, 1.0]] * 3, **fast)
+    refined = maximize(ridge, [[0.0, 1.0]] * 3, refine={"enabled": True, "max_iter": 5}, **fast)
+    n = paper.n_evaluations
+    np.testing.assert_array_equal(refined.X[:n], paper.X)
+    assert refined.stop_reason == paper.stop_reason and paper.n_refine == 0 and paper.refine_stop_reason is None
+    assert refined.n_refine == refined.n_evaluations - n == refined.n_function_calls - paper.n_function_calls
+    assert refined.y_opt >= paper.y_opt
+    again = maximize(ridge, [[0.0, 1.0]] * 3, refine={"enabled": True, "max_iter": 5}, **fast)
+    np.testing.assert_array_equal(again.X, refined.X)  # deterministic, so a killed run replays
+
+
 def test_own_initial_points_and_known_values():
     X0 = np.array([[-1.0, 0.0], [2.0, 1.0], [0.0, 0.5], [1.5, 0.2], [0.5, 0.9]])
     y0 = np.array([bowl(X0[0]), np.nan, bowl(X0[2]), np.nan, bowl(X0[4])])

@@ -22,6 +22,7 @@ study:
   variants:
     - {name: likelihood, set: {objective.plugin: likelihood}}
     - {name: overlap, set: {objective.plugin: overlap}}
+    - {name: refined, set: {objective.plugin: overlap, ego.refine: {enabled: true, max_iter: 3}}}
 """
 
 
@@ -34,12 +35,19 @@ def test_study_runs_both_objectives_from_one_design(tmp_path):
     assert res.returncode == 0, res.stderr
     out = tmp_path / "runs" / "st"
     rows = list(csv.DictReader(open(out / "study.csv")))
-    assert [r["variant"] for r in rows] == ["likelihood", "overlap"]
+    assert [r["variant"] for r in rows] == ["likelihood", "overlap", "refined"]
     assert {r["objective"] for r in rows} == {"likelihood", "overlap"}
     for r in rows:
         assert float(r["error_k_sec_z"]) >= 0 and r["identifiable_c_sec_z"] in ("True", "False")
     text = (out / "study.md").read_text()
     assert "| likelihood |" in text and "| overlap |" in text and (out / "study_parameters.png").exists()
+    # the refined variant is the overlap run continued: one row where the paper's loop stopped, one after
+    overlap, refined = rows[1], rows[2]
+    assert overlap["paper_loop_n_iterations"] == "" and refined["paper_loop_n_iterations"] == overlap["n_iterations"]
+    assert refined["paper_loop_error_k_sec_z"] == overlap["error_k_sec_z"]
+    assert int(refined["n_simulator_calls"]) == int(overlap["n_simulator_calls"]) + 3
+    assert float(refined["J_max"]) >= float(overlap["J_max"])
+    assert "| refined: paper's loop |" in text and "| refined: + refinement |" in text
     designs = [Ledger(out / "variants" / v / "ledger.sqlite").iterations("design") for v in ("likelihood", "overlap")]
     assert [d["w"] for d in designs[0]] == [d["w"] for d in designs[1]]  # the same initial design
 
