@@ -681,7 +681,7 @@ def write_report(run_dir: Path, problem: Problem, ego, result: dict[str, Any], e
     figure_parameters(run_dir / "figure2_parameters.png", names,
                       {config.objective.plugin: np.array([result["w_opt_normalized"][n] for n in names])},
                       w_ref_n, {config.objective.plugin: np.array([result["interval_normalized"][n] for n in names])})
-    figure_convergence(run_dir / "convergence.png", np.asarray(ego.y), ego.n_initial, ei_history)
+    figure_convergence(run_dir / "convergence.png", np.asarray(ego.y), ego.n_initial, ei_history, ego.n_refine)
 
     rows = []
     for n in names:

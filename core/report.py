@@ -83,22 +83,35 @@ def figure_parameters(path: Path, names: Sequence[str], variants: Mapping[str, n
     return path
 
 
-def figure_convergence(path: Path, J: np.ndarray, n_initial: int, ei: Sequence[float]) -> Path:
-    """Convergence: J of every evaluation, running J_max, and max EI per EGO iteration (log scale)."""
+def figure_convergence(path: Path, J: np.ndarray, n_initial: int, ei: Sequence[float], n_refine: int = 0) -> Path:
+    """Convergence: J of every evaluation, running J_max, and max EI per EGO iteration (log scale).
+
+    :param J: ``(n,)`` J of every evaluation in order; :param ei: EI per iteration, the
+        last ``n_refine`` of them at the points of the local refinement (``ego.refine``).
+    """
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     n = np.arange(1, len(J) + 1)
     axes[0].plot(n, J, ".", color="0.6", label="J of each evaluation")
     axes[0].plot(n, np.maximum.accumulate(J), color="tab:blue", label="J_max")
     axes[0].axvline(n_initial + 0.5, color="k", ls=":", lw=1, label="end of initial design")
+    if n_refine:
+        axes[0].axvline(len(J) - n_refine + 0.5, color="tab:orange", ls="--", lw=1,
+                        label="paper's stop, refinement after")
     axes[0].set_xlabel("evaluation")
     axes[0].set_ylabel("J")
     axes[0].legend(fontsize=8)
     ei = np.asarray(ei, dtype=float)
-    if ei.size:
-        axes[1].semilogy(np.arange(1, ei.size + 1), np.maximum(ei, 1e-300), "o-", ms=3)
-    axes[1].set_xlabel("EGO iteration")
-    axes[1].set_ylabel("max EI")
+    n_loop = ei.size - n_refine
+    it = np.arange(1, ei.size + 1)
+    if n_loop > 0:
+        axes[1].semilogy(it[:n_loop], np.maximum(ei[:n_loop], 1e-300), "o-", ms=3, label="max EI, paper's loop")
+    if n_refine:
+        axes[1].semilogy(it[n_loop:], np.maximum(ei[n_loop:], 1e-300), "s-", ms=3, color="tab:orange",
+                         label="EI at the refinement points")
+        axes[1].legend(fontsize=8)
+    axes[1].set_xlabel("iteration")
+    axes[1].set_ylabel("EI")
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
