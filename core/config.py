@@ -138,6 +138,13 @@ class Config(Section):
     # set by load_config, not by the user
     source_file: Path | None = Field(default=None, exclude=True)
 
+    def resolve(self, path: str | Path) -> Path:
+        """``path`` with ``~`` expanded; relative paths are taken from the config file's folder."""
+        p = Path(path).expanduser()
+        if not p.is_absolute() and self.source_file is not None:
+            p = self.source_file.parent / p
+        return p
+
     def run_dir(self) -> Path:
         """The run directory: ``output.dir`` or ``runs/<name>/`` beside the config."""
         if self.output.dir is not None:
@@ -255,8 +262,14 @@ def _describe(error: dict[str, Any], model: type[BaseModel], loc: tuple) -> str:
     return msg
 
 
-def _raise_validation(exc: ValidationError, model: type[BaseModel], file: str, lines: Mapping[tuple, int],
-                      prefix: tuple = ()) -> None:
+def raise_validation_error(exc: ValidationError, model: type[BaseModel], file: str, lines: Mapping[tuple, int],
+                           prefix: tuple = ()) -> None:
+    """Raise the first error of a pydantic ``exc`` as a one-line :class:`ConfigError`.
+
+    :param model: the model that was validated (for the list of expected keys).
+    :param lines: YAML line numbers by key path (:func:`load_yaml`), for ``file:line``.
+    :param prefix: the key path of the validated section inside the config file.
+    """
     error = exc.errors()[0]
     loc = tuple(error["loc"])
     full = prefix + loc
@@ -268,6 +281,12 @@ def _raise_validation(exc: ValidationError, model: type[BaseModel], file: str, l
     more = len(exc.errors()) - 1
     detail = _describe(error, model, loc) + (f" (+{more} more error{'s' * (more > 1)})" if more else "")
     raise ConfigError(detail, file=file, key=".".join(map(str, full)) or None, line=line) from None
+
+
+def override_arguments(mapping: Mapping[str, Any]) -> list[str]:
+    """``{"key.path": value}`` as ``--set`` arguments ``["key.path=<YAML flow value>"]`` for :func:`load_config`."""
+    return [f"{k}={yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}"
+            for k, v in mapping.items()]
 
 
 def validate_options(cls: type, options: Mapping[str, Any], *, file: str, key: str,
@@ -282,7 +301,7 @@ def validate_options(cls: type, options: Mapping[str, Any], *, file: str, key: s
     try:
         validated = model.model_validate(dict(options), context={"base_dir": base_dir})
     except ValidationError as exc:
-        _raise_validation(exc, model, file, lines or {}, tuple(key.split(".")))
+        raise_validation_error(exc, model, file, lines or {}, tuple(key.split(".")))
     return validated.model_dump()  # plain data: hashable identity, picklable, YAML-dumpable
 
 
@@ -305,7 +324,7 @@ def load_config(path: str | Path, overrides: Sequence[str] = (), *, check_plugin
     try:
         config = Config.model_validate(data, context={"base_dir": base_dir})
     except ValidationError as exc:
-        _raise_validation(exc, Config, file, lines)
+        raise_validation_error(exc, Config, file, lines)
     config.source_file = path.resolve()
     if check_plugins:
         check_config_plugins(config, lines)

@@ -972,9 +972,9 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
 # ====================================================================================== report
 def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | None = None) -> Path:
     """Heat map of the cell magnitudes (dB, + measured above the model) per speed group; flagged cells framed."""
-    from suspid.report import _pyplot
+    from suspid.report import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     grid = dmap.grid
     G, K, B = len(grid.speeds), len(grid.channels), grid.band_edges.shape[0]
     m = dmap.magnitude_db.reshape(G, K, B)
@@ -1000,9 +1000,9 @@ def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | N
 def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | None, channel: int,
                        dmap: DiscrepancyMap) -> Path:
     """Mean measured spectrum against the modelled mean y_sim + μ_B before and after, one channel."""
-    from suspid.report import _pyplot
+    from suspid.report import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     p = stage_before.problem
     f = p.freqs
     mu = p.noise_model.mean_[channel]

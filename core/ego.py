@@ -42,13 +42,15 @@ is the same with plain keyword arguments.
     (n0,)`` gives values already known (NaN where still to be evaluated), so
     cached evaluations are not recomputed.
 (b) Ledger: ``callback(record)`` is called once per initial point (phase
-    ``"initial"``), after each EGO iteration (phase ``"ego"``) and for the
-    iteration that stops on EI < eps (phase ``"stop"``, ``J`` is None) with an
+    ``"initial"``), after each EGO iteration (phase ``"ego"``), for the
+    iteration that stops on EI < eps (phase ``"stop"``, ``J`` is None) and
+    after each point of the optional refinement (phase ``"refine"``) with an
     :class:`IterationRecord` (iteration, point in SI and unit coordinates, J,
     EI, J_max, eps, surrogate hyperparameters, fit/search/evaluation times).
     A callback returning True stops the run (``stop_reason == "callback"``).
 (c) Determinism: the design is seeded by ``design.seed``; the EI candidates
-    of the iteration that follows the n-th evaluation by ``(ego.seed, n)``;
+    of the iteration that follows the n-th evaluation by ``(ego.seed, n)``
+    (by ``(ego.seed, 2, n)`` in the refinement);
     the surrogate by its own ``seed`` option. So a killed run replayed with a
     ``func`` that returns cached J values retraces the same points. (Passing
     every evaluated point back as ``X_init`` also works, but it is a
@@ -95,15 +97,21 @@ class RefineOptions(BaseModel):
     What. A model-based trust-region search (Conn, Scheinberg and Vicente,
     *Introduction to Derivative-Free Optimization*, 2009, ch. 10) whose model
     is a local Kriging fit, as in local approximate GPs (Gramacy and Apley,
-    2015). Each step fits the surrogate on the ``n_points`` evaluated points
+    2015). Each step fits a local surrogate (a new instance of the run's
+    surrogate class, same options) on the ``n_points`` evaluated points
     nearest to the current best w_opt (Euclidean distance in [0, 1]^q),
-    evaluates J at the maximiser of the surrogate's mean over the box
-    w_opt ± ``radius`` (clipped to [0, 1]^q), and moves the box to the new
-    point when J improved. After ``patience`` steps in a row without
-    improvement the radius is halved. It stops when the radius falls below
+    evaluates J at the maximiser of its mean over the box w_opt ± ``radius``
+    (clipped to [0, 1]^q), and moves the box to the new point when J improved
+    by more than the paper's eps = tol * (max J - min J). When the mean peaks
+    at a point already evaluated, the step takes the EI maximiser in the box
+    instead; if that too is a known point, the step counts as a failure
+    without a simulation. After ``patience`` failures in a row the radius is
+    halved (it never grows). The refinement stops when the radius falls below
     ``min_radius`` (``"radius_below_min"``: w_opt is then located to about
     that fraction of each admissible interval) or after ``max_iter`` points
-    (``"max_iter"``). The surrogate is refitted on every point at the end.
+    (``"max_iter"``). The run's global surrogate is not touched by the local
+    fits; with ``refit_final`` it is refitted on every point at the end.
+    The refinement evaluates one point per step, also with ``ego.batch`` > 1.
 
     The step maximises the mean, not EI: inside a small box EI prefers the
     corners where the local model is least sure, and on the Table 1 analogue
@@ -212,8 +220,9 @@ class EGOResult:
         ``"max_iter"``, ``"callback"``), None without one.
     :ivar n_refine: points evaluated by the refinement (included in ``n_iterations``).
     :ivar history: every :class:`IterationRecord`, in order.
-    :ivar surrogate: the surrogate fitted on all points (on all but the last
-        with ``refit_final=False``); None if it was never fitted.
+    :ivar surrogate: the surrogate fitted on all points (with
+        ``refit_final=False``: its last fit in the paper's loop, without the
+        last point and the refinement's points); None if it was never fitted.
     :ivar bounds: ``(q, 2)`` the parameter box.
     :ivar design_min_distance: smallest pairwise distance of the initial
         points in ``[0, 1]^q``.
@@ -545,7 +554,7 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
         u_new, log_ei = _search(model, Ua, ya, j_max, opts, rng)
         t_search = time.perf_counter() - t0
         ei = math.exp(log_ei) if log_ei > -745 else 0.0
-        hyper = dict(getattr(model, "hyperparameters_", {}) or {})
+        hyper = dict(model.hyperparameters_ or {})
         x_new = from_unit(u_new, b)
         if eps > 0 and log_ei < math.log(eps):  # EI(w_l) < eps, compared in log space
             stop_reason = "ei_below_tol"
@@ -603,10 +612,10 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
             break
 
     refine_reason, n_refine = None, 0
-    if opts.refine.enabled and stop_reason != "callback" and not stopped:
-        refine_reason, n_refine = _refine(func, b, opts, model, U_all, ys, n_initial, report)
+    if opts.refine.enabled and opts.refine.max_iter > 0 and stop_reason != "callback" and not stopped:
+        first = max((r.iteration for r in history if r.phase == "ego"), default=0) + 1
+        refine_reason, n_refine = _refine(func, b, opts, model, U_all, ys, first, report)
         n_calls += n_refine
-        fitted_on = -1  # fitted on local data only
 
     Ua, ya = np.array(U_all), np.array(ys)
     if opts.refit_final and fitted_on != len(ys) and len(ys) >= 2:
@@ -620,49 +629,67 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
 
 
 def _refine(func, b: np.ndarray, opts: EGOOptions, model: Surrogate, U_all: list[np.ndarray], ys: list[float],
-            n_initial: int, report: Callable[[IterationRecord], bool]) -> tuple[str, int]:
+            first_iteration: int, report: Callable[[IterationRecord], bool]) -> tuple[str, int]:
     """The local refinement of :class:`RefineOptions`; appends to ``U_all`` and ``ys`` in place.
 
+    The local fits use a new instance of the surrogate's class with the same
+    options, so the global model (its fit and its warm starts) is left as the
+    paper's loop made it.
+
+    :param first_iteration: the ``iteration`` number of the first refinement record.
     :returns: ``(stop reason, number of points evaluated)``.
     """
     ro = opts.refine
     q = b.shape[0]
     k = ro.n_points or 10 * q
+    local = type(model)(**model.options)
     radius = ro.radius
     n = failures = 0
+    iteration = first_iteration
     while n < ro.max_iter:
         Ua, ya = np.array(U_all), np.array(ys)
         best = int(np.argmax(ya))
         centre, j_max = Ua[best], float(ya[best])
         near = np.argsort(np.linalg.norm(Ua - centre, axis=1), kind="stable")[:k]
-        t0 = time.perf_counter()
-        model.fit(Ua[near], ya[near])
-        t_fit = time.perf_counter() - t0
         eps = opts.tol * float(ya.max() - ya.min())
         lo, hi = np.clip(centre - radius, 0.0, 1.0), np.clip(centre + radius, 0.0, 1.0)
+        t0 = time.perf_counter()
+        local.fit(Ua[near], ya[near])
+        t_fit = time.perf_counter() - t0
         rng = np.random.default_rng([opts.seed, 2, len(ys)])
         t0 = time.perf_counter()
-        u_new = _search_mean(model, centre, lo, hi, opts, rng)
-        log_ei = float(log_expected_improvement(*model.predict(u_new[None, :]), j_max)[0])
+        u_new = _search_mean(local, centre, lo, hi, opts, rng)
+        if _is_evaluated(u_new, Ua[near], radius):
+            # the local mean peaks at a point already known: explore the box by EI instead
+            u_new, _ = _search(local, Ua[near], ya[near], j_max, opts, rng, lo, hi)
+        log_ei = float(log_expected_improvement(*local.predict(u_new[None, :]), j_max)[0])
         t_search = time.perf_counter() - t0
-        ei = math.exp(log_ei) if log_ei > -745 else 0.0
-        hyper = dict(getattr(model, "hyperparameters_", {}) or {})
-        x_new = from_unit(u_new, b)
-        record = dict(iteration=len(ys) - n_initial + 1, x=x_new, x_unit=u_new, EI=ei, log_EI=log_ei,
-                      J_max=j_max, epsilon=eps, hyperparameters=hyper, fit_seconds=t_fit,
-                      search_seconds=t_search)
-        J, dt = _evaluate(func, x_new)
-        n += 1
-        U_all.append(u_new)
-        ys.append(J)
-        if report(IterationRecord(index=len(ys) - 1, phase="refine", J=J, eval_seconds=dt, **record)):
-            return "callback", n
-        failures = 0 if J > j_max else failures + 1
+        if _is_evaluated(u_new, Ua[near], radius):  # nothing new to learn at this scale: a failure
+            failures = ro.patience
+        else:
+            x_new = from_unit(u_new, b)
+            J, dt = _evaluate(func, x_new)
+            n += 1
+            U_all.append(u_new)
+            ys.append(J)
+            if report(IterationRecord(
+                    iteration=iteration, index=len(ys) - 1, phase="refine", x=x_new, x_unit=u_new, J=J,
+                    EI=math.exp(log_ei) if log_ei > -745 else 0.0, log_EI=log_ei, J_max=j_max, epsilon=eps,
+                    hyperparameters=dict(local.hyperparameters_ or {}), fit_seconds=t_fit,
+                    search_seconds=t_search, eval_seconds=dt)):
+                return "callback", n
+            iteration += 1
+            failures = 0 if J > j_max + eps else failures + 1
         if failures >= ro.patience:
             radius, failures = radius / 2, 0
             if radius < ro.min_radius:
                 return "radius_below_min", n
     return "max_iter", n
+
+
+def _is_evaluated(u: np.ndarray, U: np.ndarray, radius: float) -> bool:
+    """Whether ``u (q,)`` is one of the points ``U (n, q)``, to 1e-3 of the trust-region radius."""
+    return bool(np.min(np.max(np.abs(U - u), axis=1)) <= 1e-3 * radius)
 
 
 def maximize(func: Callable[[np.ndarray], float], bounds, *, n_initial: int | None = None,

@@ -191,6 +191,13 @@ class Surrogate(ABC):
     name: ClassVar[str]
     Options: ClassVar[type | None] = None
 
+    #: Optional capability, set by :meth:`fit`: the fitted hyperparameters as a
+    #: JSON-able dict, recorded in the run ledger with every EGO iteration.
+    hyperparameters_: dict[str, Any] | None = None
+    #: Optional capability, set by :meth:`fit`: ``(q,)`` length-scales in the
+    #: units of ``X``, shown beside the Sobol indices in the report.
+    lengthscales_: np.ndarray | None = None
+
     def __init__(self, **options: Any) -> None:
         self.options = options
 

@@ -82,11 +82,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from pydantic import Field, ValidationError
 
-from suspid.config import (Config, ConfigPath, Section, _raise_validation, build_simulator, identified_bounds,
-                           load_config, read_yaml)
+from suspid.config import (Config, ConfigPath, Section, build_simulator, identified_bounds, load_config,
+                           override_arguments, raise_validation_error, read_yaml)
 from suspid.errors import ConfigError
 from suspid.seeds import seed_for
-from suspid.study import _overrides
 
 STATUSES = ("ok", "warning", "out-of-domain", "not-identifiable", "unmonitored")
 
@@ -158,7 +157,7 @@ def monitor_options(config: Config, path: Path) -> MonitorOptions:
     try:
         opts = MonitorOptions.model_validate(config.monitor, context={"base_dir": base_dir})
     except ValidationError as exc:
-        _raise_validation(exc, MonitorOptions, where.file, where.lines, ("monitor",))
+        raise_validation_error(exc, MonitorOptions, where.file, where.lines, ("monitor",))
     simulator = build_simulator(config)
     bounds = identified_bounds(config, simulator)
     known = {p.name: p for p in simulator.parameters()}
@@ -246,12 +245,11 @@ def _flatten(mapping: Mapping[str, Any], prefix: str) -> dict[str, Any]:
 # -- the plan: one config per date ---------------------------------------------------------------
 def reference_noise_path(config: Config, opts: MonitorOptions) -> tuple[Path, bool]:
     """Where the reference date's noise model is, and whether it is to be identified here (module docstring)."""
-    from suspid.pipeline import _resolve
 
     if opts.reference.noise_model is not None:
         return opts.reference.noise_model, False
     if config.noise.get("path"):
-        return _resolve(config, config.noise["path"]), False
+        return config.resolve(config.noise["path"]), False
     return config.run_dir() / "reference" / "noise_model.npz", True
 
 
@@ -266,7 +264,7 @@ def identify_reference(path: Path, overrides: Sequence[str], config: Config, *, 
     from suspid.pipeline import build_problem
 
     ref_dir = config.run_dir() / "reference"
-    ref_cfg = load_config(path, [*overrides, *_overrides({"monitor": {}, "output.dir": str(ref_dir),
+    ref_cfg = load_config(path, [*overrides, *override_arguments({"monitor": {}, "output.dir": str(ref_dir),
                                                            "name": f"{config.name}-reference"})])
     ref_dir.mkdir(parents=True, exist_ok=True)
     ledger = Ledger(ref_dir / "ledger.sqlite")
@@ -307,7 +305,7 @@ def monitor_dates(path: Path, overrides: Sequence[str], config: Config, opts: Mo
         if data.get("data.source", config.data.source) == "experiment":
             extra["data.track.seed"] = seed_for(config.seed, f"monitor-{label}")  # own track realisations
         try:
-            cfg = load_config(path, [*overrides, *_overrides(extra), *_overrides(data)])
+            cfg = load_config(path, [*overrides, *override_arguments(extra), *override_arguments(data)])
         except ConfigError as exc:
             if exc.key and exc.key.startswith("data.") and key.startswith("monitor.campaigns"):
                 raise where.fail(f"{exc.detail} (date {label})", f"{key}{exc.key[len('data'):]}") from None
@@ -477,9 +475,9 @@ def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str,
     :param rows: this parameter's rows of :func:`monitor_rows`, in date order.
     :param alert: the alert date (ISO), drawn as a vertical line.
     """
-    from suspid.report import _pyplot
+    from suspid.report import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     dates = [dt.date.fromisoformat(r["date"]) for r in rows]
     value = np.array([r["value"] for r in rows])
     lo_i = np.array([r["interval_low"] for r in rows])

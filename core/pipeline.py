@@ -28,7 +28,7 @@ import yaml
 
 from suspid import registry
 from suspid.config import Config, build_simulator, identified_bounds
-from suspid.errors import ConfigError, SimulatorError, SuspidError
+from suspid.errors import ConfigError, SimulatorError
 from suspid.interfaces import Response, Simulator, TrackSegment
 from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
 from suspid.seeds import rng as named_rng
@@ -213,7 +213,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         segments = synthetic_track(config, "measurement")
         ref_opt = ReferenceOptions.model_validate(config.data.reference)
         if noise_path:
-            noise_model = NoiseModel.load(_resolve(config, noise_path))
+            noise_model = NoiseModel.load(config.resolve(noise_path))
         else:
             log("reference date: simulating w0 and identifying the noise model B (eq. 3)")
             ref_segments = synthetic_track(config, "reference", ref_opt.n_segments or len(segments))
@@ -259,7 +259,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         if not noise_path:
             raise ConfigError("measured data need a noise model identified at the reference date "
                               "(noise.path: a file written by a reference-date run)", file=file, key="noise.path")
-        noise_model = NoiseModel.load(_resolve(config, noise_path))
+        noise_model = NoiseModel.load(config.resolve(noise_path))
     noise_model.check_grid(freqs, channels)
     b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"))
 
@@ -272,13 +272,6 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
                    channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
                    data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model)
-
-
-def _resolve(config: Config, path: str | Path) -> Path:
-    p = Path(path).expanduser()
-    if not p.is_absolute() and config.source_file is not None:
-        p = config.source_file.parent / p
-    return p
 
 
 def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:

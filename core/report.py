@@ -12,7 +12,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -28,7 +29,7 @@ def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_sim: np.n
     :param freqs: ``(n_freqs,)`` Hz.
     :param y_mes, y_sim, y_mod: ``(n_samples, n_channels, n_freqs)`` dB.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
     for ax, other, label, color in ((axes[0], y_sim, "Y_sim(w0)", "tab:red"),
                                     (axes[1], y_mod, "Y_mod(w0)", "tab:blue")):
@@ -59,7 +60,7 @@ def figure_parameters(path: Path, names: Sequence[str], variants: Mapping[str, n
     :param w_ref: ``(q,)`` normalised reference, when known.
     :param intervals: label -> ``(q, 2)`` normalised intervals, drawn as bars.
     """
-    plt = _pyplot()
+    plt = pyplot()
     q = len(names)
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * q + 2), 4))
     x = np.arange(q)
@@ -89,7 +90,7 @@ def figure_convergence(path: Path, J: np.ndarray, n_initial: int, ei: Sequence[f
     :param J: ``(n,)`` J of every evaluation in order; :param ei: EI per iteration, the
         last ``n_refine`` of them at the points of the local refinement (``ego.refine``).
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
     n = np.arange(1, len(J) + 1)
     axes[0].plot(n, J, ".", color="0.6", label="J of each evaluation")

@@ -159,7 +159,7 @@ def surrogate_sensitivity(surrogate, q: int, *, bounds=None, n: int = 4096, seed
                                for i in range(0, X.shape[0], batch)])
 
     result = sobol_indices(mean, q, n=n, seed=seed, n_bootstrap=n_bootstrap, names=names)
-    ls = getattr(surrogate, "lengthscales_", None)
+    ls = surrogate.lengthscales_
     if ls is not None:
         result.lengthscales = np.asarray(ls, dtype=float).reshape(-1) / width
     return result

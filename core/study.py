@@ -26,10 +26,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-import yaml
 from pydantic import Field
 
-from suspid.config import Config, Section, load_config
+from suspid.config import Config, Section, load_config, override_arguments
 from suspid.errors import ConfigError
 
 
@@ -41,11 +40,6 @@ class Variant(Section):
 class StudyOptions(Section):
     variants: list[Variant] = Field(min_length=1)
     seeds: list[int] | None = None
-
-
-def _overrides(mapping: dict[str, Any]) -> list[str]:
-    return [f"{k}={yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}"
-            for k, v in mapping.items()]
 
 
 def study_variants(path: Path, overrides: list[str], config: Config) -> list[tuple[str, Config]]:
@@ -67,7 +61,7 @@ def study_variants(path: Path, overrides: list[str], config: Config) -> list[tup
             extra = {"output.dir": str(base_dir / "variants" / label), "name": f"{config.name}-{label}"}
             if seed is not None:
                 extra["seed"] = seed
-            out.append((label, load_config(path, [*overrides, *_overrides(v.set), *_overrides(extra)])))
+            out.append((label, load_config(path, [*overrides, *override_arguments(v.set), *override_arguments(extra)])))
     return out
 
 

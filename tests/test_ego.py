@@ -207,10 +207,66 @@ def test_refinement_leaves_the_papers_loop_unchanged():
     n = paper.n_evaluations
     np.testing.assert_array_equal(refined.X[:n], paper.X)
     assert refined.stop_reason == paper.stop_reason and paper.n_refine == 0 and paper.refine_stop_reason is None
-    assert refined.n_refine == refined.n_evaluations - n == refined.n_function_calls - paper.n_function_calls
-    assert refined.y_opt >= paper.y_opt
-    again = maximize(ridge, [[0.0, 1.0]] * 3, refine={"enabled": True, "max_iter": 5}, **fast)
-    np.testing.assert_array_equal(again.X, refined.X)  # deterministic, so a killed run replays
+    assert refined.n_refine == refined.n_evaluations - n == refined.n_function_calls - paper.n_function_calls > 0
+    # the global surrogate is not the local one: refit on every point at the end
+    assert refined.surrogate.model_.X.shape[0] == refined.n_evaluations
+
+
+def test_refinement_after_the_ei_stop_and_its_records():
+    records = []
+    res = maximize(ridge, [[0.0, 1.0]] * 3, n_initial=8, max_iter=30, tol=1e-2, seed=3, callback=records.append,
+                   refine={"enabled": True, "max_iter": 4}, n_candidates=256, n_starts=3)
+    assert res.stop_reason == "ei_below_tol"
+    phases = [r.phase for r in records if r.phase != "initial"]
+    n_ego = phases.index("stop")
+    assert phases == ["ego"] * n_ego + ["stop"] + ["refine"] * res.n_refine and res.n_refine >= 1
+    refine = [r for r in records if r.phase == "refine"]
+    assert [r.iteration for r in refine] == list(range(n_ego + 1, n_ego + 1 + res.n_refine))
+    assert [r.index for r in refine] == list(range(8 + n_ego, 8 + n_ego + res.n_refine))
+    assert all(r.J_max == pytest.approx(max(res.y[:r.index])) and r.hyperparameters for r in refine)
+
+
+def test_refinement_without_final_refit_keeps_the_global_surrogate():
+    res = maximize(ridge, [[0.0, 1.0]] * 3, n_initial=8, max_iter=3, tol=0.0, seed=3, refit_final=False,
+                   refine={"enabled": True, "max_iter": 3, "n_points": 5})
+    assert res.n_refine == 3
+    assert res.surrogate.model_.X.shape[0] == 8 + 2  # the last fit of the paper's loop
+
+
+def test_refinement_never_simulates_a_known_point_again():
+    # all J equal: the local mean is flat and peaks at the centre, which is known
+    calls = []
+
+    def flat(w):
+        calls.append(np.array(w))
+        return 1.0
+
+    res = maximize(flat, [[0.0, 1.0]] * 2, n_initial=5, max_iter=0, seed=0,
+                   refine={"enabled": True, "max_iter": 20})
+    X = np.array(calls)
+    gaps = [np.max(np.abs(X[i] - X[j])) for i in range(len(X)) for j in range(i)]
+    assert min(gaps) > 1e-6 and res.refine_stop_reason == "radius_below_min"
+
+
+def test_refinement_killed_and_replayed_retraces_the_same_points():
+    fast = dict(n_initial=6, max_iter=2, tol=0.0, n_candidates=256, n_starts=3, seed=5,
+                refine={"enabled": True, "max_iter": 5})
+    full = maximize(ridge, [[0.0, 1.0]] * 3, **fast)
+    cache, calls = {}, []
+
+    def cached(w):
+        key = tuple(np.round(w, 12))
+        if key not in cache:
+            calls.append(key)
+            cache[key] = ridge(w)
+        return cache[key]
+
+    killed = maximize(cached, [[0.0, 1.0]] * 3, callback=lambda r: r.phase == "refine" and r.index == 9, **fast)
+    assert killed.refine_stop_reason == "callback"
+    assert killed.n_evaluations == 10
+    replay = maximize(cached, [[0.0, 1.0]] * 3, **fast)
+    np.testing.assert_array_equal(replay.X, full.X)
+    assert len(calls) == full.n_evaluations  # nothing evaluated twice
 
 
 def test_own_initial_points_and_known_values():

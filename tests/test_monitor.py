@@ -214,7 +214,7 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
     true value outside is the fifth (32 %). The alert must come within one date of it; k_sec_z stays nominal."""
     from suspid.monitor import run_monitor
     from suspid.noise import NoiseModel
-    from suspid.plugins.simulators.exudyn_train.threads import single_blas_thread
+    from suspid.threads import single_blas_thread
 
     path = _write(tmp_path, SCENARIO)
     with single_blas_thread():  # the Kriging fits of tiny matrices: 2x faster on a busy 2-core machine
@@ -229,7 +229,7 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
     # outputs: table, report with the alert, one plot per parameter
     with open(out / "monitor.csv") as fh:
         assert len(list(csv.DictReader(fh))) == 12
-    assert f"**`c_sec_z` out of its acceptable domain" in (out / "monitor.md").read_text()
+    assert "**`c_sec_z` out of its acceptable domain" in (out / "monitor.md").read_text()
     assert (out / "monitor_c_sec_z.png").stat().st_size > 10_000 and (out / "monitor_k_sec_z.png").exists()
     # the reference noise model, identified once, is the one every date used
     ref = NoiseModel.load(out / "reference" / "noise_model.npz")
@@ -243,7 +243,7 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
 def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatch):
     from suspid import pipeline
     from suspid.monitor import run_monitor
-    from suspid.plugins.simulators.exudyn_train.threads import single_blas_thread
+    from suspid.threads import single_blas_thread
 
     monitor = "monitor:\n  scenario: {parameter: c_sec_z, dates: [2026-01-01, 2026-03-01]}\n"
     small = BASE.replace("n_segments: 24", "n_segments: 8").replace("n_initial: 8", "n_initial: 6") \

@@ -46,7 +46,6 @@ def test_study_runs_both_objectives_from_one_design(tmp_path):
     assert overlap["paper_loop_n_iterations"] == "" and refined["paper_loop_n_iterations"] == overlap["n_iterations"]
     assert refined["paper_loop_error_k_sec_z"] == overlap["error_k_sec_z"]
     assert int(refined["n_simulator_calls"]) == int(overlap["n_simulator_calls"]) + 3
-    assert float(refined["J_max"]) >= float(overlap["J_max"])
     assert "| refined: paper's loop |" in text and "| refined: + refinement |" in text
     designs = [Ledger(out / "variants" / v / "ledger.sqlite").iterations("design") for v in ("likelihood", "overlap")]
     assert [d["w"] for d in designs[0]] == [d["w"] for d in designs[1]]  # the same initial design

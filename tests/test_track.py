@@ -14,7 +14,7 @@ from suspid.track import GERMAN, GERMAN_A, SPECTRA, TrackOptions, psd, realise, 
 
 def test_german_and_fra_formulas_at_a_point():
     w = 1.0
-    oc, orr, os_, b = GERMAN["omega_c"], GERMAN["omega_r"], GERMAN["omega_s"], GERMAN["b"]
+    oc, orr, os_ = GERMAN["omega_c"], GERMAN["omega_r"], GERMAN["omega_s"]
     a = GERMAN_A["german-low"]
     base = oc ** 2 / ((w ** 2 + orr ** 2) * (w ** 2 + oc ** 2))
     assert psd("german-low", "vertical", w) == pytest.approx(a["vertical"] * base)

@@ -16,7 +16,6 @@ import pickle
 import re
 import shutil
 import signal
-import sys
 import time
 import uuid
 from pathlib import Path
@@ -35,7 +34,7 @@ from suspid.plugins.simulators.vampire.options import (COMMAND_FIELDS, STANDARD_
 from suspid.plugins.simulators.vampire.profiles import Profile, read_profile, write_profile
 from suspid.plugins.simulators.vampire.templates import inside, render, safe_relpath
 from suspid.plugins.simulators.vampire.trackfile import track_rows, write_track_file
-from suspid.testing import check_simulator, sample_segments
+from suspid.testing import check_simulator
 
 ROOT = Path(__file__).resolve().parents[1]
 DOUBLE_DIR = Path(__file__).resolve().parent / "vampire_double"

@@ -52,7 +52,7 @@ from scipy.signal import resample_poly
 from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
-from .threads import single_blas_thread
+from suspid.threads import single_blas_thread
 from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
@@ -277,7 +277,7 @@ class FrequencyResponse:
         w = 2 * math.pi * f
         delays = self.linear.wheelset_x / self.linear.speed                  # (n_w,)
         E = np.exp(1j * np.outer(delays, w))                                 # (n_w, n_f)
-        nw, m2, nin = (self.B.shape[0], 2 * self.n, self.B.shape[2])
+        m2, nin = 2 * self.n, self.B.shape[2]
         nf = len(f)
         with single_blas_thread():
             if self.modal:
