@@ -58,11 +58,11 @@ def check(run_dir: Path, maxfev: int) -> None:
             u_ref = np.array([result["w_ref_normalized"][n] for n in names])
             starts["w_ref"] = u_ref
         print(f"\n{run_dir}  ({result['objective']}, {result['n_simulator_calls']} simulations)")
-        print(f"  J(w_opt) = {J(u_opt):.6g}" + (f", J(w_ref) = {J(u_ref):.6g}" if u_ref is not None else ""))
+        print(f"  J(w_opt) = {J(u_opt):.8g}" + (f", J(w_ref) = {J(u_ref):.8g}" if u_ref is not None else ""))
         width = max(len(n) for n in names)
         for label, u0 in starts.items():
             u_max, j_max, nfev = climb(u0)
-            print(f"  Nelder-Mead from {label}: J max = {j_max:.6g} after {nfev} evaluations")
+            print(f"  Nelder-Mead from {label}: J max = {j_max:.8g} after {nfev} evaluations")
             print(f"    {'component':{width}}  EGO   J max  EGO to J max   (% of interval; * = flagged n.i.)")
             for i, n in enumerate(names):
                 flag = "" if result["identifiable"][n] else "*"

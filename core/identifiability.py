@@ -33,6 +33,7 @@ interval.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -50,6 +51,9 @@ class IdentifiabilityOptions(Section):
     n_redraws: int = Field(default=32, ge=4, description="bootstrap replicates of the gradient noise")
     step: float = Field(default=0.05, gt=0, le=0.25, description="finite-difference step in [0, 1]^q")
     n_sigmas: float = Field(default=2.0, gt=0, description="half-width of the intervals, in standard deviations")
+    bootstrap: Literal["independent", "paired"] = Field(
+        default="independent", description="resample measured and modelled segments independently, or as pairs "
+        "(segment i's measured and simulated spectra share its track)")
 
 
 @dataclass

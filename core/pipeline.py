@@ -521,8 +521,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     return RunResult(result, run_dir, problem, ego)
 
 
-def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int
-                   ) -> tuple[np.ndarray, float]:
+def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
+                   paired: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
     """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
 
     J is estimated from v measured spectra and v modelled ones (y_sim_i + b_i).
@@ -557,7 +557,8 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     grads, j_opt = np.empty((n_redraws, q)), np.empty(n_redraws)
     for k in range(n_redraws):
         b = problem.noise_model.sample(v, rng)
-        i_mes, i_mod = rng.integers(0, v, v), rng.integers(0, v, v)
+        i_mes = rng.integers(0, v, v)
+        i_mod = i_mes if paired else rng.integers(0, v, v)
         y_mes = problem.y_mes[i_mes]
         J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes)[0]  # noqa: E731
         grads[k] = [(J(yp) - J(ym)) / step[i] for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
@@ -581,7 +582,8 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
     x_opt = np.asarray(ego.x_opt, float)
     u_opt = problem.to_unit(x_opt)
-    sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws)
+    sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
+                                                 paired=opts.bootstrap == "paired")
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     interval_si = lo[:, None] + verdict.interval_unit * (hi - lo)[:, None]
