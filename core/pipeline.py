@@ -522,12 +522,14 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
 
 
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
-                   paired: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+                   paired: bool = True) -> tuple[np.ndarray, np.ndarray, float]:
     """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
 
     J is estimated from v measured spectra and v modelled ones (y_sim_i + b_i).
-    Each of ``n_redraws`` replicates resamples the segments of both sets with
-    replacement (a bootstrap over segments: the finite measured data) and
+    Each of ``n_redraws`` replicates resamples the segments with replacement
+    (a bootstrap over segments: the finite measured data; with ``paired`` a
+    segment's measured and simulated spectra, which share its track, are
+    drawn together, otherwise the two sets are resampled independently) and
     draws new noise paths b_i (the finite Monte Carlo sample of Y_mod, §2.3),
     then takes the central-difference gradient of J at w_opt from the 2q points
     w_opt ± h e_k (clipped to the box). The spread of these gradients over the
@@ -601,6 +603,7 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
         "interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_si)},
         "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, verdict.interval_unit)},
         "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
+                            "bootstrap": opts.bootstrap,
                             "n_sigmas": opts.n_sigmas,
                             "covariance_normalized": verdict.covariance.tolist()},
         "sensitivity": {
@@ -707,7 +710,7 @@ J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 Components marked **no** are not identifiable from these data: their value is not a finding.
 Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
-bootstrap over segments with redrawn noise paths), clipped to the admissible box.
+bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths), clipped to the admissible box.
 
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
 
