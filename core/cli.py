@@ -67,9 +67,10 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> No
     """Check a config (plugins, options, parameters, data files); exit 0 when valid."""
     from suspid.config import load_config
 
-    from suspid.pipeline import validate_data
+    from suspid.pipeline import check_sections, validate_data
 
     cfg = load_config(config, set_ or [])
+    check_sections(cfg)
     n = validate_data(cfg)
     data = f", {n} measured segments" if n else ""
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "

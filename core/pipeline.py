@@ -170,6 +170,36 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
     return segments, [r for _, r in records]
 
 
+def check_sections(config: Config) -> None:
+    """Validate the sections that their modules read later (spectra, noise, design, ego, ...).
+
+    Called before any simulation, so that a typo in ``ego:`` does not wait
+    for the reference date to be simulated, nor one in ``identifiability:``
+    for the end of the run.
+
+    :raises ConfigError: one line naming the file and the key.
+    """
+    from suspid.design import DesignOptions
+    from suspid.ego import EGOOptions
+    from suspid.experiment import MeasurementOptions, ReferenceOptions
+    from suspid.identifiability import IdentifiabilityOptions
+    from suspid.noise import NoiseOptions
+    from suspid.spectra import SpectraOptions
+    from suspid.track import TrackOptions
+
+    file = str(config.source_file)
+    noise = {k: v for k, v in config.noise.items() if k != "path"}
+    checks = [(SpectraOptions, config.spectra, "spectra"), (NoiseOptions, noise, "noise"),
+              (DesignOptions, config.design, "design"), (EGOOptions, config.ego, "ego"),
+              (IdentifiabilityOptions, config.identifiability, "identifiability")]
+    if config.data.source == "experiment":
+        checks += [(TrackOptions, config.data.track, "data.track"),
+                   (ReferenceOptions, config.data.reference, "data.reference"),
+                   (MeasurementOptions, config.data.measurement, "data.measurement")]
+    for model, values, section in checks:
+        _section_with_seed(model, values, 0, section, file)
+
+
 def validate_data(config: Config) -> int:
     """Read and check measured data as a run would (files, channels, durations, spectra grid).
 
@@ -393,7 +423,8 @@ def _section_with_seed(model, values: dict, seed: int, section: str, file: str):
         return model.model_validate(values)
     except ValidationError as exc:
         err = exc.errors()[0]
-        raise ConfigError(err["msg"], file=file, key=".".join([section, *map(str, err["loc"])])) from None
+        got = f" (got {err['input']!r})" if err["type"] != "missing" and not isinstance(err.get("input"), dict) else ""
+        raise ConfigError(err["msg"] + got, file=file, key=".".join([section, *map(str, err["loc"])])) from None
 
 
 def make_progress(enabled: bool):
@@ -432,6 +463,7 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config.model_dump(mode="json", exclude={"source_file"}),
                                                         sort_keys=False))
+    check_sections(config)
     ledger = Ledger(run_dir / "ledger.sqlite")
     if fresh:
         ledger.clear()

@@ -78,6 +78,14 @@ BAD = [
     ("unknown objective", GOOD.replace("plugin: likelihood", "plugin: chi2"), (), "objective.plugin",
      "available objectives: likelihood, overlap"),
     ("bad name", GOOD.replace("name: qc", "name: 'a b/c'"), (), "name", "match pattern"),
+    # sections read by their own modules, checked before any simulation
+    ("ego typo", GOOD + "ego: {max_iters: 3}\n", (), "ego.max_iters", "Extra inputs are not permitted"),
+    ("refine range", GOOD, ("--set", "ego.refine.radius=2"), "ego.refine.radius", "less than or equal to 0.5 (got 2)"),
+    ("bootstrap literal", GOOD + "identifiability: {bootstrap: pairs}\n", (), "identifiability.bootstrap",
+     "'paired' or 'independent'"),
+    ("design size", GOOD + "design: {n_initial: 1}\n", (), "design.n_initial", "greater than or equal to 2"),
+    ("spectra band", GOOD + "spectra: {f_min_hz: -1}\n", (), "spectra.f_min_hz", "greater than 0"),
+    ("track speed", GOOD + "data: {track: {speed_kmh: -5}}\n", (), "data.track.speed_kmh", "greater than 0"),
 ]
 
 
