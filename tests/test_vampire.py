@@ -240,6 +240,9 @@ def test_identity_hashes_the_templates(double_options, tmp_path):
                                           max_concurrent=1, timeout_s=5))
     assert a.identity() == b.identity()  # where and how fast runs go does not change results
     json.dumps(a.identity())
+    moved = tmp_path / "moved" / "project"
+    shutil.copytree(template, moved)
+    assert VampireSimulator(**double_options(template_dir=str(moved))).identity() == a.identity()
     veh = template / "vehicle.veh"
     veh.write_text(veh.read_text() + "! an edited comment is an edited template\n")
     c = VampireSimulator(**double_options(template_dir=str(template)))

@@ -44,8 +44,11 @@ from .runner import run_command
 from .templates import TemplateSet, check_names, inside, load_templates, render, scan
 from .trackfile import check_segment, track_rows, write_track_file
 
-_IDENTITY_EXCLUDE = {"work_root", "keep_workdirs", "max_concurrent", "timeout_s", "kill_grace_s", "on_error"}
-"""Options that do not change results, left out of :meth:`VampireSimulator.identity`."""
+_IDENTITY_EXCLUDE = {"work_root", "keep_workdirs", "max_concurrent", "timeout_s", "kill_grace_s", "on_error",
+                     "template_dir"}
+"""Options that do not change results, left out of :meth:`VampireSimulator.identity`. The
+template directory enters through the digest of its files, not its path, so a project moved
+elsewhere keeps its cached results."""
 
 
 class _Cancelled(Exception):
