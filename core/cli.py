@@ -91,7 +91,7 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
     cfg = load_config(config, set_ or [])
     out = run_pipeline(cfg, fresh=fresh, progress=not quiet,
-                       log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+                       log=_log(quiet))
     _print_result(out.result, out.run_dir)
 
 
@@ -108,7 +108,7 @@ def monitor(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     from suspid.monitor import run_monitor
 
     out = run_monitor(config, set_ or [], fresh=fresh, progress=not quiet,
-                      log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+                      log=_log(quiet))
     console.print((out / "monitor.md").read_text(), markup=False, highlight=False)
 
 
@@ -124,7 +124,7 @@ def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     from suspid.diagnose import run_diagnose
 
     out = run_diagnose(config, set_ or [], fresh=fresh, progress=not quiet,
-                       log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+                       log=_log(quiet))
     console.print((out / "diagnosis.md").read_text(), markup=False, highlight=False)
 
 
@@ -202,8 +202,13 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     from suspid.study import run_study
 
     out = run_study(config, set_ or [], fresh=fresh, progress=not quiet,
-                    log=(lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]")))
+                    log=_log(quiet))
     console.print((out / "study.md").read_text())
+
+
+def _log(quiet: bool):
+    """Progress messages of a command: dimmed lines on the console, none with --quiet."""
+    return (lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]"))
 
 
 def _print_result(result: dict, run_dir: Path) -> None:

@@ -32,12 +32,14 @@ from suspid.errors import ConfigError, UnknownPluginError
 
 
 # -- paths relative to the config file -------------------------------------------
+def _against(path: str | Path, base: str | Path | None) -> Path:
+    """``path`` with ``~`` expanded; a relative path is taken from the folder ``base`` when given."""
+    p = Path(path).expanduser()
+    return Path(base) / p if base is not None and not p.is_absolute() else p
+
+
 def _resolve_path(value: Path, info: ValidationInfo) -> Path:
-    base = (info.context or {}).get("base_dir") if info.context is not None else None
-    value = Path(value).expanduser()
-    if base is not None and not value.is_absolute():
-        value = Path(base) / value
-    return value
+    return _against(value, (info.context or {}).get("base_dir") if info.context is not None else None)
 
 
 ConfigPath = Annotated[Path, AfterValidator(_resolve_path)]
@@ -140,10 +142,7 @@ class Config(Section):
 
     def resolve(self, path: str | Path) -> Path:
         """``path`` with ``~`` expanded; relative paths are taken from the config file's folder."""
-        p = Path(path).expanduser()
-        if not p.is_absolute() and self.source_file is not None:
-            p = self.source_file.parent / p
-        return p
+        return _against(path, self.source_file.parent if self.source_file is not None else None)
 
     def run_dir(self) -> Path:
         """The run directory: ``output.dir`` or ``runs/<name>/`` beside the config."""

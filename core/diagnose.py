@@ -166,11 +166,6 @@ class CellGrid:
         band_of_bin = np.argmax(self.average > 0, axis=1)
         return values.reshape(G, K, B)[:, :, band_of_bin]
 
-    def bandwidths(self) -> np.ndarray:
-        """``(n_cells,)`` Hz."""
-        widths = self.band_edges[:, 1] - self.band_edges[:, 0]
-        return np.tile(widths, len(self.speeds) * len(self.channels))
-
 
 def make_cells(channels: Sequence[str], freqs: np.ndarray, segment_speeds: Sequence[float],
                bands_per_octave: float = 3.0, min_bins: int = 3) -> CellGrid:
@@ -515,7 +510,7 @@ class Discrepancy:
         self.scale = null.bin_sd
         self.flagged = grid.cell_to_bins(flagged.astype(float)) > 0
         self.base_means = grid.group_means(y_base)
-        self.D0, self.D0_flagged = self(y_base)
+        self.D0, self.D0_flagged = self.of_means(self.target - self.base_means)
 
     @property
     def n_terms(self) -> int:
@@ -922,11 +917,10 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
     if named is not None:
         cand = next(c for c in ranking if c.effect == named)
         aug_path = write_augmented(config, cand, out_dir, out_dir / "before" / "noise_model.npz")
+        aug = load_config(aug_path)
         if opts.reidentify:
-            aug = load_config(aug_path)
             after = make_stage("after", aug, True, out_dir / "after", fresh=fresh, progress=progress, log=log)
         else:
-            aug = load_config(aug_path)
             after = Stage("after", aug, problem, before.w, cand.y_sim, None)
         after.dmap = locate(grid, null, after.problem.y_mes, after.y_sim, after.problem.noise_model.mean_,
                             opts.alpha)

@@ -297,6 +297,11 @@ def log_expected_improvement(mean: np.ndarray, variance: np.ndarray, j_max: floa
     return out
 
 
+def _ei(log_ei: float) -> float:
+    """EI from log EI, 0 where exp underflows (log EI < -745) or log EI is NaN."""
+    return math.exp(log_ei) if log_ei > -745 else 0.0
+
+
 def expected_improvement(mean: np.ndarray, variance: np.ndarray, j_max: float) -> np.ndarray:
     """EI(w) = (μ - J_max) Φ(z) + σ φ(z), z = (μ - J_max)/σ (paper eq. 9, maximisation).
 
@@ -406,12 +411,23 @@ def _search(surrogate: Surrogate, U: np.ndarray, y: np.ndarray, j_max: float, op
         val, grad = _log_ei_and_grad(surrogate, u, j_max, with_grad)
         return (-val, -grad) if with_grad else -val
 
+    def score(u: np.ndarray) -> float:
+        return float(log_expected_improvement(*surrogate.predict(u[None, :]), j_max)[0])
+
+    return _climb(objective, score, starts, lo, hi, with_grad, opts.search_maxiter, best_u, best_val)
+
+
+def _climb(objective: Callable, score: Callable[[np.ndarray], float], starts: Sequence[np.ndarray],
+           lo: np.ndarray, hi: np.ndarray, with_grad: bool, maxiter: int, best_u: np.ndarray,
+           best_val: float) -> tuple[np.ndarray, float]:
+    """Multi-start L-BFGS-B of ``objective`` (minimised; ``(value, gradient)`` when ``with_grad``)
+    over the box [lo, hi]; returns the highest-``score`` point and its score, ``best_u`` if none beats it."""
     for u0 in starts:
         with np.errstate(all="ignore"):
-            res = minimize(objective, u0, jac=with_grad, method="L-BFGS-B",
-                           bounds=list(zip(lo, hi)), options={"maxiter": opts.search_maxiter})
+            res = minimize(objective, u0, jac=with_grad, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                           options={"maxiter": maxiter})
         u = np.clip(res.x, lo, hi)
-        val = float(log_expected_improvement(*surrogate.predict(u[None, :]), j_max)[0])
+        val = score(u)
         if val > best_val:
             best_u, best_val = u, val
     return best_u, best_val
@@ -426,20 +442,14 @@ def _search_mean(surrogate: Surrogate, centre: np.ndarray, lo: np.ndarray, hi: n
     mean = surrogate.predict(cand)[0]
     with_grad = _has_gradients(surrogate, cand[:1])
 
+    def score(u: np.ndarray) -> float:
+        return float(surrogate.predict(u[None, :])[0][0])
+
     def objective(u: np.ndarray):
-        m = float(surrogate.predict(u[None, :])[0][0])
-        return (-m, -surrogate.predict_gradients(u[None, :])[0][0]) if with_grad else -m
+        return (-score(u), -surrogate.predict_gradients(u[None, :])[0][0]) if with_grad else -score(u)
 
     best_u, best_val = cand[int(np.argmax(mean))], float(np.max(mean))
-    for u0 in [centre, best_u]:
-        with np.errstate(all="ignore"):
-            res = minimize(objective, u0, jac=with_grad, method="L-BFGS-B", bounds=list(zip(lo, hi)),
-                           options={"maxiter": opts.search_maxiter})
-        u = np.clip(res.x, lo, hi)
-        val = float(surrogate.predict(u[None, :])[0][0])
-        if val > best_val:
-            best_u, best_val = u, val
-    return best_u
+    return _climb(objective, score, [centre, best_u], lo, hi, with_grad, opts.search_maxiter, best_u, best_val)[0]
 
 
 def _evaluate(func: Callable[[np.ndarray], float], x: np.ndarray) -> tuple[float, float]:
@@ -522,7 +532,6 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
         history.append(record)
         return bool(callback(record)) if callback is not None else False
 
-    stopped = False
     for i, u in enumerate(U):
         x = from_unit(u, b)
         if np.isfinite(y0[i]):
@@ -533,14 +542,14 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
         ys.append(J)
         if report(IterationRecord(iteration=0, index=i, phase="initial", x=x, x_unit=u.copy(), J=J,
                                   J_max=max(ys[:-1]) if i else None, eval_seconds=dt)):
-            stopped, stop_reason = True, "callback"
+            stop_reason = "callback"
             break
     n_initial = len(ys)
     U_all = [u.copy() for u in U[:n_initial]]
     fitted_on = 0
 
     for it in range(1, opts.max_iter + 1):
-        if stopped:
+        if stop_reason == "callback":
             break
         Ua, ya = np.array(U_all), np.array(ys)
         t0 = time.perf_counter()
@@ -553,7 +562,7 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
         t0 = time.perf_counter()
         u_new, log_ei = _search(model, Ua, ya, j_max, opts, rng)
         t_search = time.perf_counter() - t0
-        ei = math.exp(log_ei) if log_ei > -745 else 0.0
+        ei = _ei(log_ei)
         hyper = dict(model.hyperparameters_ or {})
         x_new = from_unit(u_new, b)
         if eps > 0 and log_ei < math.log(eps):  # EI(w_l) < eps, compared in log space
@@ -588,7 +597,7 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
             u_j, log_ei_j = _search(model, np.array(U_b), np.array(y_b), j_max, opts, rng_j)
             if eps > 0 and log_ei_j < math.log(eps):
                 break
-            chosen.append((u_j, math.exp(log_ei_j) if log_ei_j > -745 else 0.0, log_ei_j))
+            chosen.append((u_j, _ei(log_ei_j), log_ei_j))
         t_search = time.perf_counter() - t0
         X_batch = np.array([from_unit(u, b) for u, _, _ in chosen])
         t0 = time.perf_counter()
@@ -607,12 +616,12 @@ def _run_ego(func, bounds, ego, design, surrogate, X_init, y_init, callback, fun
                                       EI=ei_j, log_EI=log_ei_j, J_max=j_max, epsilon=eps,
                                       hyperparameters=hyper, fit_seconds=t_fit, search_seconds=t_search,
                                       eval_seconds=dt)):
-                stopped, stop_reason = True, "callback"
+                stop_reason = "callback"
         if len(ys) - n_initial >= opts.max_iter:
             break
 
     refine_reason, n_refine = None, 0
-    if opts.refine.enabled and opts.refine.max_iter > 0 and stop_reason != "callback" and not stopped:
+    if opts.refine.enabled and opts.refine.max_iter > 0 and stop_reason != "callback":
         first = max((r.iteration for r in history if r.phase == "ego"), default=0) + 1
         refine_reason, n_refine = _refine(func, b, opts, model, U_all, ys, first, report)
         n_calls += n_refine
@@ -674,7 +683,7 @@ def _refine(func, b: np.ndarray, opts: EGOOptions, model: Surrogate, U_all: list
             ys.append(J)
             if report(IterationRecord(
                     iteration=iteration, index=len(ys) - 1, phase="refine", x=x_new, x_unit=u_new, J=J,
-                    EI=math.exp(log_ei) if log_ei > -745 else 0.0, log_EI=log_ei, J_max=j_max, epsilon=eps,
+                    EI=_ei(log_ei), log_EI=log_ei, J_max=j_max, epsilon=eps,
                     hyperparameters=dict(local.hyperparameters_ or {}), fit_seconds=t_fit,
                     search_seconds=t_search, eval_seconds=dt)):
                 return "callback", n

@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from suspid import registry
-from suspid.config import Config, build_simulator, identified_bounds
+from suspid.config import Config, build_simulator, identified_bounds, raise_validation_error
 from suspid.errors import ConfigError, SimulatorError
 from suspid.interfaces import Response, Simulator, TrackSegment
 from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
@@ -257,7 +257,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                 ref_sim, {}, ref_segments, spectra_options, lambda rs: apply_model_error(rs, ref_opt, err_rng)))
             y_sim0, _ = _cached_spectra(ledger, key + ":sim", lambda: _simulate_spectra(
                 simulator, {}, ref_segments, spectra_options))
-            noise_model = fit_noise_model(y_mes0, y_sim0, {k: v for k, v in noise_section.items()},
+            noise_model = fit_noise_model(y_mes0, y_sim0, noise_section,
                                           freqs=freqs, channels=channels)
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
         log("measurement date: simulating w_ref (eq. 10)")
@@ -422,9 +422,7 @@ def _section_with_seed(model, values: dict, seed: int, section: str, file: str):
     try:
         return model.model_validate(values)
     except ValidationError as exc:
-        err = exc.errors()[0]
-        got = f" (got {err['input']!r})" if err["type"] != "missing" and not isinstance(err.get("input"), dict) else ""
-        raise ConfigError(err["msg"] + got, file=file, key=".".join([section, *map(str, err["loc"])])) from None
+        raise_validation_error(exc, model, file, {}, tuple(section.split(".")))
 
 
 def make_progress(enabled: bool):
@@ -654,8 +652,7 @@ def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], conf
         w_ref = np.array([problem.w_ref[n] for n in names])
         result["w_ref"] = {n: float(v) for n, v in zip(names, w_ref)}
         result["w_ref_normalized"] = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
-        result["errors_percent"] = {n: float(100 * abs(a - b) / (h - l))
-                                    for n, a, b, l, h in zip(names, x_opt, w_ref, lo, hi)}
+        result["errors_percent"] = _errors_percent(problem, x_opt)
     if ego.n_refine:
         result["paper_loop"] = _paper_loop(problem, ego)
     return result
@@ -672,10 +669,14 @@ def _paper_loop(problem: Problem, ego) -> dict[str, Any]:
         "w_opt": {n: float(v) for n, v in zip(names, x)},
         "w_opt_normalized": {n: float(v) for n, v in zip(names, problem.to_unit(x))}}
     if problem.w_ref is not None:
-        lo, hi = problem.bounds[:, 0], problem.bounds[:, 1]
-        out["errors_percent"] = {n: float(100 * abs(a - problem.w_ref[n]) / (h - l))
-                                 for n, a, l, h in zip(names, x, lo, hi)}
+        out["errors_percent"] = _errors_percent(problem, x)
     return out
+
+
+def _errors_percent(problem: Problem, x_si: np.ndarray) -> dict[str, float]:
+    """|w - w_ref| per component in % of its admissible interval; ``x_si (q,)`` SI."""
+    lo, hi = problem.bounds[:, 0], problem.bounds[:, 1]
+    return {n: float(100 * abs(a - problem.w_ref[n]) / (h - l)) for n, a, l, h in zip(problem.names, x_si, lo, hi)}
 
 
 def _figure_channel(config: Config, channels: Sequence[str]) -> int:

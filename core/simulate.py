@@ -105,11 +105,9 @@ def read_simulation(path: str | Path) -> tuple[list[Response], np.ndarray, np.nd
 def plot_spectra(y: np.ndarray, freqs: np.ndarray, channels: Sequence[str], path: str | Path,
                  title: str = "") -> Path:
     """PNG of the spectra: per channel, every segment (thin) and the mean over segments (thick)."""
-    import matplotlib
+    from suspid.report import pyplot
 
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     y = np.asarray(y, dtype=float)
     n = len(channels)
     cols = 2 if n > 1 else 1

@@ -21,6 +21,20 @@ def bowl(w):
     return 1.0 - (w[0] - 0.5) ** 2 - 4 * (w[1] - 0.3) ** 2
 
 
+def counting_cache(f):
+    """``f`` behind a cache, as a ledger replay serves it: ``(cached f, list of the points computed)``."""
+    cache, calls = {}, []
+
+    def cached(w):
+        key = tuple(np.round(w, 12))
+        if key not in cache:
+            calls.append(key)
+            cache[key] = f(w)
+        return cache[key]
+
+    return cached, calls
+
+
 def relative_error(name, X):
     f = FUNCTIONS[name]
     return abs(f.func(X).min() - f.f_min) / abs(f.f_min)
@@ -144,15 +158,7 @@ def test_same_seed_same_points_and_replay_of_a_killed_run():
 
     # a run killed after 2 EGO points, replayed with cached values, retraces the
     # points of the uninterrupted run with the same seed
-    cache, calls = {}, []
-
-    def cached(w):
-        key = tuple(np.round(w, 12))
-        if key not in cache:
-            calls.append(key)
-            cache[key] = bowl(w)
-        return cache[key]
-
+    cached, calls = counting_cache(bowl)
     killed = maximize(cached, BOX, seed=3, callback=lambda r: r.phase == "ego" and r.iteration == 2,
                       **fast)
     assert killed.stop_reason == "callback" and killed.n_evaluations == 7
@@ -252,15 +258,7 @@ def test_refinement_killed_and_replayed_retraces_the_same_points():
     fast = dict(n_initial=6, max_iter=2, tol=0.0, n_candidates=256, n_starts=3, seed=5,
                 refine={"enabled": True, "max_iter": 5})
     full = maximize(ridge, [[0.0, 1.0]] * 3, **fast)
-    cache, calls = {}, []
-
-    def cached(w):
-        key = tuple(np.round(w, 12))
-        if key not in cache:
-            calls.append(key)
-            cache[key] = ridge(w)
-        return cache[key]
-
+    cached, calls = counting_cache(ridge)
     killed = maximize(cached, [[0.0, 1.0]] * 3, callback=lambda r: r.phase == "refine" and r.index == 9, **fast)
     assert killed.refine_stop_reason == "callback"
     assert killed.n_evaluations == 10

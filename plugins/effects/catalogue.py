@@ -7,6 +7,7 @@ lengths in m, masses in kg, stiffnesses in N/m, angles in degrees.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, Sequence
 
@@ -37,6 +38,7 @@ def beam_mode_shape(x: np.ndarray | float, length: float) -> np.ndarray:
     return shape(xi) / shape(0.5 * BEAM_BETA_L)
 
 
+@functools.cache
 def beam_modal_mass_ratio() -> float:
     """∫φ² dx / L for :func:`beam_mode_shape` (0.677): modal mass over beam mass."""
     x = np.linspace(-0.5, 0.5, 20001)

@@ -761,10 +761,6 @@ class TrainModel:
             solver.FinalizeSolver(self.mbs, ss)
         return residual[self.free]
 
-    def sensor_matrix(self) -> np.ndarray:
-        """C ``(n_sensors, n_free)``: sensor accelerations per free coordinate acceleration."""
-        return self.sensor_matrices()[0]
-
     def sensor_matrices(self, values: dict[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(C, C_disp)``, each ``(n_sensors, n_free)``: sensor = C q'' + C_disp q on the free coordinates.
 
