@@ -35,7 +35,7 @@ def main() -> None:
                         help="more config overrides, e.g. identifiability.bootstrap=paired")
     args = parser.parse_args()
 
-    from suspid.study import run_study
+    from suspid.workflows.study import run_study
 
     overrides = [f"output.dir={args.out}", "ego.refine={enabled: true}",
                  f"study.seeds=[{', '.join(str(s) for s in range(1, args.seeds + 1))}]",

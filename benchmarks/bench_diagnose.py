@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from test_diagnose import CASES, KMH, _config, _main_error, _shrink  # noqa: E402
 
-from suspid.diagnose import run_diagnose  # noqa: E402
+from suspid.workflows.diagnose import run_diagnose  # noqa: E402
 
 
 def _run(path: Path) -> tuple[dict, float]:

@@ -8,9 +8,9 @@ Usage (2 cores, ~10 min)::
 
 What is measured. Each run maximises J = -f (Goldstein-Price: J = -log f, a
 monotone transform that makes its 3 .. 1e6 range learnable; the error is
-still measured on f) with :func:`suspid.ego.maximize` and its defaults
+still measured on f) with :func:`suspid.optimize.ego.maximize` and its defaults
 (``gpy-kriging`` Matérn 5/2 ARD, maximin LHS of m0 = default_n_initial(q)
-points, EI search of :class:`suspid.ego.EGOOptions`), with ``tol = 0`` and a
+points, EI search of :class:`suspid.optimize.ego.EGOOptions`), with ``tol = 0`` and a
 fixed budget, so that the run is not cut by the EI stop. For each run:
 
 - ``n_1%``: the number of function evaluations (initial design included)
@@ -58,7 +58,7 @@ PAPER_TOL = 1e-4
 
 
 def objective(name: str):
-    from suspid.testfunctions import FUNCTIONS
+    from suspid.optimize.testfunctions import FUNCTIONS
 
     f = FUNCTIONS[name].func
     if name == "goldstein-price":
@@ -69,9 +69,9 @@ def objective(name: str):
 def run_one(name: str, seed: int, kernel: str = "matern52") -> dict:
     """One EGO run; the numbers of the table for it."""
     warnings.simplefilter("ignore")  # routine conditioning notes would flood the output
-    from suspid.design import default_n_initial
-    from suspid.ego import maximize
-    from suspid.testfunctions import FUNCTIONS
+    from suspid.optimize.design import default_n_initial
+    from suspid.optimize.ego import maximize
+    from suspid.optimize.testfunctions import FUNCTIONS
 
     f = FUNCTIONS[name]
     m0 = default_n_initial(f.q)
@@ -102,7 +102,7 @@ def table(rows: list[dict], names: list[str], seeds: list[int]) -> str:
     out = ["| function | q | m0 | budget | n_1% per seed | mean n_1% | reached 1 % | published | "
            "paper stop (tol 1e-4): evals, rel. error | s/run |",
            "|---|---|---|---|---|---|---|---|---|---|"]
-    from suspid.testfunctions import FUNCTIONS
+    from suspid.optimize.testfunctions import FUNCTIONS
 
     for name in names:
         rs = sorted((r for r in rows if r["name"] == name), key=lambda r: r["seed"])

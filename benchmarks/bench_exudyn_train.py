@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 
 from bench_objectives import best_time as timed  # noqa: E402  (same folder: best/median wall, best CPU)
 from suspid.plugins.simulators.exudyn_train import ExudynTrain  # noqa: E402
-from suspid.track import synthetic_segments  # noqa: E402
+from suspid.data.track import synthetic_segments  # noqa: E402
 
 LENGTH_M, SPEED_KMH, FS_HZ, STEP_S = 2000.0, 300.0, 100.0, 0.002
 

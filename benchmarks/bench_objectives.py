@@ -2,7 +2,7 @@
 
 Case of issue 3: v = 100 measured and 100 modelled samples, n = 8 channels,
 1000 frequencies (8000 (channel, ω) pairs). J is evaluated through
-:class:`suspid.objective_function.ObjectiveFunction` (y_mod = y_sim + b, Ψ_k,
+:class:`suspid.method.objective.ObjectiveFunction` (y_mod = y_sim + b, Ψ_k,
 α-weighted sum). The reference is a plain loop over (channel, ω) with
 ``scipy.stats.gaussian_kde`` on a subset of pairs, timed in the same run and
 scaled to 8000 pairs; the ratio is reference / suspid. The reference's values
@@ -28,8 +28,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import gaussian_kde  # noqa: E402
 
-from suspid.noise import NoiseModel  # noqa: E402
-from suspid.objective_function import ObjectiveFunction  # noqa: E402
+from suspid.method.noise import NoiseModel  # noqa: E402
+from suspid.method.objective import ObjectiveFunction  # noqa: E402
 from suspid.plugins.objectives.likelihood import LikelihoodObjective  # noqa: E402
 from suspid.plugins.objectives.overlap import OverlapObjective  # noqa: E402
 

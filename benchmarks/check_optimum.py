@@ -30,10 +30,10 @@ from scipy.optimize import minimize
 
 
 def check(run_dir: Path, maxfev: int) -> None:
-    from suspid import pipeline
+    from suspid.workflows import pipeline
     from suspid.config import load_config
-    from suspid.ledger import Ledger
-    from suspid.threads import single_blas_thread
+    from suspid.infra.ledger import Ledger
+    from suspid.infra.threads import single_blas_thread
 
     result = json.loads((run_dir / "result.json").read_text())
     with tempfile.TemporaryDirectory() as tmp, single_blas_thread():

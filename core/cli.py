@@ -67,7 +67,7 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> No
     """Check a config (plugins, options, parameters, data files); exit 0 when valid."""
     from suspid.config import load_config
 
-    from suspid.pipeline import check_sections, validate_data
+    from suspid.workflows.pipeline import check_sections, validate_data
 
     cfg = load_config(config, set_ or [])
     check_sections(cfg)
@@ -87,7 +87,7 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     from the ledger without recomputing finished simulations.
     """
     from suspid.config import load_config
-    from suspid.pipeline import run as run_pipeline
+    from suspid.workflows.pipeline import run as run_pipeline
 
     cfg = load_config(config, set_ or [])
     out = run_pipeline(cfg, fresh=fresh, progress=not quiet,
@@ -105,7 +105,7 @@ def monitor(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     noise model of the reference date is reused at every date; each date runs
     in <run dir>/dates/<date>/ with its own ledger, so running again resumes.
     """
-    from suspid.monitor import run_monitor
+    from suspid.workflows.monitor import run_monitor
 
     out = run_monitor(config, set_ or [], fresh=fresh, progress=not quiet,
                       log=_log(quiet))
@@ -121,7 +121,7 @@ def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     Writes diagnosis.json, diagnosis.md (with PNG maps), augmented.yaml and the
     identifications before/ and after/ in the run directory; see docs/diagnose.md.
     """
-    from suspid.diagnose import run_diagnose
+    from suspid.workflows.diagnose import run_diagnose
 
     out = run_diagnose(config, set_ or [], fresh=fresh, progress=not quiet,
                        log=_log(quiet))
@@ -130,8 +130,8 @@ def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
 def _segments(cfg):
     """The configured segments: the measurement-date synthetic track, or the measured track file."""
-    from suspid.pipeline import synthetic_track
-    from suspid.track import read_track
+    from suspid.workflows.pipeline import synthetic_track
+    from suspid.data.track import read_track
 
     if cfg.data.source == "experiment":
         return synthetic_track(cfg, "measurement")
@@ -166,8 +166,8 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
                                                        "other parameters nominal.")) -> None:
     """Simulate the nominal (or given) parameters on the configured segments; writes simulation.h5 and a PNG."""
     from suspid.config import build_simulator, load_config
-    from suspid.simulate import write_simulation
-    from suspid.spectra import compute_spectra
+    from suspid.workflows.simulate import write_simulation
+    from suspid.method.spectra import compute_spectra
 
     cfg = load_config(config, set_ or [])
     sim = build_simulator(cfg)
@@ -184,7 +184,7 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
     from suspid.config import build_simulator, load_config
-    from suspid.simulate import format_modes, modes_report
+    from suspid.workflows.simulate import format_modes, modes_report
 
     cfg = load_config(config, set_ or [])
     sim = build_simulator(cfg)
@@ -199,7 +199,7 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           fresh: bool = typer.Option(False, "--fresh", help="Start every variant over."),
           quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
     """Run the variants of the config's study: section; writes study.csv, study.md and a Figure 2 plot."""
-    from suspid.study import run_study
+    from suspid.workflows.study import run_study
 
     out = run_study(config, set_ or [], fresh=fresh, progress=not quiet,
                     log=_log(quiet))

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from suspid.ego import EGOOptions, run_ego
-from suspid.testfunctions import branin
+from suspid.optimize.ego import EGOOptions, run_ego
+from suspid.optimize.testfunctions import branin
 
 BRANIN_BOX = [[-5.0, 10.0], [0.0, 15.0]]
 BRANIN_MIN = 0.397887
@@ -61,8 +61,8 @@ ego: {max_iter: 4, batch: 2}
 @pytest.mark.parametrize("executor", ["processes", "dask"])
 def test_parallel_executor_gives_the_serial_J_values(tmp_path, executor):
     from suspid.config import load_config
-    from suspid.ledger import Ledger
-    from suspid.pipeline import run
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.pipeline import run
 
     cfg = tmp_path / "par.yaml"
     cfg.write_text(SMALL)

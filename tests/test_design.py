@@ -5,7 +5,7 @@ import pytest
 from pydantic import ValidationError
 from scipy.stats import qmc
 
-from suspid.design import (DESIGNS, DesignOptions, check_bounds, default_n_initial, from_unit,
+from suspid.optimize.design import (DESIGNS, DesignOptions, check_bounds, default_n_initial, from_unit,
                            make_design, maximin_lhs, min_distance, phi_p, to_unit)
 from suspid.errors import ConfigError
 

@@ -31,7 +31,7 @@ KMH = 1 / 3.6
 # ------------------------------------------------------------------------------------------ statistics
 def _noise_model(rng, v0=48, K=3, F=60, scatter=1.0):
     """A fitted noise model of smooth correlated paths, and its grid."""
-    from suspid.noise import NoiseModel
+    from suspid.method.noise import NoiseModel
 
     f = np.linspace(0.5, 30.0, F)
     x = np.log2(f)
@@ -42,7 +42,7 @@ def _noise_model(rng, v0=48, K=3, F=60, scatter=1.0):
 
 
 def test_cells_tile_the_grid_with_enough_bins_per_band():
-    from suspid.diagnose import make_cells
+    from suspid.workflows.diagnose import make_cells
 
     f = np.linspace(0.4, 30.0, 150)
     grid = make_cells(["a", "b"], f, [83.3] * 5 + [50.0] * 3, bands_per_octave=3, min_bins=3)
@@ -59,7 +59,7 @@ def test_cells_tile_the_grid_with_enough_bins_per_band():
 
 
 def test_null_is_calibrated_and_by_flags_nothing_under_the_null():
-    from suspid.diagnose import calibrate_null, locate, make_cells
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells
 
     rng = np.random.default_rng(1)
     nm, f = _noise_model(rng)
@@ -80,7 +80,7 @@ def test_null_is_calibrated_and_by_flags_nothing_under_the_null():
 
 
 def test_locate_finds_a_broad_shift_and_a_narrow_line():
-    from suspid.diagnose import calibrate_null, locate, make_cells
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells
 
     rng = np.random.default_rng(3)
     nm, f = _noise_model(rng, scatter=0.5)
@@ -102,7 +102,7 @@ def test_locate_finds_a_broad_shift_and_a_narrow_line():
 
 
 def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
-    from suspid.diagnose import Candidate, DiagnoseOptions, decide
+    from suspid.workflows.diagnose import Candidate, DiagnoseOptions, decide
 
     class Map:
         flagged = np.array([True, False])
@@ -146,7 +146,7 @@ def _config(tmp_path: Path, name: str, hidden: list, *, speed_kmh=300.0, fs=100.
 
 
 def _diagnose(path: Path) -> dict:
-    from suspid.diagnose import run_diagnose
+    from suspid.workflows.diagnose import run_diagnose
 
     out = run_diagnose(path, progress=False, log=lambda s: None)
     return json.loads((out / "diagnosis.json").read_text())
@@ -241,7 +241,7 @@ def test_null_case_names_nothing(tmp_path):
 
 
 def test_diagnose_section_errors_name_the_key(tmp_path):
-    from suspid.diagnose import run_diagnose
+    from suspid.workflows.diagnose import run_diagnose
     from suspid.errors import ConfigError
 
     path = _config(tmp_path, "bad", [])
@@ -318,10 +318,10 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     from dataclasses import replace
 
     from suspid.config import load_config
-    from suspid.diagnose import DiagnoseOptions, calibrate_null, locate, make_cells, rank_effects
+    from suspid.workflows.diagnose import DiagnoseOptions, calibrate_null, locate, make_cells, rank_effects
     from suspid.interfaces import TrackSegment
-    from suspid.ledger import Ledger
-    from suspid.pipeline import _simulate_spectra, build_problem
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.pipeline import _simulate_spectra, build_problem
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
 
     cfg = load_config(_config(tmp_path, "speeds", [], n_segments=32))

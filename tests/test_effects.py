@@ -19,8 +19,8 @@ from suspid.interfaces import Effect, EffectSignature
 from suspid.plugins.effects import EFFECTS, beam_mode_shape, klingel_hz
 from suspid.plugins.simulators.exudyn_train import ExudynTrain
 from suspid.plugins.simulators.exudyn_train.effects import point_jacobian
-from suspid.spectra import compute_spectra
-from suspid.track import synthetic_segments
+from suspid.method.spectra import compute_spectra
+from suspid.data.track import synthetic_segments
 
 KMH = 1 / 3.6
 NAMES = {"carbody-bending", "wheel-polygon", "yaw-damper-series-stiffness", "sensor-tilt", "conicity-change",

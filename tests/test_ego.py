@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from suspid.ego import (EGOOptions, _log_ei_and_grad, expected_improvement,
+from suspid.optimize.ego import (EGOOptions, _log_ei_and_grad, expected_improvement,
                         log_expected_improvement, maximize, run_ego)
 from suspid.errors import ConfigError, SuspidError, UnknownPluginError
 from suspid.interfaces import Surrogate
 from suspid.plugins.surrogates.gpy_kriging import GPyKriging
-from suspid.testfunctions import FUNCTIONS
+from suspid.optimize.testfunctions import FUNCTIONS
 
 BOX = [[-1.0, 2.0], [0.0, 1.0]]
 
@@ -327,7 +327,7 @@ def solve_to_one_percent(name, budget, seed):
         best[0] = min(best[0], -record.J) if record.J is not None else best[0]
         return abs(best[0] - f.f_min) / abs(f.f_min) <= 0.01
 
-    from suspid.design import default_n_initial
+    from suspid.optimize.design import default_n_initial
 
     return maximize(lambda x: -f.func(x), f.bounds, max_iter=budget - default_n_initial(f.q),
                     tol=0.0, seed=seed, callback=reached)

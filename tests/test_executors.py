@@ -1,6 +1,6 @@
 """Executors (issue 9): serial, processes and dask give the same results; dead workers; no process left.
 
-Task functions live at module level (here or in ``suspid._executor_checks``) so that
+Task functions live at module level (here or in ``suspid.testing``) so that
 worker processes can import them by reference: spawned workers, the pool's and
 the LocalCluster's, start with the driver's ``sys.path``, which holds this
 folder. The quarter-car workload adds the template's ``src`` folder to
@@ -23,11 +23,11 @@ import pytest
 from suspid import registry
 from suspid.errors import ConfigError, PluginError
 from suspid.plugins.executors._common import WorkerLostError
-from suspid._executor_checks import DieOnce, check_executor, collect, square
+from suspid.testing import DieOnce, check_executor, collect, square
 from suspid.plugins.executors.dask import DaskExecutor, DaskOptions, scheduler_address
 from suspid.plugins.executors.processes import ProcessExecutor, ProcessOptions, default_workers
 from suspid.plugins.executors.serial import SerialExecutor
-from suspid.spectra import compute_spectra
+from suspid.method.spectra import compute_spectra
 from suspid.testing import sample_segments
 
 TEMPLATE_SRC = str(Path(__file__).resolve().parents[1] / "examples" / "plugin-template" / "src")
@@ -41,7 +41,7 @@ PARALLEL = [(ProcessExecutor, {"workers": 2}), (DaskExecutor, {"n_workers": 2})]
 class QuarterCarJ:
     """J(w) = -mean over samples, channels, frequencies of (Y(w) - Y(w_ref))², dB².
 
-    Y are the spectra (``suspid.spectra``) of the template's quarter car run
+    Y are the spectra (``suspid.method.spectra``) of the template's quarter car run
     over ``segments``; the object carries the segments and Y(w_ref), so an
     executor has to ship data to its workers too.
     """

@@ -20,9 +20,9 @@ from suspid.plugins.simulators.exudyn_train import ExudynTrain
 from suspid.plugins.simulators.exudyn_train import parameters as P
 from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
 from suspid.plugins.simulators.exudyn_train.solvers import FrequencyResponse
-from suspid.spectra import compute_spectra
+from suspid.method.spectra import compute_spectra
 from suspid.testing import check_simulator
-from suspid.track import synthetic_segments
+from suspid.data.track import synthetic_segments
 
 KMH = 1 / 3.6
 
@@ -263,7 +263,7 @@ def test_bump_stops_act_on_a_large_lateral_kink():
 def test_write_simulation_and_modes_report(tmp_path, freq_sim):
     import json
 
-    from suspid.simulate import format_modes, modes_report, read_simulation, write_simulation
+    from suspid.workflows.simulate import format_modes, modes_report, read_simulation, write_simulation
 
     segs = track(1000.0, 300.0, n=2)        # 12 s records: long enough for the default 0.1 Hz grid
     path = write_simulation(freq_sim, segs, {"c_sec_z": 25e3}, tmp_path / "sim")

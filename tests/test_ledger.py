@@ -11,7 +11,7 @@ import textwrap
 
 import numpy as np
 
-from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
+from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
 
 
 def test_key_depends_on_all_three_parts():
@@ -43,7 +43,7 @@ def test_put_get_and_arrays(tmp_path):
 
 WRITER = textwrap.dedent("""
     import sys, time
-    from suspid.ledger import Ledger, Evaluation, evaluation_key
+    from suspid.infra.ledger import Ledger, Evaluation, evaluation_key
     led = Ledger(sys.argv[1])
     computed = 0
     for i in range(int(sys.argv[2])):

@@ -53,7 +53,7 @@ def _write(tmp_path: Path, monitor: str, base: str = BASE, name: str = "mon.yaml
 
 def _plan(path: Path, overrides: list[str] = (), noise_model: Path = Path("/nm.npz")):
     from suspid.config import load_config
-    from suspid.monitor import monitor_dates, monitor_options
+    from suspid.workflows.monitor import monitor_dates, monitor_options
 
     config = load_config(path, list(overrides))
     opts = monitor_options(config, path)
@@ -75,7 +75,7 @@ def _plan(path: Path, overrides: list[str] = (), noise_model: Path = Path("/nm.n
     ((12e3, 14e3), None, True, "unmonitored"),
 ])
 def test_status_of(interval, domain, identifiable, expected):
-    from suspid.monitor import status_of
+    from suspid.workflows.monitor import status_of
 
     assert status_of(interval, domain, identifiable) == expected
 
@@ -89,7 +89,7 @@ def _result(values: dict, intervals: dict, identifiable: dict, w_ref: dict | Non
 
 
 def test_alerts_first_out_of_domain_date_and_not_identifiable_never_flagged(tmp_path):
-    from suspid.monitor import MonitorOptions, write_monitor
+    from suspid.workflows.monitor import MonitorOptions, write_monitor
 
     opts = MonitorOptions.model_validate({"acceptable": {"a": [1.0, 2.0], "b": [1.0, 2.0]},
                                           "scenario": {"parameter": "a", "n_dates": 4, "start": "2026-01-01"}})
@@ -212,9 +212,9 @@ def test_cli_one_line_error(tmp_path):
 def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_else(tmp_path):
     """c_sec_z loses 0, 8, 16, 24, 32, 40 %; its acceptable domain starts at -25 %: the first date with the
     true value outside is the fifth (32 %). The alert must come within one date of it; k_sec_z stays nominal."""
-    from suspid.monitor import run_monitor
-    from suspid.noise import NoiseModel
-    from suspid.threads import single_blas_thread
+    from suspid.workflows.monitor import run_monitor
+    from suspid.method.noise import NoiseModel
+    from suspid.infra.threads import single_blas_thread
 
     path = _write(tmp_path, SCENARIO)
     with single_blas_thread():  # the Kriging fits of tiny matrices: 2x faster on a busy 2-core machine
@@ -241,9 +241,9 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
 
 
 def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatch):
-    from suspid import pipeline
-    from suspid.monitor import run_monitor
-    from suspid.threads import single_blas_thread
+    from suspid.workflows import pipeline
+    from suspid.workflows.monitor import run_monitor
+    from suspid.infra.threads import single_blas_thread
 
     monitor = "monitor:\n  scenario: {parameter: c_sec_z, dates: [2026-01-01, 2026-03-01]}\n"
     small = BASE.replace("n_segments: 24", "n_segments: 8").replace("n_initial: 8", "n_initial: 6") \

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from suspid.errors import ConfigError, DataError
-from suspid.noise import FORMAT_VERSION, NoiseModel, fit_noise_model, noise_samples
+from suspid.method.noise import FORMAT_VERSION, NoiseModel, fit_noise_model, noise_samples
 
 N_CH, N_F = 2, 12
 FREQS = np.linspace(0.5, 20.0, N_F)

@@ -10,9 +10,9 @@ from scipy.stats import gaussian_kde
 import suspid.registry as registry
 from suspid.config import Config, validate_options
 from suspid.errors import ConfigError, DataError
-from suspid.kde import bandwidths, frequency_mean, log_kde, overlap_coefficient
-from suspid.noise import NoiseModel
-from suspid.objective_function import ObjectiveFunction, validate_weights
+from suspid.method.kde import bandwidths, frequency_mean, log_kde, overlap_coefficient
+from suspid.method.noise import NoiseModel
+from suspid.method.objective import ObjectiveFunction, validate_weights
 from suspid.plugins.objectives.likelihood import LikelihoodObjective
 from suspid.plugins.objectives.overlap import OverlapObjective
 from suspid.testing import check_objective

@@ -40,7 +40,7 @@ def _write(tmp_path: Path, name: str = "small.yaml", objective: str = "overlap",
 @pytest.mark.parametrize("objective", ["overlap", "likelihood"])
 def test_run_recovers_w_ref(tmp_path, objective):
     from suspid.config import load_config
-    from suspid.pipeline import run
+    from suspid.workflows.pipeline import run
 
     out = run(load_config(_write(tmp_path, objective=objective)), progress=False, log=lambda s: None)
     r = out.result
@@ -63,7 +63,7 @@ def test_run_recovers_w_ref(tmp_path, objective):
 
 def test_same_config_same_result_and_resume_reuses_ledger(tmp_path):
     from suspid.config import load_config
-    from suspid.pipeline import run
+    from suspid.workflows.pipeline import run
 
     cfg = load_config(_write(tmp_path, m1=4))
     first = run(cfg, progress=False, log=lambda s: None).result
@@ -116,7 +116,7 @@ def test_sigkill_during_design_then_resume_gives_same_result(tmp_path):
 def measured(tmp_path_factory):
     """A measured data set in the documented CSV layout: exudyn accelerations on synthetic track."""
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
-    from suspid.track import synthetic_segments, write_accelerations_csv, write_track_csv
+    from suspid.data.track import synthetic_segments, write_accelerations_csv, write_track_csv
 
     root = tmp_path_factory.mktemp("measured")
     segments = synthetic_segments({"n_segments": 3, "length_m": 600.0, "speed_kmh": 300.0, "seed": 3})

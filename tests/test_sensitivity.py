@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from suspid.design import DesignOptions, make_design
+from suspid.optimize.design import DesignOptions, make_design
 from suspid.errors import ConfigError
 from suspid.plugins.surrogates.gpy_kriging import GPyKriging
-from suspid.sensitivity import sobol_indices, surrogate_sensitivity
-from suspid.testfunctions import ishigami, ishigami_indices
+from suspid.method.sensitivity import sobol_indices, surrogate_sensitivity
+from suspid.optimize.testfunctions import ishigami, ishigami_indices
 
 
 def test_ishigami_indices_match_the_analytic_values():

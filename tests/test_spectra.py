@@ -8,7 +8,7 @@ from scipy.special import digamma
 
 from suspid.errors import ConfigError, DataError
 from suspid.interfaces import Response
-from suspid.spectra import (SpectraOptions, compute_spectra, fourier_amplitude, frequency_grid,
+from suspid.method.spectra import (SpectraOptions, compute_spectra, fourier_amplitude, frequency_grid,
                             record_spectrum)
 
 DB = 5.0 / math.log(10.0)  # d(5 log10 x)/d(ln x): natural-log units to dB of an amplitude

@@ -27,7 +27,7 @@ study:
 
 
 def test_study_runs_both_objectives_from_one_design(tmp_path):
-    from suspid.ledger import Ledger
+    from suspid.infra.ledger import Ledger
 
     cfg = tmp_path / "study.yaml"
     cfg.write_text(STUDY)

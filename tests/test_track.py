@@ -9,7 +9,7 @@ import pytest
 
 from suspid.errors import ConfigError
 from suspid.interfaces import IRREGULARITY_CHANNELS
-from suspid.track import GERMAN, GERMAN_A, SPECTRA, TrackOptions, psd, realise, synthetic_segments
+from suspid.data.track import GERMAN, GERMAN_A, SPECTRA, TrackOptions, psd, realise, synthetic_segments
 
 
 def test_german_and_fra_formulas_at_a_point():

@@ -349,7 +349,7 @@ def test_on_error_finish_lets_the_other_runs_complete(double_options, tmp_path):
 
 def test_a_failing_point_leaves_other_points_and_the_ledger_alone(double_options, tmp_path):
     """The run goes on with other points after a failure; evaluations already committed stay."""
-    ledger_mod = pytest.importorskip("suspid.ledger")
+    ledger_mod = pytest.importorskip("suspid.infra.ledger")
     good, bad = _segment("good", length_m=100.0), _segment("bad", length_m=100.0, seed=1)
     sim = VampireSimulator(**double_options(fault={"bad": "hang"}, timeout_s=1.0, kill_grace_s=0.5))
     ledger = ledger_mod.Ledger(tmp_path / "ledger.sqlite")

@@ -6,7 +6,7 @@ from typing import Any, Mapping, TypeVar
 
 from pydantic import BaseModel
 
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.errors import SimulatorError
 
 M = TypeVar("M", bound=BaseModel)

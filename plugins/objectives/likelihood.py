@@ -4,7 +4,7 @@
 
 p_{Y_k^mod}(·; ω, w) is the Gaussian kernel density estimate of the modelled
 samples y_mod_i = y_sim_i(w) + b_i at (k, ω), evaluated exactly at every
-measured point (:func:`suspid.kde.log_kde`: a Gaussian mixture, its log
+measured point (:func:`suspid.method.kde.log_kde`: a Gaussian mixture, its log
 formed safely where it underflows). As in the paper the log-likelihood is
 summed over the v measured samples, not averaged, so Ψ_k grows with v; the
 ω integral is the trapezoidal rule over the grid. Units: p in 1/dB, so Ψ_k is
@@ -18,9 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from suspid import hookimpl
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.interfaces import Objective
-from suspid.kde import KdeOptions, bandwidths, frequency_mean, log_kde, prepare
+from suspid.method.kde import KdeOptions, bandwidths, frequency_mean, log_kde, prepare
 
 
 class LikelihoodOptions(KdeOptions):

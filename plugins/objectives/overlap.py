@@ -6,7 +6,7 @@
 Both densities are Gaussian kernel estimates at (k, ω), each with its own
 bandwidth, from the measured samples and from the modelled samples
 y_mod_i = y_sim_i(w) + b_i. They are evaluated on a grid by linear binning and
-FFT smoothing (:func:`suspid.kde.overlap_coefficient`): with ``grid_size`` 256
+FFT smoothing (:func:`suspid.method.kde.overlap_coefficient`): with ``grid_size`` 256
 the OVL of v = 100 samples is within about 2e-4 of its exact value (the
 error falls as grid_size^-2). Ψ_k is dimensionless in [0, 1]; 1 means the
 two densities coincide at every frequency. Higher is better.
@@ -20,9 +20,9 @@ import numpy as np
 from pydantic import Field
 
 from suspid import hookimpl
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.interfaces import Objective
-from suspid.kde import KdeOptions, bandwidths, frequency_mean, overlap_coefficient, prepare
+from suspid.method.kde import KdeOptions, bandwidths, frequency_mean, overlap_coefficient, prepare
 
 
 class OverlapOptions(KdeOptions):

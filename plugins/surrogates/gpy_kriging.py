@@ -72,7 +72,7 @@ from scipy.spatial.distance import cdist, pdist, squareform
 from suspid import hookimpl
 from suspid.errors import ConfigError
 from suspid.interfaces import Surrogate
-from suspid.threads import single_blas_thread
+from suspid.infra.threads import single_blas_thread
 
 __all__ = ["GPyKriging", "GPyKrigingOptions", "ConditioningWarning", "suspid_register_surrogates"]
 
@@ -195,7 +195,7 @@ class GPyKriging(Surrogate):
         self.y_std_ = std if std > 0 else 1.0
         Xs = (X - self.x_lower_) / self.x_range_
         ys = ((y - self.y_mean_) / self.y_std_)[:, None]
-        # small matrices: OpenBLAS threads only contend (suspid.threads)
+        # small matrices: OpenBLAS threads only contend (suspid.infra.threads)
         with single_blas_thread():
             self._fit(GPy, Xs, ys, opts)
         return self

@@ -106,7 +106,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
-from suspid.threads import single_blas_thread
+from suspid.infra.threads import single_blas_thread
 
 TABLE_PAD = 2
 """Zero leaves before the first track sample (and at least as many after the last one)."""

@@ -9,7 +9,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, ValidationError, field_validator, model_validator
 from pydantic_core import InitErrorDetails
 
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.errors import SimulatorError
 from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 

@@ -52,7 +52,7 @@ from scipy.signal import resample_poly
 from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
-from suspid.threads import single_blas_thread
+from suspid.infra.threads import single_blas_thread
 from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]

@@ -24,7 +24,7 @@ The maximum then moves by Δ = -H⁻¹ g, so Cov(w_opt) ≈ H⁻¹ Σ_g H⁻¹, 
 The diagonal of H comes from simulations at w_opt ± h e_k, its correlation
 structure from the metamodel. Σ_g, the covariance of the gradient of J at w_opt, comes from a bootstrap
 over segments with redrawn noise paths
-(:func:`suspid.pipeline.gradient_noise`). Segments are resampled as pairs:
+(:func:`suspid.workflows.pipeline.gradient_noise`). Segments are resampled as pairs:
 segment i's measured spectra and its simulated spectra come from the same
 track, so they vary together. Resampling the two sets independently
 (``bootstrap: independent``) miscalibrates the intervals: over 16 seeds of
@@ -135,7 +135,7 @@ def assess(names: list[str], u_opt: np.ndarray, sigma_g: np.ndarray, surrogate,
     :param curvature: ``(q,)`` d²J/du_k² at w_opt from simulations (NaN where unknown);
         without it the metamodel's Hessian is used alone.
     """
-    from suspid.sensitivity import surrogate_sensitivity
+    from suspid.method.sensitivity import surrogate_sensitivity
 
     q = len(names)
     mean_fn = lambda U: surrogate.predict(np.atleast_2d(U))[0]  # noqa: E731

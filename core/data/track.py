@@ -91,7 +91,7 @@ Accelerations (``format = "suspid-accelerations"``)::
     /segments                 attrs: order = segment names in order
     /segments/<name>/accelerations   (n_channels, n_t) m/s^2; attrs: fs_hz
 
-A simulation file (``simulation.h5``, :mod:`suspid.simulate`) is an
+A simulation file (``simulation.h5``, :mod:`suspid.workflows.simulate`) is an
 accelerations file with, in addition, ``/y`` (n_segments, n_channels,
 n_freqs) dB and ``/freqs`` (n_freqs,) Hz.
 
@@ -110,7 +110,7 @@ from typing import Any, Iterable, Literal, Mapping, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, model_validator
 
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.errors import DataError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 

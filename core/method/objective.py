@@ -22,7 +22,7 @@ import numpy as np
 
 from suspid.errors import ConfigError, DataError
 from suspid.interfaces import Objective
-from suspid.noise import NoiseModel
+from suspid.method.noise import NoiseModel
 
 
 def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, channels: Sequence[str],

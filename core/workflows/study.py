@@ -68,7 +68,7 @@ def study_variants(path: Path, overrides: list[str], config: Config) -> list[tup
 def run_study(path: Path, overrides: list[str], *, fresh: bool = False, progress: bool = True,
               log: Callable[[str], None] = print) -> Path:
     """Run every variant (resuming finished ones from their ledgers), then write the study outputs."""
-    from suspid.pipeline import run
+    from suspid.workflows.pipeline import run
 
     config = load_config(path, overrides)
     if not config.study:
@@ -86,7 +86,7 @@ def run_study(path: Path, overrides: list[str], *, fresh: bool = False, progress
 
 def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None:
     """study.csv, study.md and study_parameters.png from the variants' results."""
-    from suspid.report import figure_parameters, markdown_table
+    from suspid.workflows.report import figure_parameters, markdown_table
 
     names = rows[0][1]["parameters"]
     has_ref = "w_ref" in rows[0][1]

@@ -27,13 +27,13 @@ against a 301 x 301 grid at every iteration of 3 runs, the search never
 returned less than the grid's maximum of EI.
 
 Choices tuned on the standard functions (``benchmarks/RESULTS.md``): m0 =
-:func:`suspid.design.default_n_initial` = min(2^q, 10 q); the surrogate's
+:func:`suspid.optimize.design.default_n_initial` = min(2^q, 10 q); the surrogate's
 defaults (Matérn 5/2 ARD, length-scales <= 2 box widths).
 
 API for the end-to-end pipeline
 -------------------------------
 :func:`run_ego` takes validated options (:class:`EGOOptions` for the ``ego:``
-section, :class:`suspid.design.DesignOptions` for ``design:``) and a surrogate
+section, :class:`suspid.optimize.design.DesignOptions` for ``design:``) and a surrogate
 instance (``suspid.registry.get("surrogate", name)(**options)``); :func:`maximize`
 is the same with plain keyword arguments.
 
@@ -75,10 +75,10 @@ from scipy.special import erfcx, log_ndtr, ndtr
 from scipy.stats import qmc
 
 from suspid import registry
-from suspid.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
+from suspid.optimize.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
 from suspid.errors import ConfigError, SuspidError
 from suspid.interfaces import Surrogate
-from suspid.threads import single_blas_thread
+from suspid.infra.threads import single_blas_thread
 
 __all__ = ["EGOOptions", "IterationRecord", "EGOResult", "run_ego", "maximize", "make_surrogate",
            "expected_improvement", "log_expected_improvement"]
@@ -712,13 +712,13 @@ def maximize(func: Callable[[np.ndarray], float], bounds, *, n_initial: int | No
 
     :param func: ``func(w) -> float``, ``w (q,)`` in SI units.
     :param bounds: ``(q, 2)`` lower and upper bounds, SI units.
-    :param n_initial: m0 (None: :func:`suspid.design.default_n_initial`).
+    :param n_initial: m0 (None: :func:`suspid.optimize.design.default_n_initial`).
     :param max_iter: m1, the largest number of EGO points.
     :param tol: eps = tol * (max J - min J) stops the loop when max EI < eps.
     :param seed: seeds the design, the EI candidates and (when it has a
         ``seed`` option not given in ``surrogate_options``) the surrogate.
     :param surrogate: a registered surrogate name or an instance.
-    :param design: a name in :data:`suspid.design.DESIGNS`.
+    :param design: a name in :data:`suspid.optimize.design.DESIGNS`.
     :param search: other :class:`EGOOptions` fields (``n_candidates``, ``n_starts``, ...).
     :raises ConfigError: invalid options.
     """

@@ -34,13 +34,13 @@ Identified parameters without an acceptable domain are reported with status
 ``monitor.reference.noise_model`` file (written by a reference-date run,
 ``<run dir>/noise_model.npz``), the base config's ``noise.path``, or
 identified here from the base config as a numerical experiment (paper §2.3
-and :mod:`suspid.experiment`: the model at w0 made into measurements on the
+and :mod:`suspid.data.experiment`: the model at w0 made into measurements on the
 reference-date track) in ``<monitor dir>/reference/`` with its own ledger.
 Measured campaigns therefore need one of the first two.
 
 **Dates.** Each date is the base config with overrides (``monitor`` removed,
 ``noise.path`` set to the reference model, ``output.dir`` set to
-``<monitor dir>/dates/<date>/``), run by :func:`suspid.pipeline.run` in its
+``<monitor dir>/dates/<date>/``), run by :func:`suspid.workflows.pipeline.run` in its
 own directory with its own ledger: an interrupted monitor resumes where it
 stopped when run again. A campaign's ``data`` mapping is applied key by key
 (``data: {track: {seed: 3}}`` changes only the seed). For a numerical
@@ -85,7 +85,7 @@ from pydantic import Field, ValidationError
 from suspid.config import (Config, ConfigPath, Section, build_simulator, identified_bounds, load_config,
                            override_arguments, raise_validation_error, read_yaml)
 from suspid.errors import ConfigError
-from suspid.seeds import seed_for
+from suspid.infra.seeds import seed_for
 
 STATUSES = ("ok", "warning", "out-of-domain", "not-identifiable", "unmonitored")
 
@@ -121,7 +121,7 @@ class MonitorOptions(Section):
 
 @dataclass
 class DatePlan:
-    """One measurement date: its config (ready for :func:`suspid.pipeline.run`) and, for the scenario, its loss."""
+    """One measurement date: its config (ready for :func:`suspid.workflows.pipeline.run`) and, for the scenario, its loss."""
 
     date: dt.date
     config: Config
@@ -257,11 +257,11 @@ def identify_reference(path: Path, overrides: Sequence[str], config: Config, *, 
                        log: Callable[[str], None] = print) -> Path:
     """Identify the noise model B at the reference date, once for every date (paper §2.3).
 
-    The base config as a numerical experiment at w0 (:func:`suspid.pipeline.build_problem`), with its
+    The base config as a numerical experiment at w0 (:func:`suspid.workflows.pipeline.build_problem`), with its
     own ledger in ``<monitor dir>/reference/``; returns the ``noise_model.npz`` written there.
     """
-    from suspid.ledger import Ledger
-    from suspid.pipeline import build_problem
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.pipeline import build_problem
 
     ref_dir = config.run_dir() / "reference"
     ref_cfg = load_config(path, [*overrides, *override_arguments({"monitor": {}, "output.dir": str(ref_dir),
@@ -369,7 +369,7 @@ def run_monitor(path: Path, overrides: Sequence[str] = (), *, fresh: bool = Fals
 
     :returns: the monitor's run directory.
     """
-    from suspid.pipeline import run
+    from suspid.workflows.pipeline import run
 
     path = Path(path)
     config = load_config(path, overrides)
@@ -397,7 +397,7 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
 
     :returns: the monitor.json summary.
     """
-    from suspid.report import markdown_table
+    from suspid.workflows.report import markdown_table
 
     acceptable = {n: list(v) for n, v in opts.acceptable.items()}
     rows = monitor_rows(dated, acceptable)
@@ -475,7 +475,7 @@ def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str,
     :param rows: this parameter's rows of :func:`monitor_rows`, in date order.
     :param alert: the alert date (ISO), drawn as a vertical line.
     """
-    from suspid.report import pyplot
+    from suspid.workflows.report import pyplot
 
     plt = pyplot()
     dates = [dt.date.fromisoformat(r["date"]) for r in rows]

@@ -45,7 +45,7 @@ from typing import Annotated, Any, Literal, Mapping, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.errors import DataError
 
 FORMAT = "suspid-noise-model"

@@ -57,7 +57,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 from scipy.special import digamma
 
-from suspid._options import parse_options
+from suspid.options import parse_options
 from suspid.errors import DataError
 from suspid.interfaces import Response
 

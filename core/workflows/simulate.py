@@ -6,7 +6,7 @@ segments and writes ``simulation.h5`` and ``spectra.png`` into a folder;
 e.g. ``exudyn-train``) for its modes and writes ``modes.json``.
 
 ``simulation.h5`` is an accelerations file in the layout of
-:mod:`suspid.track` (``/segments/<name>/accelerations`` (n_channels, n_t)
+:mod:`suspid.data.track` (``/segments/<name>/accelerations`` (n_channels, n_t)
 m/s^2 with attribute ``fs_hz``; root attribute ``channels``), plus
 
 - ``/y`` ``(n_segments, n_channels, n_freqs)``: spectra in dB (paper eq. 1-2),
@@ -28,7 +28,7 @@ import numpy as np
 
 from suspid.errors import SimulatorError
 from suspid.interfaces import Response, Simulator, TrackSegment
-from suspid.track import read_accelerations_h5, write_accelerations_h5
+from suspid.data.track import read_accelerations_h5, write_accelerations_h5
 
 SpectraFn = Callable[[Sequence[Response]], tuple[np.ndarray, np.ndarray]]
 """responses -> (y (n_samples, n_channels, n_freqs) dB, freqs (n_freqs,) Hz)."""
@@ -36,8 +36,8 @@ SpectraFn = Callable[[Sequence[Response]], tuple[np.ndarray, np.ndarray]]
 
 def default_spectra(responses: Sequence[Response], options: Mapping[str, Any] | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Spectra of :func:`suspid.spectra.compute_spectra` with the given ``spectra:`` options."""
-    from suspid.spectra import compute_spectra
+    """Spectra of :func:`suspid.method.spectra.compute_spectra` with the given ``spectra:`` options."""
+    from suspid.method.spectra import compute_spectra
 
     return compute_spectra(responses, options)
 
@@ -52,7 +52,7 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         their nominal values; ``{}`` simulates the nominal vehicle.
     :param out_dir: the folder to write into (created).
     :param spectra_fn: responses -> (y, freqs); default
-        :func:`suspid.spectra.compute_spectra` with default options (pass
+        :func:`suspid.method.spectra.compute_spectra` with default options (pass
         ``lambda r: compute_spectra(r, config.spectra)`` for the config's).
     :returns: the path of ``simulation.h5``.
     :raises SimulatorError: the simulator failed; DataError: records unfit for the spectra.
@@ -105,7 +105,7 @@ def read_simulation(path: str | Path) -> tuple[list[Response], np.ndarray, np.nd
 def plot_spectra(y: np.ndarray, freqs: np.ndarray, channels: Sequence[str], path: str | Path,
                  title: str = "") -> Path:
     """PNG of the spectra: per channel, every segment (thin) and the mean over segments (thick)."""
-    from suspid.report import pyplot
+    from suspid.workflows.report import pyplot
 
     plt = pyplot()
     y = np.asarray(y, dtype=float)

@@ -548,7 +548,7 @@ class EffectFitter:
         return self._sims[key]
 
     def simulate(self, sim, w_effect: dict[str, float]) -> np.ndarray | None:
-        from suspid.pipeline import _simulate_spectra
+        from suspid.workflows.pipeline import _simulate_spectra
 
         self.evaluations += 1
         try:
@@ -727,7 +727,7 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
 
     :returns: ``(ranking, bumps by size, named or None, reason)``.
     """
-    from suspid.pipeline import j_of_spectra
+    from suspid.workflows.pipeline import j_of_spectra
 
     disc = Discrepancy(dmap.grid, null, problem.y_mes, problem.noise_model, dmap.flagged, y_sim)
     D0, D0_f = disc.D0, disc.D0_flagged
@@ -846,8 +846,8 @@ def _with_output(config: Config, run_dir: Path) -> Config:
 def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fresh: bool, progress: bool,
                log: Callable[[str], None]) -> Stage:
     """The model of ``config`` at its identified parameters (a full run in ``run_dir``) or at the nominal ones."""
-    from suspid.ledger import Ledger
-    from suspid.pipeline import _simulate_spectra, build_problem, run
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.pipeline import _simulate_spectra, build_problem, run
 
     cfg = _with_output(config, run_dir)
     if identify:
@@ -886,9 +886,9 @@ def write_augmented(config: Config, candidate: Candidate, out_dir: Path, noise_p
 def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool = False, progress: bool = True,
                  log: Callable[[str], None] = print) -> Path:
     """The whole workflow (module docstring): writes diagnosis.json, diagnosis.md and figures; returns the folder."""
-    from suspid.pipeline import j_of_spectra
-    from suspid.seeds import rng as named_rng
-    from suspid.threads import single_blas_thread
+    from suspid.workflows.pipeline import j_of_spectra
+    from suspid.infra.seeds import rng as named_rng
+    from suspid.infra.threads import single_blas_thread
 
     t_start = time.perf_counter()
     config = load_config(path, list(overrides))
@@ -901,7 +901,7 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
     grid = make_cells(problem.channels, problem.freqs, [s.mean_speed for s in problem.segments],
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
-    with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.threads)
+    with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.infra.threads)
         null = calibrate_null(grid, problem.noise_model, opts.n_bootstrap,
                               named_rng(config.seed, "diagnose-bootstrap"))
         mu = problem.noise_model.mean_
@@ -966,7 +966,7 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
 # ====================================================================================== report
 def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | None = None) -> Path:
     """Heat map of the cell magnitudes (dB, + measured above the model) per speed group; flagged cells framed."""
-    from suspid.report import pyplot
+    from suspid.workflows.report import pyplot
 
     plt = pyplot()
     grid = dmap.grid
@@ -994,7 +994,7 @@ def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | N
 def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | None, channel: int,
                        dmap: DiscrepancyMap) -> Path:
     """Mean measured spectrum against the modelled mean y_sim + μ_B before and after, one channel."""
-    from suspid.report import pyplot
+    from suspid.workflows.report import pyplot
 
     plt = pyplot()
     p = stage_before.problem
@@ -1040,7 +1040,7 @@ def _fmt_params(params: dict[str, Any]) -> str:
 def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Stage, after: Stage | None,
                            ranking: list[Candidate], bumps: dict[int, Candidate]) -> Path:
     """``diagnosis.md`` and its figures."""
-    from suspid.report import markdown_table
+    from suspid.workflows.report import markdown_table
 
     dmap = before.dmap
     lim = max(1.0, float(np.max(np.abs(dmap.magnitude_db))))

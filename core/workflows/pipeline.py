@@ -1,7 +1,7 @@
 """The whole identification chain of the paper, as ``suspid run`` runs it.
 
 1. data: the measured spectra y_mes (or the numerical experiment of §3.3,
-   :mod:`suspid.experiment`), and the noise model B identified at the
+   :mod:`suspid.data.experiment`), and the noise model B identified at the
    reference date (§2.3) or loaded from a file;
 2. J(w) = Σ α_k Ψ_k(w) (eq. 5) with Y_mod = Y_sim(w) + b_i, the paths b_i
    drawn once from the run's seed (common random numbers);
@@ -30,10 +30,10 @@ from suspid import registry
 from suspid.config import Config, build_simulator, identified_bounds, raise_validation_error
 from suspid.errors import ConfigError, SimulatorError
 from suspid.interfaces import Response, Simulator, TrackSegment
-from suspid.ledger import Evaluation, Ledger, evaluation_key, stable_hash
-from suspid.seeds import rng as named_rng
-from suspid.seeds import seed_for
-from suspid.threads import single_blas_thread
+from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
+from suspid.infra.seeds import rng as named_rng
+from suspid.infra.seeds import seed_for
+from suspid.infra.threads import single_blas_thread
 
 
 def array_digest(*arrays: np.ndarray) -> str:
@@ -116,7 +116,7 @@ def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarra
 def _simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequence[TrackSegment],
                       spectra_options: Any, transform: Callable[[list[Response]], list[Response]] | None = None
                       ) -> tuple[np.ndarray, np.ndarray]:
-    from suspid.spectra import compute_spectra
+    from suspid.method.spectra import compute_spectra
 
     responses = simulator.simulate(w, segments)
     if transform is not None:
@@ -126,7 +126,7 @@ def _simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Seque
 
 def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
     """The synthetic track of one date of a numerical experiment (seeded by the config's seed)."""
-    from suspid.track import synthetic_segments
+    from suspid.data.track import synthetic_segments
 
     options = dict(config.data.track)
     if n_segments is not None:
@@ -146,7 +146,7 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
         channels differ, or a record's duration does not match its segment.
     """
     from suspid.errors import DataError
-    from suspid.track import read_accelerations, read_track
+    from suspid.data.track import read_accelerations, read_track
 
     if track_file is None:
         raise DataError(f"{measurements}: measured accelerations need the track measured with them "
@@ -179,13 +179,13 @@ def check_sections(config: Config) -> None:
 
     :raises ConfigError: one line naming the file and the key.
     """
-    from suspid.design import DesignOptions
-    from suspid.ego import EGOOptions
-    from suspid.experiment import MeasurementOptions, ReferenceOptions
-    from suspid.identifiability import IdentifiabilityOptions
-    from suspid.noise import NoiseOptions
-    from suspid.spectra import SpectraOptions
-    from suspid.track import TrackOptions
+    from suspid.optimize.design import DesignOptions
+    from suspid.optimize.ego import EGOOptions
+    from suspid.data.experiment import MeasurementOptions, ReferenceOptions
+    from suspid.method.identifiability import IdentifiabilityOptions
+    from suspid.method.noise import NoiseOptions
+    from suspid.method.spectra import SpectraOptions
+    from suspid.data.track import TrackOptions
 
     file = str(config.source_file)
     noise = {k: v for k, v in config.noise.items() if k != "path"}
@@ -208,7 +208,7 @@ def validate_data(config: Config) -> int:
     """
     if config.data.source != "measured":
         return 0
-    from suspid.spectra import compute_spectra
+    from suspid.method.spectra import compute_spectra
 
     simulator = build_simulator(config)
     if config.data.measurements is None:
@@ -222,9 +222,9 @@ def validate_data(config: Config) -> int:
 
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
     """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3)."""
-    from suspid.experiment import MeasurementOptions, ReferenceOptions, apply_model_error
-    from suspid.noise import NoiseModel, fit_noise_model
-    from suspid.spectra import SpectraOptions
+    from suspid.data.experiment import MeasurementOptions, ReferenceOptions, apply_model_error
+    from suspid.method.noise import NoiseModel, fit_noise_model
+    from suspid.method.spectra import SpectraOptions
 
     file = str(config.source_file)
     simulator = build_simulator(config)
@@ -283,7 +283,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         w_ref = None
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                                 channels=channels)
-        from suspid.spectra import compute_spectra
+        from suspid.method.spectra import compute_spectra
 
         y_mes, freqs = compute_spectra(responses, spectra_options)
         if not noise_path:
@@ -306,7 +306,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
 
 def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:
     """α_k of eq. 5 from ``objective.weights``, normalised to sum 1; default 1/n."""
-    from suspid.objective_function import validate_weights
+    from suspid.method.objective import validate_weights
 
     try:
         return validate_weights(config.objective.weights, channels)
@@ -318,7 +318,7 @@ def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:
 def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
                  y_mes: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra)."""
-    from suspid.objective_function import ObjectiveFunction
+    from suspid.method.objective import ObjectiveFunction
 
     fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
                            problem.b if b is None else b, weights=problem.weights, channels=problem.channels)
@@ -452,8 +452,8 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     :param fresh: forget the ledger of a previous run in the same directory.
     :param progress: show rich progress bars.
     """
-    from suspid.design import DesignOptions, from_unit, make_design
-    from suspid.ego import EGOOptions, run_ego
+    from suspid.optimize.design import DesignOptions, from_unit, make_design
+    from suspid.optimize.ego import EGOOptions, run_ego
 
     t_start = time.perf_counter()
     file = str(config.source_file)
@@ -482,7 +482,7 @@ def run(config: Config, *, fresh: bool = False, progress: bool = True,
     U0 = make_design(design_opts, problem.q)
     X0 = from_unit(U0, problem.bounds)
     ei_history: list[float] = []
-    # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.threads)
+    # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.infra.threads)
     with make_progress(progress) as bars, single_blas_thread():
         design_task = bars.add_task("initial design", total=len(X0), status="")
         j_max = -np.inf
@@ -608,7 +608,7 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
 def analyse(problem: Problem, ledger: Ledger, ego, ei_history: list[float], config: Config) -> dict[str, Any]:
     """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict."""
-    from suspid.identifiability import IdentifiabilityOptions, assess
+    from suspid.method.identifiability import IdentifiabilityOptions, assess
 
     opts = IdentifiabilityOptions.model_validate(config.identifiability)
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
@@ -694,7 +694,7 @@ def _figure_channel(config: Config, channels: Sequence[str]) -> int:
 
 def write_report(run_dir: Path, problem: Problem, ego, result: dict[str, Any], ei_history: list[float]) -> Path:
     """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot."""
-    from suspid.report import figure_convergence, figure_parameters, figure_spectra, markdown_table
+    from suspid.workflows.report import figure_convergence, figure_parameters, figure_spectra, markdown_table
 
     config = problem.config
     names = problem.names

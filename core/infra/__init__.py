@@ -1,0 +1,1 @@
+"""Infrastructure that the workflows share: the run ledger, seeded random streams, BLAS threads, files."""
