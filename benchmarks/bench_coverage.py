@@ -35,13 +35,13 @@ def main() -> None:
                         help="more config overrides, e.g. identifiability.bootstrap=paired")
     args = parser.parse_args()
 
-    from suspid.workflows.study import run_study
+    import suspid
 
     overrides = [f"output.dir={args.out}", "ego.refine={enabled: true}",
                  f"study.seeds=[{', '.join(str(s) for s in range(1, args.seeds + 1))}]",
                  "study.variants=[{name: likelihood, set: {objective.plugin: likelihood}}, "
                  "{name: overlap, set: {objective.plugin: overlap}}]", *args.sets]
-    study_dir = run_study(args.config, overrides, progress=False, log=lambda s: None)
+    study_dir = suspid.study(args.config, overrides).study_dir
 
     import json
 

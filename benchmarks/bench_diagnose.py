@@ -32,13 +32,13 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from test_diagnose import CASES, KMH, _config, _main_error, _shrink  # noqa: E402
 
-from suspid.workflows.diagnose import run_diagnose  # noqa: E402
+import suspid  # noqa: E402
 
 
 def _run(path: Path) -> tuple[dict, float]:
     t0 = time.perf_counter()
-    out = run_diagnose(path, progress=False, log=lambda s: None)
-    return json.loads((out / "diagnosis.json").read_text()), time.perf_counter() - t0
+    out = suspid.diagnose(path)
+    return out.diagnosis, time.perf_counter() - t0
 
 
 def _located(d: dict, frequency: float | None) -> str:

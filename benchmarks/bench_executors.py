@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from suspid import registry
-from suspid.workflows.pipeline import simulate_spectra_task
+from suspid.workflows.evaluation import simulate_spectra_task
 from suspid.data.track import synthetic_segments
 
 EXPERIMENT = """\
@@ -69,7 +69,7 @@ def design_speedup(n_points: int, length_m: float) -> None:
 
 def batch_ego(m1: int) -> None:
     from suspid.config import load_config
-    from suspid.workflows.pipeline import run
+    from suspid.workflows.identify import run
 
     print(f"\n2. batch EGO, numerical experiment (q = 3, 16 segments, m0 = 12, m1 = {m1}), processes executor")
     print(f"{'batch':>5} {'calls':>6} {'batches':>8} {'wall (s)':>9} {'max error %':>12}")

@@ -30,8 +30,9 @@ from scipy.optimize import minimize
 
 
 def check(run_dir: Path, maxfev: int) -> None:
-    from suspid.workflows import pipeline
     from suspid.config import load_config
+    from suspid.workflows.evaluation import evaluate
+    from suspid.workflows.problem import build_problem
     from suspid.infra.ledger import Ledger
     from suspid.infra.threads import single_blas_thread
 
@@ -39,11 +40,11 @@ def check(run_dir: Path, maxfev: int) -> None:
     with tempfile.TemporaryDirectory() as tmp, single_blas_thread():
         shutil.copy(run_dir / "ledger.sqlite", Path(tmp) / "ledger.sqlite")
         ledger = Ledger(Path(tmp) / "ledger.sqlite")
-        problem = pipeline.build_problem(load_config(run_dir / "config.yaml"), ledger)
+        problem = build_problem(load_config(run_dir / "config.yaml"), ledger)
         names = problem.names
 
         def J(u: np.ndarray) -> float:
-            return pipeline.evaluate(problem, ledger, problem.from_unit(np.clip(u, 0.0, 1.0))).J
+            return evaluate(problem, ledger, problem.from_unit(np.clip(u, 0.0, 1.0))).J
 
         def climb(u0: np.ndarray) -> tuple[np.ndarray, float, int]:
             simplex = u0 + 0.03 * np.vstack([np.zeros(len(u0)), np.eye(len(u0))])

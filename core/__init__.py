@@ -1,8 +1,17 @@
-"""suspid: identification of high-speed train suspension parameters.
+"""suspid: identification of high-speed train suspension parameters from on-track accelerations.
 
-The method follows the paper in ``shared/reference/paper.txt``: spectra of
-accelerations (eq. 1-2), an additive Gaussian noise model (eq. 3), a kernel
-density objective (eq. 5-8) maximised by EGO on a Kriging metamodel (eq. 9).
+The method is that of the paper "Inverse identification of mechanical
+parameters of high-speed train suspensions submitted to random track
+irregularities": spectra of accelerations (eq. 1-2), an additive Gaussian
+noise model (eq. 3), a kernel density objective (eq. 5-8) maximised by EGO on
+a Kriging metamodel (eq. 9); ``docs/method.md`` maps each equation to its module.
+
+The Python API (:mod:`suspid.api`), what every command of the ``suspid``
+command line does::
+
+    import suspid
+    r = suspid.identify("configs/quickstart.yaml")
+    print(r.errors_percent)
 
 Plugin authors import :data:`hookimpl` from here::
 
@@ -28,4 +37,10 @@ try:
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
-__all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__"]
+# The API comes last: its modules import the markers above.
+from suspid.api import (Validation, diagnose, identify, load_config, modes, monitor, segments,  # noqa: E402
+                        simulate, study, validate)
+from suspid.workflows.identify import IdentificationResult  # noqa: E402
+
+__all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
+           "diagnose", "identify", "load_config", "modes", "monitor", "segments", "simulate", "study", "validate"]

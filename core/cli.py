@@ -18,7 +18,9 @@ from rich.console import Console
 from rich.table import Table
 
 import suspid
-from suspid.errors import SuspidError
+from suspid import api, registry
+from suspid.errors import ConfigError, SuspidError
+from suspid.workflows.simulate import format_modes
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
@@ -45,8 +47,6 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 @app.command()
 def plugins() -> None:
     """List every plugin: kind, name, entry point, distribution, version, module."""
-    from suspid import registry
-
     rows, failures = registry.plugins()
     if not console.is_terminal:
         console.width = 240  # keep rows whole when piped
@@ -64,17 +64,15 @@ def plugins() -> None:
 
 @app.command()
 def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
-    """Check a config (plugins, options, parameters, data files); exit 0 when valid."""
-    from suspid.config import load_config
+    """Check a config (every section, plugins' options, parameters, data files, study/monitor/diagnose); exit 0 when valid.
 
-    from suspid.workflows.pipeline import check_sections, validate_data
-
-    cfg = load_config(config, set_ or [])
-    check_sections(cfg)
-    n = validate_data(cfg)
-    data = f", {n} measured segments" if n else ""
+    Everything that needs no simulation is checked: what this accepts, run will not reject for the config's sake.
+    """
+    checked = api.validate(config, set_ or [])
+    cfg = checked.config
+    data = f", {checked.n_measured_segments} measured segments" if checked.n_measured_segments else ""
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "
-                  f"surrogate {cfg.surrogate.plugin}{data})")
+                  f"surrogate {cfg.surrogate.plugin}, executor {cfg.executor.plugin}{data})")
 
 
 @app.command()
@@ -86,13 +84,8 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     Interrupt with Ctrl-C at any time; running the same command again resumes
     from the ledger without recomputing finished simulations.
     """
-    from suspid.config import load_config
-    from suspid.workflows.pipeline import run as run_pipeline
-
-    cfg = load_config(config, set_ or [])
-    out = run_pipeline(cfg, fresh=fresh, progress=not quiet,
-                       log=_log(quiet))
-    _print_result(out.result, out.run_dir)
+    out = api.identify(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    _print_result(out.to_dict(), out.run_dir)
 
 
 @app.command()
@@ -105,11 +98,8 @@ def monitor(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     noise model of the reference date is reused at every date; each date runs
     in <run dir>/dates/<date>/ with its own ledger, so running again resumes.
     """
-    from suspid.workflows.monitor import run_monitor
-
-    out = run_monitor(config, set_ or [], fresh=fresh, progress=not quiet,
-                      log=_log(quiet))
-    console.print((out / "monitor.md").read_text(), markup=False, highlight=False)
+    out = api.monitor(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    console.print((out.monitor_dir / "monitor.md").read_text(encoding="utf-8"), markup=False, highlight=False)
 
 
 @app.command()
@@ -121,37 +111,17 @@ def diagnose(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     Writes diagnosis.json, diagnosis.md (with PNG maps), augmented.yaml and the
     identifications before/ and after/ in the run directory; see docs/diagnose.md.
     """
-    from suspid.workflows.diagnose import run_diagnose
-
-    out = run_diagnose(config, set_ or [], fresh=fresh, progress=not quiet,
-                       log=_log(quiet))
-    console.print((out / "diagnosis.md").read_text(), markup=False, highlight=False)
+    out = api.diagnose(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    console.print((out.out_dir / "diagnosis.md").read_text(encoding="utf-8"), markup=False, highlight=False)
 
 
-def _segments(cfg):
-    """The configured segments: the measurement-date synthetic track, or the measured track file."""
-    from suspid.workflows.pipeline import synthetic_track
-    from suspid.data.track import read_track
-
-    if cfg.data.source == "experiment":
-        return synthetic_track(cfg, "measurement")
-    if cfg.data.track_file is None:
-        from suspid.errors import ConfigError
-
-        raise ConfigError("measured data need data.track_file", file=str(cfg.source_file), key="data.track_file")
-    return read_track(cfg.data.track_file)
-
-
-def _parse_params(items: list[str] | None, simulator) -> dict[str, float]:
-    from suspid.errors import ConfigError
-
-    known = {p.name for p in simulator.parameters()}
+def _parse_params(items: list[str] | None) -> dict[str, float]:
+    """``--param name=value`` items as a mapping (names are checked against the simulator by the API)."""
     out = {}
     for item in items or []:
         name, sep, value = item.partition("=")
-        if not sep or name not in known:
-            raise ConfigError(f"--param expects name=value with a parameter of the simulator "
-                              f"({', '.join(sorted(known))}), got '{item}'")
+        if not sep or not name:
+            raise ConfigError(f"--param expects name=value, got '{item}'")
         try:
             out[name] = float(value)
         except ValueError:
@@ -165,16 +135,8 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
              param: Optional[List[str]] = typer.Option(None, "--param", help="name=value in SI units (repeatable); "
                                                        "other parameters nominal.")) -> None:
     """Simulate the nominal (or given) parameters on the configured segments; writes simulation.h5 and a PNG."""
-    from suspid.config import build_simulator, load_config
-    from suspid.workflows.simulate import write_simulation
-    from suspid.method.spectra import compute_spectra
-
-    cfg = load_config(config, set_ or [])
-    sim = build_simulator(cfg)
-    w = _parse_params(param, sim)
-    out_dir = out or cfg.run_dir() / "simulation"
-    path = write_simulation(sim, _segments(cfg), w, out_dir, lambda rs: compute_spectra(rs, cfg.spectra))
-    console.print(f"wrote {path} and {out_dir / 'spectra.png'}")
+    path = api.simulate(config, set_ or [], w=_parse_params(param), out_dir=out)
+    console.print(f"wrote {path} and {path.parent / 'spectra.png'}")
 
 
 @app.command()
@@ -183,15 +145,10 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
-    from suspid.config import build_simulator, load_config
-    from suspid.workflows.simulate import format_modes, modes_report
-
-    cfg = load_config(config, set_ or [])
-    sim = build_simulator(cfg)
-    out_dir = out or cfg.run_dir()
-    report = modes_report(sim, None if speed_kmh is None else speed_kmh / 3.6, out_dir)
+    report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6, out_dir=out)
     console.print(format_modes(report, max_hz), markup=False, highlight=False)
-    console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(out_dir) / 'modes.json'}")
+    where = out if out is not None else api.load_config(config, set_ or []).run_dir()
+    console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")
 
 
 @app.command()
@@ -199,11 +156,8 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           fresh: bool = typer.Option(False, "--fresh", help="Start every variant over."),
           quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
     """Run the variants of the config's study: section; writes study.csv, study.md and a Figure 2 plot."""
-    from suspid.workflows.study import run_study
-
-    out = run_study(config, set_ or [], fresh=fresh, progress=not quiet,
-                    log=_log(quiet))
-    console.print((out / "study.md").read_text())
+    out = api.study(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    console.print((out.study_dir / "study.md").read_text(encoding="utf-8"))
 
 
 def _log(quiet: bool):
@@ -238,9 +192,12 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     warnings.showwarning = _show_warning
+    interrupted = False
     try:
-        app(args=argv, prog_name="suspid", standalone_mode=False)
-        code = 0
+        # Without standalone mode, typer catches Ctrl-C itself and *returns* 130 instead of raising.
+        returned = app(args=argv, prog_name="suspid", standalone_mode=False)
+        code = returned if isinstance(returned, int) else 0
+        interrupted = code == 130
     except SuspidError as exc:
         if debug:
             raise
@@ -252,8 +209,10 @@ def main(argv: list[str] | None = None) -> int:
         exc.show()
         code = exc.exit_code
     except (KeyboardInterrupt, click.exceptions.Abort):
-        err_console.print("interrupted: finished evaluations are kept in the run ledger; run again to resume")
-        code = 130
+        interrupted, code = True, 130
+    if interrupted:
+        err_console.print("interrupted: finished evaluations are kept in the run ledger; "
+                          "run the same command to resume")
     sys.exit(code)
 
 

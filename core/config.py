@@ -21,128 +21,68 @@ from __future__ import annotations
 
 import copy
 from pathlib import Path
-from typing import Annotated, Any, Literal, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
+import numpy as np
 import yaml
-from pydantic import (AfterValidator, BaseModel, ConfigDict, Field, ValidationError,
-                      ValidationInfo, field_validator)
+from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_validator
 
 from suspid import registry
 from suspid.errors import ConfigError, UnknownPluginError
+from suspid.infra.seeds import seed_for
+from suspid.method.identifiability import IdentifiabilityOptions
+from suspid.method.objective import validate_weights
+from suspid.method.spectra import SpectraOptions
+from suspid.optimize.design import DesignOptions
+from suspid.optimize.ego import EGOOptions
+from suspid.options import Section, against, key_error, raise_validation_error
+from suspid.sections import (DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
+                             ObjectiveSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
+                             StudyOptions, SurrogateSection)
 
 
-# -- paths relative to the config file -------------------------------------------
-def _against(path: str | Path, base: str | Path | None) -> Path:
-    """``path`` with ``~`` expanded; a relative path is taken from the folder ``base`` when given."""
-    p = Path(path).expanduser()
-    return Path(base) / p if base is not None and not p.is_absolute() else p
-
-
-def _resolve_path(value: Path, info: ValidationInfo) -> Path:
-    return _against(value, (info.context or {}).get("base_dir") if info.context is not None else None)
-
-
-ConfigPath = Annotated[Path, AfterValidator(_resolve_path)]
-"""A path field: relative values resolve against the folder of the config file."""
-
-
-class Section(BaseModel):
-    """Base of config sections: unknown keys are errors."""
-
-    model_config = ConfigDict(extra="forbid")
-
-
-class PluginSection(Section):
-    """A section that selects a plugin by registered name."""
-
-    plugin: str
-    options: dict[str, Any] = Field(default_factory=dict)
-
-
-class SimulatorSection(PluginSection):
-    plugin: str = "exudyn-train"
-
-
-class ObjectiveSection(PluginSection):
-    plugin: str = "overlap"
-    weights: list[float] | dict[str, float] | None = Field(
-        default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; default 1/n")
-
-
-class SurrogateSection(PluginSection):
-    plugin: str = "gpy-kriging"
-
-
-class ExecutorSection(PluginSection):
-    plugin: str = "serial"
-
-
-class ParameterBounds(Section):
-    """Bounds of one identified parameter (SI units); missing bounds keep the simulator's."""
-
-    lower: float | None = None
-    upper: float | None = None
-
-
-class OutputSection(Section):
-    dir: ConfigPath | None = Field(default=None, description="run directory; default runs/<name>/")
-    figure_channel: str | None = Field(default=None, description="channel of Figure 1; default: first carbody vertical")
-
-
-class DataSection(Section):
-    """Where the measurements come from.
-
-    ``source: experiment`` builds the numerical experiment of paper §3.3 on a
-    synthetic track; ``source: measured`` reads measured accelerations and the
-    matching track geometry from files.
-    """
-
-    source: Literal["experiment", "measured"] = "experiment"
-    track: dict[str, Any] = Field(default_factory=dict, description="synthetic track options (experiment)")
-    w_ref: dict[str, float] = Field(default_factory=dict, description="known 'damaged' parameters (experiment)")
-    reference: dict[str, Any] = Field(default_factory=dict,
-                                      description="how the reference-date measurements for the noise model are made")
-    measurement: dict[str, Any] = Field(
-        default_factory=dict, description="how the measurement-date 'measurements' are simulated (experiment), "
-        "e.g. simulator_options with a hidden effect")
-    measurements: ConfigPath | None = Field(default=None, description="measured data file or folder")
-    track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
-
-    @field_validator("measurements", "track_file")
-    @classmethod
-    def _exists(cls, value: Path | None) -> Path | None:
-        if value is not None and not value.exists():
-            raise ValueError(f"file not found: {value}")
-        return value
+def _with_seed(options: BaseModel, seed: int) -> BaseModel:
+    """``options`` with ``seed`` set to ``seed`` unless the user gave one (seeds derive from the run seed)."""
+    if "seed" in type(options).model_fields and "seed" not in options.model_fields_set:
+        return options.model_copy(update={"seed": seed})
+    return options
 
 
 class Config(Section):
-    """The whole run configuration (validated)."""
+    """The whole run configuration, every section validated and typed."""
 
     name: str = Field(default="suspid-run", min_length=1, pattern=r"^[A-Za-z0-9_.\-]+$")
-    seed: int = Field(default=0, ge=0)
+    seed: int = Field(default=0, ge=0, lt=2**32)
     simulator: SimulatorSection = Field(default_factory=SimulatorSection)
     parameters: dict[str, ParameterBounds | None] = Field(default_factory=dict)
     data: DataSection = Field(default_factory=DataSection)
-    spectra: dict[str, Any] = Field(default_factory=dict)
-    noise: dict[str, Any] = Field(default_factory=dict)
+    spectra: SpectraOptions = Field(default_factory=SpectraOptions)
+    noise: NoiseSection = Field(default_factory=NoiseSection)
     objective: ObjectiveSection = Field(default_factory=ObjectiveSection)
     surrogate: SurrogateSection = Field(default_factory=SurrogateSection)
-    design: dict[str, Any] = Field(default_factory=dict)
-    ego: dict[str, Any] = Field(default_factory=dict)
+    design: DesignOptions = Field(default_factory=DesignOptions)
+    ego: EGOOptions = Field(default_factory=EGOOptions)
     executor: ExecutorSection = Field(default_factory=ExecutorSection)
-    identifiability: dict[str, Any] = Field(default_factory=dict)
-    study: dict[str, Any] = Field(default_factory=dict)
-    monitor: dict[str, Any] = Field(default_factory=dict)
-    diagnose: dict[str, Any] = Field(default_factory=dict)
+    identifiability: IdentifiabilityOptions = Field(default_factory=IdentifiabilityOptions)
+    study: StudyOptions | None = None
+    monitor: MonitorOptions | None = None
+    diagnose: DiagnoseOptions = Field(default_factory=DiagnoseOptions)
     output: OutputSection = Field(default_factory=OutputSection)
 
     # set by load_config, not by the user
     source_file: Path | None = Field(default=None, exclude=True)
+    _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)  # YAML line of each key path
+
+    @model_validator(mode="after")
+    def _derive_seeds(self) -> "Config":
+        """Sections with their own ``seed`` get one derived from the run seed unless the config gives it."""
+        self.design = _with_seed(self.design, seed_for(self.seed, "design"))
+        self.ego = _with_seed(self.ego, seed_for(self.seed, "ego"))
+        return self
 
     def resolve(self, path: str | Path) -> Path:
         """``path`` with ``~`` expanded; relative paths are taken from the config file's folder."""
-        return _against(path, self.source_file.parent if self.source_file is not None else None)
+        return against(path, self.source_file.parent if self.source_file is not None else None)
 
     def run_dir(self) -> Path:
         """The run directory: ``output.dir`` or ``runs/<name>/`` beside the config."""
@@ -150,6 +90,15 @@ class Config(Section):
             return self.output.dir
         base = self.source_file.parent if self.source_file else Path.cwd()
         return base / "runs" / self.name
+
+    def error(self, message: str, key: str) -> ConfigError:
+        """A one-line :class:`ConfigError` naming this config's file, ``key`` and its YAML line."""
+        return key_error(message, key, self.file, self._lines)
+
+    @property
+    def file(self) -> str:
+        """The config file, for error messages."""
+        return str(self.source_file) if self.source_file else "<config>"
 
 
 # -- YAML with line numbers ------------------------------------------------------
@@ -233,55 +182,6 @@ def apply_overrides(data: dict[str, Any], overrides: Sequence[str], file: str) -
     return data
 
 
-# -- error translation -----------------------------------------------------------
-def _allowed_keys(model: type[BaseModel], loc: tuple) -> list[str] | None:
-    """Field names of the (nested) model at ``loc``, for 'unknown key' messages."""
-    for part in loc:
-        field = model.model_fields.get(str(part)) if isinstance(part, str) else None
-        if field is None:
-            return None
-        annotation = field.annotation
-        candidates = [annotation, *getattr(annotation, "__args__", ())]
-        nested = [c for c in candidates if isinstance(c, type) and issubclass(c, BaseModel)]
-        if not nested:
-            return None
-        model = nested[0]
-    return sorted(model.model_fields)
-
-
-def _describe(error: dict[str, Any], model: type[BaseModel], loc: tuple) -> str:
-    if error["type"] == "extra_forbidden":
-        allowed = _allowed_keys(model, loc[:-1])
-        return "unknown key" + (f"; expected one of: {', '.join(allowed)}" if allowed else "")
-    msg = error["msg"]
-    if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
-    if error["type"] not in {"missing"} and "input" in error and not isinstance(error["input"], (dict, list)):
-        msg += f" (got {error['input']!r})"
-    return msg
-
-
-def raise_validation_error(exc: ValidationError, model: type[BaseModel], file: str, lines: Mapping[tuple, int],
-                           prefix: tuple = ()) -> None:
-    """Raise the first error of a pydantic ``exc`` as a one-line :class:`ConfigError`.
-
-    :param model: the model that was validated (for the list of expected keys).
-    :param lines: YAML line numbers by key path (:func:`load_yaml`), for ``file:line``.
-    :param prefix: the key path of the validated section inside the config file.
-    """
-    error = exc.errors()[0]
-    loc = tuple(error["loc"])
-    full = prefix + loc
-    line = None
-    for n in range(len(full), 0, -1):
-        if full[:n] in lines:
-            line = lines[full[:n]]
-            break
-    more = len(exc.errors()) - 1
-    detail = _describe(error, model, loc) + (f" (+{more} more error{'s' * (more > 1)})" if more else "")
-    raise ConfigError(detail, file=file, key=".".join(map(str, full)) or None, line=line) from None
-
-
 def override_arguments(mapping: Mapping[str, Any]) -> list[str]:
     """``{"key.path": value}`` as ``--set`` arguments ``["key.path=<YAML flow value>"]`` for :func:`load_config`."""
     return [f"{k}={yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}"
@@ -289,66 +189,123 @@ def override_arguments(mapping: Mapping[str, Any]) -> list[str]:
 
 
 def validate_options(cls: type, options: Mapping[str, Any], *, file: str, key: str,
-                     lines: Mapping[tuple, int] | None = None, base_dir: Path | None = None) -> dict[str, Any]:
+                     lines: Mapping[tuple, int] | None = None, base_dir: Path | None = None,
+                     seed: int | None = None) -> dict[str, Any]:
     """Validate a plugin's ``options`` with its ``Options`` model; returns the validated options.
 
     Plugins without an ``Options`` model get their options back unchanged.
+
+    :param seed: for an ``Options`` model with a ``seed`` field that the user left out: the
+        seed derived from the run seed (so that every random draw follows the config's seed).
     """
     model = getattr(cls, "Options", None)
     if model is None:
         return dict(options)
+    options = dict(options)
+    if seed is not None and "seed" in model.model_fields and "seed" not in options:
+        options["seed"] = seed
     try:
-        validated = model.model_validate(dict(options), context={"base_dir": base_dir})
+        validated = model.model_validate(options, context={"base_dir": base_dir})
     except ValidationError as exc:
         raise_validation_error(exc, model, file, lines or {}, tuple(key.split(".")))
     return validated.model_dump()  # plain data: hashable identity, picklable, YAML-dumpable
 
 
-def load_config(path: str | Path, overrides: Sequence[str] = (), *, check_plugins: bool = True) -> Config:
-    """Read, override and validate a config file.
+def load_config(source: str | Path | Mapping[str, Any], overrides: Sequence[str] = (), *,
+                check_plugins: bool = True, base_dir: str | Path | None = None) -> Config:
+    """Read, override and validate a config: every section is resolved into its typed model.
 
-    :param path: the YAML file.
-    :param overrides: ``key.path=value`` strings from ``--set``.
+    :param source: the YAML file, or a mapping with the same content (a notebook's dict).
+    :param overrides: ``key.path=value`` strings, as ``--set`` takes them.
     :param check_plugins: also resolve plugins by name, validate their options
-        and check the parameter names against the simulator.
+        (executor included), check the parameter names against the simulator,
+        the channel weights and the figure channel.
+    :param base_dir: the folder relative paths of a mapping resolve against
+        (default: the current folder); a file's own folder otherwise.
     :raises ConfigError: on the first problem, naming file, key and line.
     """
-    path = Path(path)
-    file = str(path)
     if check_plugins:
         registry.registry()  # plugin load errors first (strict mode), whatever the config says
-    data, lines = read_yaml(path)
+    if isinstance(source, Mapping):
+        file, path, lines = "<mapping>", None, {}
+        data = copy.deepcopy(dict(source))
+        folder = Path(base_dir).resolve() if base_dir is not None else Path.cwd()
+    else:
+        path = Path(source)
+        file = str(path)
+        data, lines = read_yaml(path)
+        folder = path.resolve().parent
     data = apply_overrides(data, overrides, file)
-    base_dir = path.resolve().parent
     try:
-        config = Config.model_validate(data, context={"base_dir": base_dir})
+        config = Config.model_validate(data, context={"base_dir": folder})
     except ValidationError as exc:
         raise_validation_error(exc, Config, file, lines)
-    config.source_file = path.resolve()
+    config.source_file = path.resolve() if path is not None else None
+    config._lines = lines
     if check_plugins:
-        check_config_plugins(config, lines)
+        check_config_plugins(config)
     return config
 
 
-def plugin_class(kind: str, section: PluginSection, key: str, file: str, lines: Mapping[tuple, int] = {}) -> type:
+def plugin_class(kind: str, section: PluginSection, key: str, config: Config) -> type:
     """Resolve a plugin section's name to its class, or a ConfigError listing the available ones."""
     try:
         return registry.get(kind, section.plugin)
     except UnknownPluginError as exc:
-        raise ConfigError(str(exc), file=file, key=f"{key}.plugin", line=lines.get((key, "plugin"))) from None
+        raise config.error(str(exc), f"{key}.plugin") from None
 
 
-def check_config_plugins(config: Config, lines: Mapping[tuple, int] = {}) -> None:
-    """Resolve every plugin by name, validate its options, check parameter names and bounds."""
-    file = str(config.source_file) if config.source_file else "<config>"
+def check_config_plugins(config: Config) -> None:
+    """Resolve every plugin by name and validate its options; check parameters, weights, figure channel.
+
+    Plugins' options become validated plain data (workers receive them as they are).
+    A plugin whose ``Options`` has a ``seed`` gets one derived from the run seed
+    unless the config gives it.
+    """
     base_dir = config.source_file.parent if config.source_file else None
-    for kind, key in (("simulator", "simulator"), ("objective", "objective"), ("surrogate", "surrogate")):
-        section: PluginSection = getattr(config, key)
-        cls = plugin_class(kind, section, key, file, lines)
-        section.options = validate_options(cls, section.options, file=file, key=f"{key}.options",
-                                           lines=lines, base_dir=base_dir)
+    for kind in ("simulator", "objective", "surrogate", "executor"):
+        section: PluginSection = getattr(config, kind)
+        cls = plugin_class(kind, section, kind, config)
+        section.options = validate_options(cls, section.options, file=config.file, key=f"{kind}.options",
+                                           lines=config._lines, base_dir=base_dir,
+                                           seed=seed_for(config.seed, kind))
+    sim_cls = type(build_simulator(config))
+    for date in ("reference", "measurement"):  # the simulator of a date of the numerical experiment
+        extra = getattr(config.data, date).simulator_options
+        if extra:
+            validate_options(sim_cls, dict(config.simulator.options) | extra, file=config.file,
+                             key=f"data.{date}.simulator_options", lines=config._lines, base_dir=base_dir)
     simulator = build_simulator(config)
-    check_parameters(config, simulator, lines)
+    check_parameters(config, simulator)
+    channels = simulator.channels()
+    channel_weights(config, channels)
+    figure_channel(config, channels)
+    for i, name in enumerate(config.diagnose.effects or []):
+        if name not in registry.names("effect"):
+            raise config.error(f"unknown effect '{name}'; effects: {', '.join(registry.names('effect'))}",
+                               f"diagnose.effects.{i}")
+
+
+def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:
+    """α_k of eq. 5 from ``objective.weights``, ``(n_channels,)`` normalised to sum 1; default 1/n."""
+    try:
+        return validate_weights(config.objective.weights, channels)
+    except ConfigError as exc:
+        raise config.error(exc.detail, "objective.weights") from None
+
+
+def figure_channel(config: Config, channels: Sequence[str]) -> int:
+    """Index of the channel of Figure 1: ``output.figure_channel``, or the first carbody vertical one."""
+    wanted = config.output.figure_channel
+    if wanted is not None:
+        if wanted not in channels:
+            raise config.error(f"unknown channel '{wanted}'; channels are {', '.join(channels)}",
+                               "output.figure_channel")
+        return list(channels).index(wanted)
+    for i, c in enumerate(channels):
+        if "carbody" in c and "vertical" in c:
+            return i
+    return 0
 
 
 def build_simulator(config: Config):
@@ -357,9 +314,9 @@ def build_simulator(config: Config):
     return cls(**config.simulator.options)
 
 
-def check_parameters(config: Config, simulator, lines: Mapping[tuple, int] = {}) -> None:
+def check_parameters(config: Config, simulator) -> None:
     """Identified parameter names must be the simulator's; lower < upper after defaults."""
-    file = str(config.source_file) if config.source_file else "<config>"
+    file, lines = config.file, config._lines
     known = {p.name: p for p in simulator.parameters()}
     for group, names in (("parameters", config.parameters), ("data.w_ref", config.data.w_ref)):
         for name in names:

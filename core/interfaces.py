@@ -1,6 +1,6 @@
 """Small interfaces for the three plugin kinds, with their shapes and units.
 
-Conventions (``shared/CONVENTIONS.md``): constructors store their options and
+Conventions (those of scikit-learn's estimators): constructors store their options and
 do no work; methods work; fitted state ends in ``_``. A plugin class may
 declare ``Options``, a pydantic model of its ``options:`` section, which the
 config layer validates with key paths (``simulator.options.fs``) before the

@@ -1,6 +1,6 @@
 """Plugin discovery and the registry of simulators, objectives and surrogates.
 
-Loading is fixed and isolated (CONVENTIONS.md, 7):
+Loading is fixed and isolated (one broken plugin never takes the command line down):
 
 1. every entry point of the group ``suspid`` is loaded on its own, sorted by
    name; a failure is a :class:`PluginWarning` naming the entry point and its

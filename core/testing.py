@@ -1,4 +1,4 @@
-"""Conformance checks for plugin authors (CONVENTIONS.md, 10).
+"""Conformance checks for plugin authors (in the spirit of scikit-learn's ``check_estimator``).
 
 Call them from your plugin's test suite::
 

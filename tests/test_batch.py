@@ -62,7 +62,7 @@ ego: {max_iter: 4, batch: 2}
 def test_parallel_executor_gives_the_serial_J_values(tmp_path, executor):
     from suspid.config import load_config
     from suspid.infra.ledger import Ledger
-    from suspid.workflows.pipeline import run
+    from suspid.workflows.identify import run
 
     cfg = tmp_path / "par.yaml"
     cfg.write_text(SMALL)

@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 from suspid.cli import main
-from suspid.config import ConfigPath, Section, load_config
+from suspid.config import load_config
+from suspid.options import ConfigPath, Section
 
 GOOD = """\
 name: qc

@@ -23,6 +23,8 @@ import numpy as np
 import pytest
 import yaml
 
+import suspid
+
 from conftest import run_cli
 
 KMH = 1 / 3.6
@@ -102,7 +104,8 @@ def test_locate_finds_a_broad_shift_and_a_narrow_line():
 
 
 def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
-    from suspid.workflows.diagnose import Candidate, DiagnoseOptions, decide
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose import Candidate, decide
 
     class Map:
         flagged = np.array([True, False])
@@ -146,10 +149,10 @@ def _config(tmp_path: Path, name: str, hidden: list, *, speed_kmh=300.0, fs=100.
 
 
 def _diagnose(path: Path) -> dict:
-    from suspid.workflows.diagnose import run_diagnose
-
-    out = run_diagnose(path, progress=False, log=lambda s: None)
-    return json.loads((out / "diagnosis.json").read_text())
+    out = suspid.diagnose(path)
+    saved = json.loads((out.out_dir / "diagnosis.json").read_text())
+    assert saved == out.diagnosis
+    return saved
 
 
 def _main_error(d: dict, name: str, truth: float) -> float:
@@ -241,7 +244,6 @@ def test_null_case_names_nothing(tmp_path):
 
 
 def test_diagnose_section_errors_name_the_key(tmp_path):
-    from suspid.workflows.diagnose import run_diagnose
     from suspid.errors import ConfigError
 
     path = _config(tmp_path, "bad", [])
@@ -249,13 +251,13 @@ def test_diagnose_section_errors_name_the_key(tmp_path):
     cfg["diagnose"]["alpha"] = 2.0
     path.write_text(yaml.safe_dump(cfg))
     with pytest.raises(ConfigError, match="diagnose.alpha"):
-        run_diagnose(path, progress=False, log=lambda s: None)
+        suspid.diagnose(path)
     cfg["diagnose"] = {"effects": ["bending"]}
     cfg["data"]["measurement"] = {"simulator_options": {"effects": [{"name": "carbody-bending",
                                                                       "frequency_hz": 40.0}]}}
     path.write_text(yaml.safe_dump(cfg))
     with pytest.raises(ConfigError, match=r"data.measurement.simulator_options.effects.0.frequency_hz"):
-        run_diagnose(path, progress=False, log=lambda s: None)
+        suspid.diagnose(path)
 
 
 def test_cli_diagnose(tmp_path):
@@ -318,10 +320,11 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     from dataclasses import replace
 
     from suspid.config import load_config
-    from suspid.workflows.diagnose import DiagnoseOptions, calibrate_null, locate, make_cells, rank_effects
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells, rank_effects
     from suspid.interfaces import TrackSegment
     from suspid.infra.ledger import Ledger
-    from suspid.workflows.pipeline import _simulate_spectra, build_problem
+    from suspid.workflows.problem import build_problem, simulate_spectra
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
 
     cfg = load_config(_config(tmp_path, "speeds", [], n_segments=32))
@@ -331,9 +334,9 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     hidden = ExudynTrain(**(dict(cfg.simulator.options) | {"effects": [
         {"name": "wheel-polygon", "order": 1, "amplitude_m": 1e-4, "wheelsets": [2]}]}))
     rng = np.random.default_rng(7)
-    y_mes = _simulate_spectra(hidden, {}, segments, cfg.spectra)[0] + problem.noise_model.sample(len(segments), rng)
+    y_mes = simulate_spectra(hidden, {}, segments, cfg.spectra)[0] + problem.noise_model.sample(len(segments), rng)
     problem = replace(problem, segments=segments, y_mes=y_mes)
-    y_sim = _simulate_spectra(problem.simulator, {}, segments, cfg.spectra)[0]
+    y_sim = simulate_spectra(problem.simulator, {}, segments, cfg.spectra)[0]
     grid = make_cells(problem.channels, problem.freqs, speeds)
     assert len(grid.speeds) == 2
     null = calibrate_null(grid, problem.noise_model, 100, rng)

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import suspid
+
 from conftest import run_cli
 
 BASE = """\
@@ -56,7 +58,7 @@ def _plan(path: Path, overrides: list[str] = (), noise_model: Path = Path("/nm.n
     from suspid.workflows.monitor import monitor_dates, monitor_options
 
     config = load_config(path, list(overrides))
-    opts = monitor_options(config, path)
+    opts = monitor_options(config)
     return config, opts, monitor_dates(path, list(overrides), config, opts, noise_model)
 
 
@@ -129,13 +131,13 @@ def test_scenario_plan_degrades_one_parameter_with_own_tracks_and_the_reference_
         cfg = p.config
         assert cfg.data.w_ref == pytest.approx({"k_sec_z": nominal["k_sec_z"],
                                                 "c_sec_z": nominal["c_sec_z"] * (1 - p.loss)})
-        assert cfg.noise["path"] == str(tmp_path / "ref.npz")  # never identified again at a date
+        assert cfg.noise.path == tmp_path / "ref.npz"  # never identified again at a date
         assert cfg.output.dir == tmp_path / "runs" / "mon" / "dates" / p.date.isoformat()
-        assert cfg.monitor == {} and cfg.design == config.design
-    seeds = {p.config.data.track["seed"] for p in plans}
+        assert cfg.monitor is None and cfg.design == config.design
+    seeds = {p.config.data.track.seed for p in plans}
     assert len(seeds) == len(plans)  # every date its own track realisations
     _, _, again = _plan(_write(tmp_path, SCENARIO), noise_model=tmp_path / "ref.npz")
-    assert [p.config.data.track["seed"] for p in again] == [p.config.data.track["seed"] for p in plans]
+    assert [p.config.data.track.seed for p in again] == [p.config.data.track.seed for p in plans]
 
 
 def test_scenario_explicit_dates_lose_linearly_in_time(tmp_path):
@@ -155,7 +157,7 @@ def test_campaigns_plan_merges_data_overrides_and_resolves_paths(tmp_path):
         data = p.config.data
         assert data.source == "measured"
         assert data.measurements == tmp_path / f"m{i}" and data.track_file == tmp_path / f"t{i}"
-        assert data.track["n_segments"] == 24 and "seed" not in data.track  # merged key by key, no synthetic seed
+        assert data.track.n_segments == 24 and "seed" not in data.track.model_fields_set  # merged key by key
 
 
 ERRORS = [
@@ -212,14 +214,15 @@ def test_cli_one_line_error(tmp_path):
 def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_else(tmp_path):
     """c_sec_z loses 0, 8, 16, 24, 32, 40 %; its acceptable domain starts at -25 %: the first date with the
     true value outside is the fifth (32 %). The alert must come within one date of it; k_sec_z stays nominal."""
-    from suspid.workflows.monitor import run_monitor
     from suspid.method.noise import NoiseModel
     from suspid.infra.threads import single_blas_thread
 
     path = _write(tmp_path, SCENARIO)
     with single_blas_thread():  # the Kriging fits of tiny matrices: 2x faster on a busy 2-core machine
-        out = run_monitor(path, progress=False, log=lambda s: None)
+        result = suspid.monitor(path)
+    out = result.monitor_dir
     summary = json.loads((out / "monitor.json").read_text())
+    assert summary == result.summary and result.alerts == summary["alerts"]
     expected = 4  # index of 2026-05-15
     assert set(summary["alerts"]) == {"c_sec_z"}, summary["alerts"]
     assert abs(summary["dates"].index(summary["alerts"]["c_sec_z"]) - expected) <= 1, summary["rows"]
@@ -241,15 +244,14 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
 
 
 def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatch):
-    from suspid.workflows import pipeline
-    from suspid.workflows.monitor import run_monitor
+    from suspid.workflows import identify
     from suspid.infra.threads import single_blas_thread
 
     monitor = "monitor:\n  scenario: {parameter: c_sec_z, dates: [2026-01-01, 2026-03-01]}\n"
     small = BASE.replace("n_segments: 24", "n_segments: 8").replace("n_initial: 8", "n_initial: 6") \
         .replace("  k_sec_z: {}\n", "")
     path = _write(tmp_path, monitor, small.replace("max_iter: 10", "max_iter: 2"))
-    real = pipeline.evaluate_many
+    real = identify.evaluate_many
 
     def interrupted(problem, ledger, X_si, executor, on_done=lambda i, ev, reused: None):
         if problem.config.name.endswith("2026-03-01"):  # Ctrl-C after 3 design points of the second date
@@ -257,14 +259,14 @@ def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatc
             raise KeyboardInterrupt
         return real(problem, ledger, X_si, executor, on_done)
 
-    monkeypatch.setattr(pipeline, "evaluate_many", interrupted)
+    monkeypatch.setattr(identify, "evaluate_many", interrupted)
     with single_blas_thread(), pytest.raises(KeyboardInterrupt):
-        run_monitor(path, progress=False, log=lambda s: None)
+        suspid.monitor(path)
     out = tmp_path / "runs" / "mon"
     assert not (out / "monitor.json").exists() and not (out / "dates" / "2026-03-01" / "result.json").exists()
-    monkeypatch.setattr(pipeline, "evaluate_many", real)
+    monkeypatch.setattr(identify, "evaluate_many", real)
     with single_blas_thread():
-        run_monitor(path, progress=False, log=lambda s: None)
+        suspid.monitor(path)
     results = {d: json.loads((out / "dates" / d / "result.json").read_text()) for d in ("2026-01-01", "2026-03-01")}
     assert results["2026-01-01"]["n_simulator_calls_this_session"] == 0  # finished date: all from its ledger
     second = results["2026-03-01"]

@@ -40,7 +40,7 @@ def _write(tmp_path: Path, name: str = "small.yaml", objective: str = "overlap",
 @pytest.mark.parametrize("objective", ["overlap", "likelihood"])
 def test_run_recovers_w_ref(tmp_path, objective):
     from suspid.config import load_config
-    from suspid.workflows.pipeline import run
+    from suspid.workflows.identify import run
 
     out = run(load_config(_write(tmp_path, objective=objective)), progress=False, log=lambda s: None)
     r = out.result
@@ -63,7 +63,7 @@ def test_run_recovers_w_ref(tmp_path, objective):
 
 def test_same_config_same_result_and_resume_reuses_ledger(tmp_path):
     from suspid.config import load_config
-    from suspid.workflows.pipeline import run
+    from suspid.workflows.identify import run
 
     cfg = load_config(_write(tmp_path, m1=4))
     first = run(cfg, progress=False, log=lambda s: None).result

@@ -7,7 +7,7 @@ from conftest import ROOT
 
 def test_identifies_the_double_parameters(tmp_path):
     from suspid.config import load_config
-    from suspid.workflows.pipeline import run
+    from suspid.workflows.identify import run
 
     cfg = load_config(ROOT / "configs" / "vampire-double.yaml",
                       [f"output.dir={tmp_path / 'run'}", f"simulator.options.work_root={tmp_path / 'work'}"])

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from suspid.config import Section
+from suspid.options import Section
 from suspid.interfaces import Response
 
 

@@ -10,7 +10,8 @@ nominal, wider positive).
 Synthetic track (:class:`TrackOptions`, :func:`synthetic_segments`)
 -------------------------------------------------------------------
 Distance-domain one-sided PSDs S(Omega), Omega in rad/m, S in m^2/(rad/m)
-(``shared/reference/railway-data.md`` §2):
+(the German spectra as published for ORE B176 and used in railway vehicle dynamics; the FRA classes of
+the US Federal Railroad Administration):
 
 - ``german-low`` / ``german-high`` (Omega_c = 0.8246, Omega_r = 0.0206,
   Omega_s = 0.4380 rad/m, b = 0.75 m): vertical and lateral

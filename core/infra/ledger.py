@@ -29,6 +29,8 @@ from typing import Any, Iterator, Mapping
 
 import numpy as np
 
+from suspid.infra.files import canonical
+
 SCHEMA_VERSION = 1
 
 _SCHEMA = """
@@ -54,28 +56,9 @@ CREATE TABLE IF NOT EXISTS artifacts (key TEXT PRIMARY KEY, value BLOB NOT NULL,
 """
 
 
-def _canonical(obj: Any) -> Any:
-    """JSON-able canonical form: sorted mappings, floats to 17 significant digits."""
-    if isinstance(obj, Mapping):
-        return {str(k): _canonical(v) for k, v in sorted(obj.items(), key=lambda kv: str(kv[0]))}
-    if isinstance(obj, (list, tuple)):
-        return [_canonical(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [_canonical(v) for v in obj.tolist()]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        return float(repr(float(obj)))
-    if isinstance(obj, Path):
-        return str(obj)
-    return obj if obj is None or isinstance(obj, str) else repr(obj)
-
-
 def stable_hash(*parts: Any) -> str:
     """SHA-256 hex digest of the canonical JSON of ``parts``."""
-    text = json.dumps(_canonical(list(parts)), sort_keys=True, separators=(",", ":"))
+    text = json.dumps(canonical(list(parts)), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -155,7 +138,7 @@ class Ledger:
         """Commit one evaluation now (replacing a failed one with the same key)."""
         self._write(
             "INSERT OR REPLACE INTO evaluations VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (ev.key, json.dumps(_canonical(ev.w)), ev.J, json.dumps(ev.psi) if ev.psi is not None else None,
+            (ev.key, json.dumps(canonical(ev.w)), ev.J, json.dumps(ev.psi) if ev.psi is not None else None,
              ev.status, ev.error, ev.wall_time_s, ev.finished_at, ev.worker or f"pid{os.getpid()}"))
 
     def get(self, key: str) -> Evaluation | None:
@@ -182,7 +165,7 @@ class Ledger:
     def put_iteration(self, run: str, iteration: int, record: Mapping[str, Any]) -> None:
         """Record one design point or EGO iteration (w, J, EI, hyperparameters, times)."""
         self._write("INSERT OR REPLACE INTO iterations VALUES (?, ?, ?)",
-                    (run, int(iteration), json.dumps(_canonical(record))))
+                    (run, int(iteration), json.dumps(canonical(record))))
 
     def iterations(self, run: str) -> list[dict[str, Any]]:
         rows = self.connection.execute(

@@ -24,7 +24,7 @@ The maximum then moves by Δ = -H⁻¹ g, so Cov(w_opt) ≈ H⁻¹ Σ_g H⁻¹, 
 The diagonal of H comes from simulations at w_opt ± h e_k, its correlation
 structure from the metamodel. Σ_g, the covariance of the gradient of J at w_opt, comes from a bootstrap
 over segments with redrawn noise paths
-(:func:`suspid.workflows.pipeline.gradient_noise`). Segments are resampled as pairs:
+(:func:`suspid.workflows.analysis.gradient_noise`). Segments are resampled as pairs:
 segment i's measured spectra and its simulated spectra come from the same
 track, so they vary together. Resampling the two sets independently
 (``bootstrap: independent``) miscalibrates the intervals: over 16 seeds of
@@ -43,7 +43,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from suspid.config import Section
+from suspid.options import Section
 
 
 class IdentifiabilityOptions(Section):

@@ -45,6 +45,7 @@ from typing import Annotated, Any, Literal, Mapping, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from suspid.infra.files import atomic_open
 from suspid.options import parse_options
 from suspid.errors import DataError
 
@@ -249,7 +250,7 @@ class NoiseModel:
                 "options": parse_options(NoiseOptions, self.options, "noise").model_dump(),
                 "channels": list(self.channels_) if self.channels_ is not None else None}
         try:
-            with open(path, "wb") as fh:
+            with atomic_open(path, "wb", fsync=True) as fh:  # a later date needs this file: never truncated
                 np.savez(fh, meta=np.array(json.dumps(meta)),
                          freqs=self.freqs_ if self.freqs_ is not None else np.zeros(0), **arrays)
         except OSError as exc:

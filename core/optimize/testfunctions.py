@@ -110,7 +110,7 @@ FUNCTIONS: dict[str, TestFunction] = {
                               np.array([0.20168952, 0.15001069, 0.47687398, 0.27533243,
                                         0.31165162, 0.65730054])),
 }
-"""Name -> :class:`TestFunction`; the minimisation benchmarks of issue 4."""
+"""Name -> :class:`TestFunction`; the minimisation benchmarks of ``benchmarks/bench_ego.py``."""
 
 
 def ishigami(X: np.ndarray, a: float = 7.0, b: float = 0.1):

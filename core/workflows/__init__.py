@@ -1,6 +1,10 @@
 """What the commands do, built on :mod:`suspid.method` and :mod:`suspid.optimize`.
 
-- :mod:`~suspid.workflows.pipeline`: one identification (``suspid run``);
+- :mod:`~suspid.workflows.identify`: one identification (``suspid run``), built from
+  :mod:`~suspid.workflows.problem` (data, noise model, objective),
+  :mod:`~suspid.workflows.evaluation` (J through the ledger and an executor),
+  :mod:`~suspid.workflows.analysis` (errors, identifiability, intervals) and
+  :mod:`~suspid.workflows.report` (figures, ``report.md``);
 - :mod:`~suspid.workflows.study`: variants of one config (``suspid study``);
 - :mod:`~suspid.workflows.monitor`: one identification per measurement date (``suspid monitor``);
 - :mod:`~suspid.workflows.diagnose`: the discrepancy workflow (``suspid diagnose``);

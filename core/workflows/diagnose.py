@@ -94,37 +94,26 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Literal, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import yaml
-from pydantic import Field, ValidationError
 
 from suspid import registry
-from suspid.config import Config, OutputSection, Section, load_config, validate_options
+from suspid.config import Config, load_config, validate_options
 from suspid.errors import ConfigError, SimulatorError, UnknownPluginError
+from suspid.infra.files import pyplot, save_figure, write_json, write_text
+from suspid.infra.ledger import Ledger
+from suspid.infra.seeds import rng as named_rng
+from suspid.infra.threads import single_blas_thread
+from suspid.sections import DiagnoseOptions, OutputSection
+from suspid.workflows.evaluation import j_of_spectra
+from suspid.workflows.identify import run
+from suspid.workflows.problem import build_problem, simulate_spectra
+from suspid.workflows.report import markdown_table
 
 Z95 = 1.959963984540054
 """Two-sided 95 % normal quantile."""
-
-
-class DiagnoseOptions(Section):
-    """The ``diagnose:`` section of a config."""
-
-    at: Literal["identified", "nominal"] = Field(
-        default="identified", description="base model: identified parameters (a run first) or nominal ones")
-    bands_per_octave: float = Field(default=3.0, gt=0.0, le=24.0, description="band width: 1/bands_per_octave octave")
-    min_bins_per_band: int = Field(default=3, ge=1, description="least grid frequencies per band (merged upwards)")
-    alpha: float = Field(default=0.05, gt=0.0, lt=1.0, description="false discovery rate (Benjamini-Yekutieli)")
-    n_bootstrap: int = Field(default=200, ge=0, description="parametric bootstrap replicates of the null (0: analytic)")
-    effects: list[str] | None = Field(default=None, description="candidate effects (default: every registered "
-                                      "effect the simulator supports)")
-    margin: float = Field(default=10.0, ge=0.0, description="score margin over the runner-up and the bump to name")
-    min_explained: float = Field(default=0.5, ge=0.0, le=1.0,
-                                 description="share of the flagged cells' discrepancy the named effect must explain")
-    n_starts: int = Field(default=2, ge=1, description="starting points refined per effect")
-    max_evaluations: int = Field(default=30, ge=3, description="simulator calls per refinement")
-    reidentify: bool = Field(default=True, description="run the identification again with the named effect")
 
 
 # ====================================================================================== cells
@@ -548,11 +537,10 @@ class EffectFitter:
         return self._sims[key]
 
     def simulate(self, sim, w_effect: dict[str, float]) -> np.ndarray | None:
-        from suspid.workflows.pipeline import _simulate_spectra
 
         self.evaluations += 1
         try:
-            return _simulate_spectra(sim, self.w | w_effect, self.problem.segments, self.config.spectra)[0]
+            return simulate_spectra(sim, self.w | w_effect, self.problem.segments, self.config.spectra)[0]
         except SimulatorError:
             return None       # e.g. an unstable vehicle: not a candidate there
 
@@ -727,7 +715,6 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
 
     :returns: ``(ranking, bumps by size, named or None, reason)``.
     """
-    from suspid.workflows.pipeline import j_of_spectra
 
     disc = Discrepancy(dmap.grid, null, problem.y_mes, problem.noise_model, dmap.flagged, y_sim)
     D0, D0_f = disc.D0, disc.D0_flagged
@@ -829,16 +816,6 @@ class Stage:
         return out
 
 
-def diagnose_options(config: Config) -> DiagnoseOptions:
-    """The validated ``diagnose:`` section; errors name the key."""
-    try:
-        return DiagnoseOptions.model_validate(config.diagnose)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        raise ConfigError(err["msg"].removeprefix("Value error, "), file=str(config.source_file),
-                          key=".".join(["diagnose", *map(str, err["loc"])])) from None
-
-
 def _with_output(config: Config, run_dir: Path) -> Config:
     return config.model_copy(update={"output": OutputSection(dir=run_dir, figure_channel=config.output.figure_channel)})
 
@@ -846,14 +823,11 @@ def _with_output(config: Config, run_dir: Path) -> Config:
 def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fresh: bool, progress: bool,
                log: Callable[[str], None]) -> Stage:
     """The model of ``config`` at its identified parameters (a full run in ``run_dir``) or at the nominal ones."""
-    from suspid.infra.ledger import Ledger
-    from suspid.workflows.pipeline import _simulate_spectra, build_problem, run
-
     cfg = _with_output(config, run_dir)
     if identify:
         log(f"{label}: identification (suspid run in {run_dir})")
         out = run(cfg, fresh=fresh, progress=progress, log=log)
-        problem, result, w = out.problem, out.result, dict(out.result["w_opt"])
+        problem, result, w = out.problem, out.to_dict(), dict(out.w_opt)
     else:
         run_dir.mkdir(parents=True, exist_ok=True)
         ledger = Ledger(run_dir / "ledger.sqlite")
@@ -861,7 +835,7 @@ def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fre
             ledger.clear()
         problem, result, w = build_problem(cfg, ledger, log), None, {}
         problem.noise_model.save(run_dir / "noise_model.npz")
-    y_sim = _simulate_spectra(problem.simulator, w, problem.segments, cfg.spectra)[0]
+    y_sim = simulate_spectra(problem.simulator, w, problem.segments, cfg.spectra)[0]
     return Stage(label, cfg, problem, w, y_sim, result)
 
 
@@ -879,20 +853,30 @@ def write_augmented(config: Config, candidate: Candidate, out_dir: Path, noise_p
     header = (f"# Written by suspid diagnose from {config.source_file}:\n"
               f"# the model with the named effect '{candidate.effect}' and its fitted parameters,\n"
               f"# and the noise model of the base run (the measurements and B are unchanged).\n")
-    path.write_text(header + yaml.safe_dump(data, sort_keys=False))
-    return path
+    return write_text(path, header + yaml.safe_dump(data, sort_keys=False))
 
 
-def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool = False, progress: bool = True,
-                 log: Callable[[str], None] = print) -> Path:
-    """The whole workflow (module docstring): writes diagnosis.json, diagnosis.md and figures; returns the folder."""
-    from suspid.workflows.pipeline import j_of_spectra
-    from suspid.infra.seeds import rng as named_rng
-    from suspid.infra.threads import single_blas_thread
+@dataclass
+class DiagnosisResult:
+    """A finished diagnosis: its folder and the content of ``diagnosis.json``."""
 
+    out_dir: Path
+    diagnosis: dict[str, Any]
+
+    @property
+    def named(self) -> str | None:
+        """The named effect, or None."""
+        return self.diagnosis["named"]
+
+
+def run_diagnose(source: str | Path | Any, overrides: Sequence[str], config: Config, *, fresh: bool = False,
+                 progress: bool = False, log: Callable[[str], None] = lambda s: None) -> DiagnosisResult:
+    """The whole workflow (module docstring): writes diagnosis.json, diagnosis.md and figures.
+
+    :param config: the config, loaded from ``source`` with ``overrides``.
+    """
     t_start = time.perf_counter()
-    config = load_config(path, list(overrides))
-    opts = diagnose_options(config)
+    opts = config.diagnose
     out_dir = config.run_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
     before = make_stage("before", config, opts.at == "identified", out_dir / "before", fresh=fresh,
@@ -958,16 +942,14 @@ def run_diagnose(path: str | Path, overrides: Sequence[str] = (), *, fresh: bool
         "wall_time_s": None, "ranking_time_s": round(rank_s, 2),
     }
     diagnosis["wall_time_s"] = round(time.perf_counter() - t_start, 2)
-    (out_dir / "diagnosis.json").write_text(json.dumps(_jsonable(diagnosis), indent=2))
+    write_json(out_dir / "diagnosis.json", _jsonable(diagnosis))
     write_diagnosis_report(out_dir, diagnosis, before, after, ranking, bumps)
-    return out_dir
+    return DiagnosisResult(out_dir, json.loads(json.dumps(_jsonable(diagnosis))))
 
 
 # ====================================================================================== report
 def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | None = None) -> Path:
     """Heat map of the cell magnitudes (dB, + measured above the model) per speed group; flagged cells framed."""
-    from suspid.workflows.report import pyplot
-
     plt = pyplot()
     grid = dmap.grid
     G, K, B = len(grid.speeds), len(grid.channels), grid.band_edges.shape[0]
@@ -986,16 +968,12 @@ def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | N
         fig.colorbar(im, ax=ax, label="y_mes - y_sim - μ_B (dB): band mean or peak bin", fraction=0.04)
     axes[-1, 0].set_xlabel("band centre (Hz); framed: flagged (BY)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | None, channel: int,
                        dmap: DiscrepancyMap) -> Path:
     """Mean measured spectrum against the modelled mean y_sim + μ_B before and after, one channel."""
-    from suspid.workflows.report import pyplot
-
     plt = pyplot()
     p = stage_before.problem
     f = p.freqs
@@ -1020,9 +998,7 @@ def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | Non
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _fmt_params(params: dict[str, Any]) -> str:
@@ -1040,7 +1016,6 @@ def _fmt_params(params: dict[str, Any]) -> str:
 def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Stage, after: Stage | None,
                            ranking: list[Candidate], bumps: dict[int, Candidate]) -> Path:
     """``diagnosis.md`` and its figures."""
-    from suspid.workflows.report import markdown_table
 
     dmap = before.dmap
     lim = max(1.0, float(np.max(np.abs(dmap.magnitude_db))))
@@ -1141,6 +1116,4 @@ only with a margin of {st['margin']:g} over the runner-up and the bump, explaini
 
 Method: `docs/diagnose.md`.
 """
-    path = out_dir / "diagnosis.md"
-    path.write_text(text)
-    return path
+    return write_text(out_dir / "diagnosis.md", text)

@@ -40,7 +40,7 @@ Measured campaigns therefore need one of the first two.
 
 **Dates.** Each date is the base config with overrides (``monitor`` removed,
 ``noise.path`` set to the reference model, ``output.dir`` set to
-``<monitor dir>/dates/<date>/``), run by :func:`suspid.workflows.pipeline.run` in its
+``<monitor dir>/dates/<date>/``), run by :func:`suspid.workflows.identify.run` in its
 own directory with its own ledger: an interrupted monitor resumes where it
 stopped when run again. A campaign's ``data`` mapping is applied key by key
 (``data: {track: {seed: 3}}`` changes only the seed). For a numerical
@@ -74,148 +74,119 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from pydantic import Field, ValidationError
 
-from suspid.config import (Config, ConfigPath, Section, build_simulator, identified_bounds, load_config,
-                           override_arguments, raise_validation_error, read_yaml)
+from suspid.config import Config, build_simulator, identified_bounds, load_config, override_arguments
 from suspid.errors import ConfigError
+from suspid.infra.files import atomic_open, pyplot, save_figure, write_json, write_text
+from suspid.infra.ledger import Ledger
 from suspid.infra.seeds import seed_for
+from suspid.sections import MonitorOptions, Scenario
+from suspid.workflows.identify import IdentificationResult, run
+from suspid.workflows.problem import build_problem
+from suspid.workflows.report import markdown_table
+
+ConfigSource = str | Path | Mapping[str, Any]
 
 STATUSES = ("ok", "warning", "out-of-domain", "not-identifiable", "unmonitored")
 
 
 # -- the monitor: section ----------------------------------------------------------------
-class ReferenceSection(Section):
-    noise_model: ConfigPath | None = Field(
-        default=None, description="noise model of the reference date (a noise_model.npz written by a run)")
-
-
-class Campaign(Section):
-    date: dt.date
-    data: dict[str, Any] = Field(default_factory=dict, description="overrides of the data section at this date")
-
-
-class Scenario(Section):
-    parameter: str
-    loss: float = Field(default=0.4, gt=0.0, lt=1.0, description="fraction of the nominal value lost at the last date")
-    dates: list[dt.date] | None = None
-    n_dates: int | None = Field(default=None, ge=2)
-    start: dt.date | None = None
-    interval_days: int = Field(default=30, ge=1)
-
-
-class MonitorOptions(Section):
-    """The validated ``monitor:`` section (see the module docstring)."""
-
-    reference: ReferenceSection = Field(default_factory=ReferenceSection)
-    acceptable: dict[str, tuple[float | None, float | None]] = Field(default_factory=dict)
-    campaigns: list[Campaign] = Field(default_factory=list)
-    scenario: Scenario | None = None
-
-
 @dataclass
 class DatePlan:
-    """One measurement date: its config (ready for :func:`suspid.workflows.pipeline.run`) and, for the scenario, its loss."""
+    """One measurement date: its config (ready for :func:`suspid.workflows.identify.run`) and, for the scenario, its loss."""
 
     date: dt.date
     config: Config
     loss: float | None = None
 
 
-class _Where:
-    """File and YAML lines of the config, to raise ConfigErrors that name file, key and line."""
+@dataclass
+class MonitorResult:
+    """A finished monitor: its folder, the ``monitor.json`` summary (rows, alerts) and each date's result."""
 
-    def __init__(self, path: Path):
-        self.file = str(path)
-        try:
-            self.lines = read_yaml(path)[1]
-        except ConfigError:
-            self.lines = {}
+    monitor_dir: Path
+    summary: dict[str, Any]
+    dates: dict[str, IdentificationResult]
 
-    def fail(self, message: str, key: str) -> ConfigError:
-        parts = tuple(int(p) if p.isdigit() else p for p in key.split("."))
-        line = next((self.lines[parts[:n]] for n in range(len(parts), 0, -1) if parts[:n] in self.lines), None)
-        return ConfigError(message, file=self.file, key=key, line=line)
+    @property
+    def alerts(self) -> dict[str, str]:
+        """Parameter -> the first date it left its acceptable domain."""
+        return dict(self.summary["alerts"])
 
 
-def monitor_options(config: Config, path: Path) -> MonitorOptions:
-    """Validate ``config.monitor`` and check it against the identified parameters.
+def monitor_options(config: Config) -> MonitorOptions:
+    """Check the (typed) ``config.monitor`` against the identified parameters and the data.
 
     :raises ConfigError: naming the file and the key path (``monitor.campaigns.2.date``).
     """
-    where = _Where(path)
-    if not config.monitor:
-        raise where.fail("this config has no 'monitor:' section (campaigns or scenario, acceptable domains)",
-                         "monitor")
-    base_dir = config.source_file.parent if config.source_file else Path(path).resolve().parent
-    try:
-        opts = MonitorOptions.model_validate(config.monitor, context={"base_dir": base_dir})
-    except ValidationError as exc:
-        raise_validation_error(exc, MonitorOptions, where.file, where.lines, ("monitor",))
+    where = config
+    opts = config.monitor
+    if opts is None:
+        raise where.error("this config has no 'monitor:' section (campaigns or scenario, acceptable domains)",
+                          "monitor")
     simulator = build_simulator(config)
     bounds = identified_bounds(config, simulator)
     known = {p.name: p for p in simulator.parameters()}
 
     if opts.reference.noise_model is not None and not opts.reference.noise_model.is_file():
-        raise where.fail(f"file not found: {opts.reference.noise_model}", "monitor.reference.noise_model")
+        raise where.error(f"file not found: {opts.reference.noise_model}", "monitor.reference.noise_model")
     for name, (lo, hi) in opts.acceptable.items():
         key = f"monitor.acceptable.{name}"
         if name not in bounds:
-            raise where.fail(f"'{name}' is not an identified parameter; identified: {', '.join(bounds)}", key)
+            raise where.error(f"'{name}' is not an identified parameter; identified: {', '.join(bounds)}", key)
         if lo is None and hi is None:
-            raise where.fail("give at least one finite side: [lower, upper], null for an open side", key)
+            raise where.error("give at least one finite side: [lower, upper], null for an open side", key)
         if lo is not None and hi is not None and not lo < hi:
-            raise where.fail(f"lower {lo:g} must be below upper {hi:g} ({known[name].unit})", key)
+            raise where.error(f"lower {lo:g} must be below upper {hi:g} ({known[name].unit})", key)
 
     if bool(opts.campaigns) == (opts.scenario is not None):
-        raise where.fail("give either 'campaigns' (measurement dates) or 'scenario' (synthetic degradation)",
+        raise where.error("give either 'campaigns' (measurement dates) or 'scenario' (synthetic degradation)",
                          "monitor")
     if opts.campaigns:
         _check_increasing([c.date for c in opts.campaigns], where, "monitor.campaigns.{}.date")
         for i, c in enumerate(opts.campaigns):
             if "w_ref" in c.data and c.data.get("source", config.data.source) == "measured":
-                raise where.fail("w_ref belongs to numerical experiments, not to measured data",
+                raise where.error("w_ref belongs to numerical experiments, not to measured data",
                                  f"monitor.campaigns.{i}.data.w_ref")
     else:
         s = opts.scenario
         if config.data.source != "experiment":
-            raise where.fail("the scenario is a numerical experiment: the base config needs data.source: "
+            raise where.error("the scenario is a numerical experiment: the base config needs data.source: "
                              "experiment", "monitor.scenario")
         if s.parameter not in bounds:
-            raise where.fail(f"'{s.parameter}' is not an identified parameter; identified: {', '.join(bounds)}",
+            raise where.error(f"'{s.parameter}' is not an identified parameter; identified: {', '.join(bounds)}",
                              "monitor.scenario.parameter")
         if (s.dates is None) == (s.n_dates is None):
-            raise where.fail("give either 'dates' or 'n_dates' with 'start'", "monitor.scenario")
+            raise where.error("give either 'dates' or 'n_dates' with 'start'", "monitor.scenario")
         if s.n_dates is not None and s.start is None:
-            raise where.fail("'n_dates' needs a 'start' date", "monitor.scenario.start")
+            raise where.error("'n_dates' needs a 'start' date", "monitor.scenario.start")
         if s.dates is not None:
             if len(s.dates) < 2:
-                raise where.fail("the scenario needs at least two dates", "monitor.scenario.dates")
+                raise where.error("the scenario needs at least two dates", "monitor.scenario.dates")
             _check_increasing(s.dates, where, "monitor.scenario.dates.{}")
         lo, hi = bounds[s.parameter]
         last = known[s.parameter].nominal * (1.0 - s.loss)
         if not lo <= last <= hi:
-            raise where.fail(f"a {100 * s.loss:g} % loss takes {s.parameter} to {last:g} {known[s.parameter].unit}, "
+            raise where.error(f"a {100 * s.loss:g} % loss takes {s.parameter} to {last:g} {known[s.parameter].unit}, "
                              f"outside its identification bounds [{lo:g}, {hi:g}] (parameters.{s.parameter})",
                              "monitor.scenario.loss")
     measured = [c.data.get("source", config.data.source) == "measured" for c in opts.campaigns]
-    if opts.reference.noise_model is None and not config.noise.get("path") and \
+    if opts.reference.noise_model is None and config.noise.path is None and \
             (config.data.source != "experiment" or any(measured)):
-        raise where.fail("measured data need the noise model of their reference date: a noise_model.npz written "
+        raise where.error("measured data need the noise model of their reference date: a noise_model.npz written "
                          "by a reference-date run", "monitor.reference.noise_model")
     return opts
 
 
-def _check_increasing(dates: Sequence[dt.date], where: _Where, key: str) -> None:
+def _check_increasing(dates: Sequence[dt.date], where: Config, key: str) -> None:
     for i in range(1, len(dates)):
         if not dates[i] > dates[i - 1]:
-            raise where.fail(f"dates must increase: {dates[i]} follows {dates[i - 1]}", key.format(i))
+            raise where.error(f"dates must increase: {dates[i]} follows {dates[i - 1]}", key.format(i))
 
 
 def scenario_dates(s: Scenario) -> list[dt.date]:
@@ -248,23 +219,20 @@ def reference_noise_path(config: Config, opts: MonitorOptions) -> tuple[Path, bo
 
     if opts.reference.noise_model is not None:
         return opts.reference.noise_model, False
-    if config.noise.get("path"):
-        return config.resolve(config.noise["path"]), False
+    if config.noise.path is not None:
+        return config.noise.path, False
     return config.run_dir() / "reference" / "noise_model.npz", True
 
 
-def identify_reference(path: Path, overrides: Sequence[str], config: Config, *, fresh: bool = False,
-                       log: Callable[[str], None] = print) -> Path:
+def identify_reference(source: ConfigSource, overrides: Sequence[str], config: Config, *, fresh: bool = False,
+                       log: Callable[[str], None] = lambda s: None) -> Path:
     """Identify the noise model B at the reference date, once for every date (paper §2.3).
 
-    The base config as a numerical experiment at w0 (:func:`suspid.workflows.pipeline.build_problem`), with its
+    The base config as a numerical experiment at w0 (:func:`suspid.workflows.problem.build_problem`), with its
     own ledger in ``<monitor dir>/reference/``; returns the ``noise_model.npz`` written there.
     """
-    from suspid.infra.ledger import Ledger
-    from suspid.workflows.pipeline import build_problem
-
     ref_dir = config.run_dir() / "reference"
-    ref_cfg = load_config(path, [*overrides, *override_arguments({"monitor": {}, "output.dir": str(ref_dir),
+    ref_cfg = load_config(source, [*overrides, *override_arguments({"monitor": None, "output.dir": str(ref_dir),
                                                            "name": f"{config.name}-reference"})])
     ref_dir.mkdir(parents=True, exist_ok=True)
     ledger = Ledger(ref_dir / "ledger.sqlite")
@@ -278,10 +246,10 @@ def identify_reference(path: Path, overrides: Sequence[str], config: Config, *, 
         ledger.close()
 
 
-def monitor_dates(path: Path, overrides: Sequence[str], config: Config, opts: MonitorOptions,
+def monitor_dates(source: ConfigSource, overrides: Sequence[str], config: Config, opts: MonitorOptions,
                   noise_model: Path) -> list[DatePlan]:
     """The validated config of every date, in date order, all reusing ``noise_model``."""
-    where = _Where(path)
+    where = config
     simulator = build_simulator(config)
     nominal = {p.name: p.nominal for p in simulator.parameters()}
     names = list(identified_bounds(config, simulator))
@@ -300,16 +268,16 @@ def monitor_dates(path: Path, overrides: Sequence[str], config: Config, opts: Mo
     plans = []
     for d, data, loss, key in per_date:
         label = d.isoformat()
-        extra = {"monitor": {}, "noise.path": str(noise_model), "output.dir": str(base_dir / "dates" / label),
+        extra = {"monitor": None, "noise.path": str(noise_model), "output.dir": str(base_dir / "dates" / label),
                  "name": f"{config.name}-{label}"}
         if data.get("data.source", config.data.source) == "experiment":
             extra["data.track.seed"] = seed_for(config.seed, f"monitor-{label}")  # own track realisations
         try:
-            cfg = load_config(path, [*overrides, *override_arguments(extra), *override_arguments(data)])
+            cfg = load_config(source, [*overrides, *override_arguments(extra), *override_arguments(data)])
         except ConfigError as exc:
             if exc.key and exc.key.startswith("data.") and key.startswith("monitor.campaigns"):
-                raise where.fail(f"{exc.detail} (date {label})", f"{key}{exc.key[len('data'):]}") from None
-            raise where.fail(f"{exc.detail} (date {label}, key '{exc.key}')", key) from None
+                raise where.error(f"{exc.detail} (date {label})", f"{key}{exc.key[len('data'):]}") from None
+            raise where.error(f"{exc.detail} (date {label}, key '{exc.key}')", key) from None
         plans.append(DatePlan(d, cfg, loss))
     return plans
 
@@ -363,32 +331,38 @@ def first_dates(rows: Sequence[Mapping[str, Any]], statuses: Sequence[str]) -> d
 
 
 # -- the run -------------------------------------------------------------------------------------
-def run_monitor(path: Path, overrides: Sequence[str] = (), *, fresh: bool = False, progress: bool = True,
-                log: Callable[[str], None] = print) -> Path:
+def monitor_plan(source: ConfigSource, overrides: Sequence[str], config: Config
+                 ) -> tuple[MonitorOptions, Path, bool, list[DatePlan]]:
+    """Every check of a monitor before any simulation: its options, and the config of every date.
+
+    :returns: the options, the reference noise model's path, whether it is to be identified here, the dates.
+    """
+    opts = monitor_options(config)
+    noise_model, identify = reference_noise_path(config, opts)
+    return opts, noise_model, identify, monitor_dates(source, overrides, config, opts, noise_model)
+
+
+def run_monitor(source: ConfigSource, overrides: Sequence[str], config: Config, *, fresh: bool = False,
+                progress: bool = False, log: Callable[[str], None] = lambda s: None) -> MonitorResult:
     """Identify at every date (resuming each from its ledger), then write the monitor outputs.
 
-    :returns: the monitor's run directory.
+    :param config: the monitor's config, loaded from ``source`` with ``overrides``.
     """
-    from suspid.workflows.pipeline import run
-
-    path = Path(path)
-    config = load_config(path, overrides)
-    opts = monitor_options(config, path)
-    noise_model, identify = reference_noise_path(config, opts)
-    plans = monitor_dates(path, overrides, config, opts, noise_model)  # every date's config checked first
+    opts, noise_model, identify, plans = monitor_plan(source, overrides, config)  # every date checked first
     if identify:
-        identify_reference(path, overrides, config, fresh=fresh, log=log)
-    dated = []
+        identify_reference(source, overrides, config, fresh=fresh, log=log)
+    dated, results = [], {}
     for plan in plans:
         loss = f" ({100 * plan.loss:.0f} % loss of {opts.scenario.parameter})" if plan.loss is not None else ""
         log(f"date {plan.date.isoformat()}{loss}")
         out = run(plan.config, fresh=fresh, progress=progress, log=log)
-        dated.append((plan.date, out.result))
+        dated.append((plan.date, out.to_dict()))
+        results[plan.date.isoformat()] = out
     monitor_dir = config.run_dir()
     monitor_dir.mkdir(parents=True, exist_ok=True)
-    write_monitor(monitor_dir, config.name, dated, opts, noise_model,
-                  {p.date.isoformat(): p.loss for p in plans if p.loss is not None})
-    return monitor_dir
+    summary = write_monitor(monitor_dir, config.name, dated, opts, noise_model,
+                            {p.date.isoformat(): p.loss for p in plans if p.loss is not None})
+    return MonitorResult(monitor_dir, summary, results)
 
 
 def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, dict[str, Any]]],
@@ -397,15 +371,13 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
 
     :returns: the monitor.json summary.
     """
-    from suspid.workflows.report import markdown_table
-
     acceptable = {n: list(v) for n, v in opts.acceptable.items()}
     rows = monitor_rows(dated, acceptable)
     names = dated[0][1]["parameters"]
     units = dated[0][1]["units"]
     alerts = first_dates(rows, ("out-of-domain",))
     warnings = first_dates(rows, ("warning", "out-of-domain"))
-    with open(monitor_dir / "monitor.csv", "w", newline="") as fh:
+    with atomic_open(monitor_dir / "monitor.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
@@ -414,7 +386,7 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
                "first_warnings": warnings, "scenario": None if opts.scenario is None else
                {"parameter": opts.scenario.parameter, "loss": opts.scenario.loss, "losses": dict(losses or {})},
                "rows": rows}
-    (monitor_dir / "monitor.json").write_text(json.dumps(summary, indent=2))
+    write_json(monitor_dir / "monitor.json", summary)
 
     figures = [figure_monitor(monitor_dir / f"monitor_{n}.png", n, units.get(n, ""),
                               [r for r in rows if r["parameter"] == n], alerts.get(n)) for n in names]
@@ -460,7 +432,7 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
         table.append(cells)
     lines += [markdown_table(header, table), "", "## Time evolution", ""]
     lines += [f"![{n}]({f.name})" for n, f in zip(names, figures)]
-    (monitor_dir / "monitor.md").write_text("\n".join(lines) + "\n")
+    write_text(monitor_dir / "monitor.md", "\n".join(lines) + "\n")
     return summary
 
 
@@ -475,8 +447,6 @@ def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str,
     :param rows: this parameter's rows of :func:`monitor_rows`, in date order.
     :param alert: the alert date (ISO), drawn as a vertical line.
     """
-    from suspid.workflows.report import pyplot
-
     plt = pyplot()
     dates = [dt.date.fromisoformat(r["date"]) for r in rows]
     value = np.array([r["value"] for r in rows])
@@ -514,6 +484,4 @@ def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str,
     ax.legend(fontsize=8, loc="best")
     fig.autofmt_xdate()
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -1,7 +1,8 @@
 """Figures and the markdown report of an identification run (paper Figures 1-2).
 
-Inputs are plain arrays so that the report can be rebuilt from the files of a
-run directory. Figures are PNG files written with matplotlib's Agg backend.
+The figure functions take plain arrays so that a report can be rebuilt from
+the files of a run directory; :func:`write_report` assembles ``report.md``.
+Figures are PNG files written atomically with matplotlib's Agg backend.
 """
 
 from __future__ import annotations
@@ -11,15 +12,11 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-
-def pyplot():
-    """matplotlib.pyplot on the Agg backend (files only, no display needed)."""
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
+from suspid.config import figure_channel
+from suspid.infra.files import pyplot, save_figure, write_text
+from suspid.infra.seeds import rng as named_rng
+from suspid.optimize.ego import EGOResult
+from suspid.workflows.problem import Problem, simulate_spectra
 
 
 def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_sim: np.ndarray, y_mod: np.ndarray,
@@ -46,9 +43,7 @@ def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_sim: np.n
     if freqs[-1] / max(freqs[0], 1e-9) > 20:
         axes[1].set_xscale("log")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def figure_parameters(path: Path, names: Sequence[str], variants: Mapping[str, np.ndarray],
@@ -79,9 +74,7 @@ def figure_parameters(path: Path, names: Sequence[str], variants: Mapping[str, n
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def figure_convergence(path: Path, J: np.ndarray, n_initial: int, ei: Sequence[float], n_refine: int = 0) -> Path:
@@ -116,9 +109,7 @@ def figure_convergence(path: Path, J: np.ndarray, n_initial: int, ei: Sequence[f
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
@@ -131,3 +122,73 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
+                 ei_history: list[float]) -> Path:
+    """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot."""
+    config = problem.config
+    names = problem.names
+    k = figure_channel(config, problem.channels)
+    if problem.reference:
+        y_mes0, y_sim0 = problem.reference["y_mes0"], problem.reference["y_sim0"]
+        date = "reference date (where B is identified)"
+    else:
+        y_mes0 = problem.y_mes
+        y_sim0, _ = simulate_spectra(problem.simulator, {}, problem.segments, config.spectra)
+        date = "measurement date"
+    y_mod0 = y_sim0 + problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1"))
+    figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, y_mes0, y_sim0, y_mod0, k, problem.channels[k])
+    w_ref_n = np.array([result["w_ref_normalized"][n] for n in names]) if "w_ref" in result else None
+    figure_parameters(run_dir / "figure2_parameters.png", names,
+                      {config.objective.plugin: np.array([result["w_opt_normalized"][n] for n in names])},
+                      w_ref_n, {config.objective.plugin: np.array([result["interval_normalized"][n] for n in names])})
+    figure_convergence(run_dir / "convergence.png", np.asarray(ego.y), ego.n_initial, ei_history, ego.n_refine)
+
+    rows = []
+    for n in names:
+        u = result["units"][n]
+        row = [n, u, result["w_opt"][n]]
+        if "w_ref" in result:
+            row += [result["w_ref"][n], f"{result['errors_percent'][n]:.2f}"]
+        lo_i, hi_i = result["interval"][n]
+        row += [f"[{lo_i:.4g}, {hi_i:.4g}]", "yes" if result["identifiable"][n] else
+                "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
+                f"{result['sensitivity']['total_sobol'][n]:.3f}"]
+        rows.append(row)
+    header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
+        + ["interval", "identifiable", "total Sobol index"]
+    refine = ""
+    if result.get("refine_stop_reason"):
+        refine = (f" (the last {result['n_refine_iterations']} in the local refinement, stop: "
+                  f"`{result['refine_stop_reason']}`)")
+    text = f"""# suspid run `{config.name}`
+
+Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
+seed {config.seed}. {result['n_initial']} initial points (maximin design, minimum distance
+{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} iterations, stop: `{result['stop_reason']}`{refine},
+J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
+
+{markdown_table(header, rows)}
+
+Components marked **no** are not identifiable from these data: their value is not a finding.
+Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
+H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
+bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths), clipped to the admissible box.
+
+## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
+
+![figure 1](figure1_spectra.png)
+
+## Figure 2: identified parameters, normalised
+
+![figure 2](figure2_parameters.png)
+
+## Convergence
+
+![convergence](convergence.png)
+"""
+    if result.get("correlated_with"):
+        text += "\n## Correlated components\n\n" + "\n".join(
+            f"- `{n}` with {', '.join(c)}" for n, c in result["correlated_with"].items()) + "\n"
+    return write_text(run_dir / "report.md", text)

@@ -27,6 +27,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from suspid.errors import SimulatorError
+from suspid.infra.files import canonical, pyplot, save_figure, write_text
 from suspid.interfaces import Response, Simulator, TrackSegment
 from suspid.data.track import read_accelerations_h5, write_accelerations_h5
 
@@ -87,7 +88,7 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         f["freqs"].attrs["units"] = "Hz"
         f.attrs["simulator"] = simulator.name
         f.attrs["parameters"] = json.dumps(values, sort_keys=True)
-        f.attrs["identity"] = json.dumps(_jsonable(simulator.identity()), sort_keys=True)
+        f.attrs["identity"] = json.dumps(canonical(simulator.identity()), sort_keys=True)
     plot_spectra(y, freqs, list(named[0].channels), out / "spectra.png",
                  title=f"{simulator.name}: {len(named)} segment(s)")
     return path
@@ -105,8 +106,6 @@ def read_simulation(path: str | Path) -> tuple[list[Response], np.ndarray, np.nd
 def plot_spectra(y: np.ndarray, freqs: np.ndarray, channels: Sequence[str], path: str | Path,
                  title: str = "") -> Path:
     """PNG of the spectra: per channel, every segment (thin) and the mean over segments (thick)."""
-    from suspid.workflows.report import pyplot
-
     plt = pyplot()
     y = np.asarray(y, dtype=float)
     n = len(channels)
@@ -129,9 +128,7 @@ def plot_spectra(y: np.ndarray, freqs: np.ndarray, channels: Sequence[str], path
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
     path = Path(path)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=100)
 
 
 def modes_report(simulator: Simulator, speed: float | None = None, out_dir: str | Path | None = None,
@@ -155,7 +152,7 @@ def modes_report(simulator: Simulator, speed: float | None = None, out_dir: str 
     if out_dir is not None:
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "modes.json").write_text(json.dumps(_jsonable(report), indent=2) + "\n", encoding="utf-8")
+        write_text(out / "modes.json", json.dumps(canonical(report), indent=2) + "\n")
     return report
 
 
@@ -187,17 +184,3 @@ def _parameter_values(simulator: Simulator, w: Mapping[str, float]) -> dict[str,
     return values
 
 
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    if hasattr(obj, "model_dump"):
-        return _jsonable(obj.model_dump(mode="json"))
-    return obj

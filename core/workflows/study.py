@@ -21,73 +21,71 @@ variant), ``study.md`` (the Table 1 analogue) and ``study_parameters.png``
 from __future__ import annotations
 
 import csv
-import json
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from pydantic import Field
 
-from suspid.config import Config, Section, load_config, override_arguments
-from suspid.errors import ConfigError
-
-
-class Variant(Section):
-    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
-    set: dict[str, Any] = Field(default_factory=dict, description="key.path -> value overrides")
+from suspid.config import Config, load_config, override_arguments
+from suspid.infra.files import atomic_open, write_json, write_text
+from suspid.workflows.identify import IdentificationResult, run
+from suspid.workflows.report import figure_parameters, markdown_table
 
 
-class StudyOptions(Section):
-    variants: list[Variant] = Field(min_length=1)
-    seeds: list[int] | None = None
+@dataclass
+class StudyResult:
+    """A finished study: its folder (``study.csv``, ``study.md``, ``study.json``, the figure) and every variant.
+
+    :ivar variants: label -> :class:`~suspid.workflows.identify.IdentificationResult`, in run order.
+    """
+
+    study_dir: Path
+    variants: dict[str, IdentificationResult]
 
 
-def study_variants(path: Path, overrides: list[str], config: Config) -> list[tuple[str, Config]]:
-    """The configs of every variant (validated), in order."""
-    try:
-        opts = StudyOptions.model_validate(config.study)
-    except Exception as exc:
-        raise ConfigError(str(exc).splitlines()[0] if "\n" not in str(exc) else
-                          "study: expected {variants: [{name, set}], seeds: [..]}: " + str(exc).splitlines()[2].strip(),
-                          file=str(path), key="study") from None
-    names = [v.name for v in opts.variants]
-    if len(set(names)) != len(names):
-        raise ConfigError(f"variant names must be unique, got {names}", file=str(path), key="study.variants")
+def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[str],
+                   config: Config) -> list[tuple[str, Config]]:
+    """The configs of every variant (each validated), in order.
+
+    :param source: the config file (or mapping) the variants are derived from.
+    :param overrides: the ``--set`` overrides of the study itself.
+    :raises ConfigError: the config has no ``study:`` section, or a variant's config is invalid.
+    """
+    if config.study is None:
+        raise config.error("this config has no 'study:' section listing variants", "study")
     out = []
     base_dir = config.run_dir()
-    for seed in opts.seeds or [None]:
-        for v in opts.variants:
+    for seed in config.study.seeds or [None]:
+        for v in config.study.variants:
             label = v.name if seed is None else f"{v.name}-seed{seed}"
             extra = {"output.dir": str(base_dir / "variants" / label), "name": f"{config.name}-{label}"}
             if seed is not None:
                 extra["seed"] = seed
-            out.append((label, load_config(path, [*overrides, *override_arguments(v.set), *override_arguments(extra)])))
+            out.append((label, load_config(source, [*overrides, *override_arguments(v.set),
+                                                    *override_arguments(extra)])))
     return out
 
 
-def run_study(path: Path, overrides: list[str], *, fresh: bool = False, progress: bool = True,
-              log: Callable[[str], None] = print) -> Path:
-    """Run every variant (resuming finished ones from their ledgers), then write the study outputs."""
-    from suspid.workflows.pipeline import run
+def run_study(source: str | Path | Mapping[str, Any], overrides: Sequence[str], config: Config, *,
+              fresh: bool = False, progress: bool = False, log: Callable[[str], None] = lambda s: None
+              ) -> StudyResult:
+    """Run every variant (resuming finished ones from their ledgers), then write the study outputs.
 
-    config = load_config(path, overrides)
-    if not config.study:
-        raise ConfigError("this config has no 'study:' section listing variants", file=str(path), key="study")
-    rows = []
-    for label, cfg in study_variants(path, overrides, config):
+    :param config: the study's own config, loaded from ``source`` with ``overrides``.
+    """
+    results: dict[str, IdentificationResult] = {}
+    for label, cfg in study_variants(source, overrides, config):
         log(f"variant {label}")
-        out = run(cfg, fresh=fresh, progress=progress, log=log)
-        rows.append((label, out.result))
+        results[label] = run(cfg, fresh=fresh, progress=progress, log=log)
     study_dir = config.run_dir()
     study_dir.mkdir(parents=True, exist_ok=True)
-    write_study(study_dir, rows)
-    return study_dir
+    write_study(study_dir, [(label, r.to_dict()) for label, r in results.items()])
+    return StudyResult(study_dir, results)
 
 
 def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None:
     """study.csv, study.md and study_parameters.png from the variants' results."""
-    from suspid.workflows.report import figure_parameters, markdown_table
-
     names = rows[0][1]["parameters"]
     has_ref = "w_ref" in rows[0][1]
     fields = ["variant", "objective", "surrogate", "seed", "n_initial", "n_iterations", "n_simulator_calls",
@@ -96,7 +94,7 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
     fields += [f"identifiable_{n}" for n in names] + [f"w_opt_{n}" for n in names]
     fields += ["paper_loop_n_iterations", "paper_loop_n_simulator_calls"]  # empty without ego.refine
     fields += [f"paper_loop_error_{n}" for n in names] if has_ref else []
-    with open(study_dir / "study.csv", "w", newline="") as fh:
+    with atomic_open(study_dir / "study.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
         for label, r in rows:
@@ -139,9 +137,9 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
     text = (f"# Study\n\nPer component: {what}; `n.i.` marks a component flagged not identifiable "
             f"(its value is shown in brackets and is not a finding).\n\n{refined}{markdown_table(header, table)}"
             f"\n\n![parameters](study_parameters.png)\n")
-    (study_dir / "study.md").write_text(text)
+    write_text(study_dir / "study.md", text)
     variants = {label: np.array([r["w_opt_normalized"][n] for n in names]) for label, r in rows}
     intervals = {label: np.array([r["interval_normalized"][n] for n in names]) for label, r in rows}
     w_ref = np.array([rows[0][1]["w_ref_normalized"][n] for n in names]) if has_ref else None
     figure_parameters(study_dir / "study_parameters.png", names, variants, w_ref, intervals)
-    (study_dir / "study.json").write_text(json.dumps({label: r for label, r in rows}, indent=2))
+    write_json(study_dir / "study.json", {label: r for label, r in rows})

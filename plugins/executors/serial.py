@@ -6,12 +6,18 @@ from typing import Any, Callable, Iterator, Sequence
 
 from suspid import hookimpl
 from suspid.interfaces import Executor
+from suspid.options import Section
+
+
+class SerialOptions(Section):
+    """The serial executor takes no options (any key is a mistake)."""
 
 
 class SerialExecutor(Executor):
     """Runs tasks in order in this process; an exception is yielded, not raised."""
 
     name = "serial"
+    Options = SerialOptions
 
     def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
         for i, item in enumerate(items):

@@ -65,12 +65,13 @@ from contextlib import contextmanager
 from typing import Any, Iterator, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.spatial.distance import cdist, pdist, squareform
 
 from suspid import hookimpl
 from suspid.errors import ConfigError
+from suspid.options import parse_options
 from suspid.interfaces import Surrogate
 from suspid.infra.threads import single_blas_thread
 
@@ -148,13 +149,7 @@ class GPyKriging(Surrogate):
 
     # -- options -----------------------------------------------------------------
     def _opts(self) -> GPyKrigingOptions:
-        try:
-            return GPyKrigingOptions(**self.options)
-        except ValidationError as exc:
-            first = exc.errors()[0]
-            key = ".".join(str(p) for p in first["loc"]) or None
-            raise ConfigError(f"gpy-kriging: {first['msg']}",
-                              key=f"surrogate.options.{key}" if key else None) from None
+        return parse_options(GPyKrigingOptions, self.options, "surrogate.options")
 
     # -- fitting -----------------------------------------------------------------
     def fit(self, X: np.ndarray, y: np.ndarray) -> "GPyKriging":

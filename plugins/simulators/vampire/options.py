@@ -15,7 +15,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from suspid.config import ConfigPath
+from suspid.options import ConfigPath
 
 from .templates import is_name, safe_relpath, scan
 

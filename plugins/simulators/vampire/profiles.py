@@ -1,7 +1,7 @@
 """Wheel and rail profile files in Vampire's ``.whe`` / ``.rai`` layout (a utility).
 
-Layout, as read by the open-source CONTACT project (``shared/reference/
-railway-data.md`` §4); all lengths in millimetres:
+Layout, as read by the open-source CONTACT project (its Vampire profile
+reader); all lengths in millimetres:
 
 - line 1: ``WHEELPROFILE`` or ``RAILPROFILE``;
 - line 2: a title of at most 80 characters;

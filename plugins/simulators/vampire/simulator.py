@@ -33,9 +33,9 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
-from pydantic import ValidationError
 
 from suspid.errors import ConfigError, SimulatorError
+from suspid.options import parse_options
 from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 
 from . import export as export_mod
@@ -128,12 +128,7 @@ class VampireSimulator(Simulator):
     def _opts(self) -> Options:
         opts = self.__dict__.get("_opts_")
         if opts is None:
-            try:
-                opts = Options.model_validate(dict(self.options))
-            except ValidationError as exc:
-                first = exc.errors()[0]
-                key = ".".join(str(p) for p in ("simulator", "options", *first["loc"]))
-                raise ConfigError(first["msg"], key=key) from None
+            opts = parse_options(Options, dict(self.options), "simulator.options")
             self.__dict__["_opts_"] = opts
         return opts
 

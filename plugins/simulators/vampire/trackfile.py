@@ -1,6 +1,6 @@
 """Track irregularity files in Vampire's 6-field layout.
 
-Public sources (``shared/reference/railway-data.md`` §4) give the fields of a
+Public descriptions of Vampire's track files give the fields of a
 row: distance (m), cross level (mm), curvature irregularity (1/km), lateral
 (mm), vertical (mm), gauge variation (mm). Header lines, extension and sign
 conventions are not public, so they are options (:class:`TrackFileOptions`).

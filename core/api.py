@@ -1,0 +1,192 @@
+"""suspid's Python API: what every ``suspid`` command does, as one documented function each.
+
+A notebook user calls these directly; the command line is a thin shell over
+them (progress bars on in the CLI, off here by default)::
+
+    import suspid
+
+    r = suspid.identify("configs/quickstart.yaml", {"ego.max_iter": 10})
+    r.w_opt, r.intervals, r.identifiable, r.errors_percent
+    r.to_dict() == json.load(open(r.run_dir / "result.json"))
+
+A config is a YAML file or a mapping with the same content; ``overrides`` are
+``{"key.path": value}`` (or ``["key.path=value", ...]`` as ``--set`` takes
+them). Every function validates the whole config first (:func:`validate`), so
+a mistake is one :class:`~suspid.errors.ConfigError` naming the file, the key
+and what was expected, before any simulation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence, Union
+
+from suspid.config import Config, build_simulator, load_config as _load, override_arguments
+from suspid.data.track import read_track
+from suspid.interfaces import TrackSegment
+from suspid.method.spectra import compute_spectra
+from suspid.workflows import diagnose as _diagnose
+from suspid.workflows import identify as _identify
+from suspid.workflows import monitor as _monitor
+from suspid.workflows import simulate as _simulate
+from suspid.workflows import study as _study
+from suspid.workflows.identify import IdentificationResult
+from suspid.workflows.problem import synthetic_track, validate_data
+
+ConfigSource = Union[str, Path, Mapping[str, Any], Config]
+"""A config: a YAML file, a mapping with the same content, or a loaded :class:`~suspid.config.Config`."""
+Overrides = Union[Mapping[str, Any], Sequence[str], None]
+"""``{"key.path": value}`` or ``["key.path=value", ...]``."""
+
+Log = Callable[[str], None]
+
+
+def _override_list(overrides: Overrides) -> list[str]:
+    if overrides is None:
+        return []
+    if isinstance(overrides, Mapping):
+        return override_arguments(overrides)
+    return [str(o) for o in overrides]
+
+
+def _source(config: ConfigSource) -> str | Path | Mapping[str, Any]:
+    """What the workflows reload variants and dates from: a path or a mapping."""
+    if isinstance(config, Config):
+        if config.source_file is None:
+            return config.model_dump(mode="json", exclude={"source_file"})
+        return config.source_file
+    return config
+
+
+def load_config(config: ConfigSource, overrides: Overrides = None) -> Config:
+    """Read and validate a config: every section resolved into its typed model, plugins checked.
+
+    :param config: a YAML file, a mapping with the same content, or a loaded config (returned as is
+        when there are no overrides).
+    :param overrides: ``{"key.path": value}`` or ``["key.path=value", ...]``.
+    :raises suspid.errors.ConfigError: one line naming the file, the key path and what was expected.
+    """
+    if isinstance(config, Config) and not overrides:
+        return config
+    return _load(_source(config), _override_list(overrides))
+
+
+@dataclass
+class Validation:
+    """What :func:`validate` checked: the resolved config and the measured segments it read (0: experiment)."""
+
+    config: Config
+    n_measured_segments: int
+
+
+def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
+    """Every check that needs no simulation, as ``suspid validate`` runs it (a dry run).
+
+    The config with every section and plugin option; the measured data files
+    (read and turned into spectra); the variants of ``study:``, the dates of
+    ``monitor:`` and the effects of ``diagnose:`` when those sections are present.
+
+    :raises suspid.errors.SuspidError: the first problem, in one line.
+    """
+    cfg = load_config(config, overrides)
+    n = validate_data(cfg)
+    source, extra = _source(cfg if not overrides else config), _override_list(overrides)
+    if cfg.study is not None:
+        _study.study_variants(source, extra, cfg)
+    if cfg.monitor is not None:
+        _monitor.monitor_plan(source, extra, cfg)
+    return Validation(cfg, n)
+
+
+def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False,
+             progress: bool = False, log: Log | None = None) -> IdentificationResult:
+    """The identification (``suspid run``): noise model, maximin design, Kriging, EGO, intervals.
+
+    Writes ``result.json``, ``report.md``, the figures, ``noise_model.npz`` and
+    ``ledger.sqlite`` in the run directory; running it again resumes from the
+    ledger without simulating finished points again.
+
+    :param fresh: forget the ledger of a previous run in the same directory.
+    :param progress: show rich progress bars.
+    :param log: receives one line per step (default: silent).
+    :returns: the typed result; ``result.to_dict()`` equals ``result.json``.
+    """
+    cfg = validate(config, overrides).config
+    return _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None))
+
+
+def study(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
+          log: Log | None = None) -> _study.StudyResult:
+    """The variants of the config's ``study:`` section (``suspid study``): one identification each.
+
+    :returns: the study folder and one :class:`IdentificationResult` per variant (in order).
+    """
+    cfg = validate(config, overrides).config
+    return _study.run_study(_source(config), _override_list(overrides), cfg, fresh=fresh, progress=progress,
+                            log=log or (lambda s: None))
+
+
+def monitor(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
+            log: Log | None = None) -> _monitor.MonitorResult:
+    """One identification per measurement date of ``monitor:`` (``suspid monitor``), with alerts.
+
+    :returns: the monitor folder, the per-date rows and the alerts.
+    """
+    cfg = validate(config, overrides).config
+    return _monitor.run_monitor(_source(config), _override_list(overrides), cfg, fresh=fresh, progress=progress,
+                                log=log or (lambda s: None))
+
+
+def diagnose(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
+             log: Log | None = None) -> _diagnose.DiagnosisResult:
+    """The discrepancy workflow (``suspid diagnose``): locate, name the missing effect, add it, re-identify.
+
+    :returns: the diagnosis folder and the content of ``diagnosis.json``.
+    """
+    cfg = validate(config, overrides).config
+    return _diagnose.run_diagnose(_source(config), _override_list(overrides), cfg, fresh=fresh,
+                                  progress=progress, log=log or (lambda s: None))
+
+
+def segments(config: ConfigSource, overrides: Overrides = None) -> list[TrackSegment]:
+    """The configured track segments: the measurement date's synthetic track, or the measured track file."""
+    cfg = load_config(config, overrides)
+    if cfg.data.source == "experiment":
+        return synthetic_track(cfg, "measurement")
+    if cfg.data.track_file is None:
+        raise cfg.error("measured data need data.track_file", "data.track_file")
+    return read_track(cfg.data.track_file)
+
+
+def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[str, float] | None = None,
+             out_dir: str | Path | None = None) -> Path:
+    """Simulate ``w`` (other parameters nominal) on the configured segments (``suspid simulate``).
+
+    :param w: parameter values, SI units; ``None`` simulates the nominal vehicle.
+    :param out_dir: default ``<run dir>/simulation``.
+    :returns: the path of ``simulation.h5`` (accelerations, spectra ``y`` and ``freqs``).
+    """
+    cfg = load_config(config, overrides)
+    sim = build_simulator(cfg)
+    known = {p.name for p in sim.parameters()}
+    unknown = sorted(set(w or {}) - known)
+    if unknown:
+        raise cfg.error(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}",
+                        "parameters")
+    out = Path(out_dir) if out_dir is not None else cfg.run_dir() / "simulation"
+    return _simulate.write_simulation(sim, segments(cfg), dict(w or {}), out,
+                                      lambda rs: compute_spectra(rs, cfg.spectra))
+
+
+def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float | None = None,
+          w: Mapping[str, float] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
+    """Eigenmodes of the train model (``suspid modes``): frequency, damping ratio, body, motion, ``stable``.
+
+    :param speed_mps: default: the simulator's configured speed.
+    :param out_dir: where ``modes.json`` goes (default: the run directory; the folder is created).
+    """
+    cfg = load_config(config, overrides)
+    out = Path(out_dir) if out_dir is not None else cfg.run_dir()
+    out.mkdir(parents=True, exist_ok=True)
+    return _simulate.modes_report(build_simulator(cfg), speed_mps, out, w)

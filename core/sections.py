@@ -1,0 +1,169 @@
+"""The typed sections of a config file.
+
+Each section is a pydantic model that rejects unknown keys; the sections of
+the numerical chain are the options models of the modules that use them
+(:class:`~suspid.method.spectra.SpectraOptions`, :class:`~suspid.method.noise.NoiseOptions`,
+:class:`~suspid.optimize.design.DesignOptions`, :class:`~suspid.optimize.ego.EGOOptions`,
+:class:`~suspid.method.identifiability.IdentifiabilityOptions`, :class:`~suspid.data.track.TrackOptions`,
+:class:`~suspid.data.experiment.ReferenceOptions`, :class:`~suspid.data.experiment.MeasurementOptions`);
+this module adds the plugin selections, the data and output sections and the
+sections of the workflows (``study``, ``monitor``, ``diagnose``).
+:class:`suspid.config.Config` puts them together, so that a config is resolved
+once, when it is loaded, into typed objects.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, field_validator
+
+from suspid.data.experiment import MeasurementOptions, ReferenceOptions
+from suspid.data.track import TrackOptions
+from suspid.method.noise import NoiseOptions
+from suspid.options import ConfigPath, Section
+
+
+# -- plugin selections ---------------------------------------------------------------------
+class PluginSection(Section):
+    """A section that selects a plugin by registered name; ``options`` are validated by the plugin's
+    ``Options`` model when the config is loaded (:func:`suspid.config.check_config_plugins`)."""
+
+    plugin: str
+    options: dict[str, Any] = Field(default_factory=dict)
+
+
+class SimulatorSection(PluginSection):
+    plugin: str = "exudyn-train"
+
+
+class ObjectiveSection(PluginSection):
+    plugin: str = "overlap"
+    weights: list[float] | dict[str, float] | None = Field(
+        default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; default 1/n")
+
+
+class SurrogateSection(PluginSection):
+    plugin: str = "gpy-kriging"
+
+
+class ExecutorSection(PluginSection):
+    plugin: str = "serial"
+
+
+# -- parameters, data, noise, output ----------------------------------------------------------
+class ParameterBounds(Section):
+    """Bounds of one identified parameter (SI units); missing bounds keep the simulator's."""
+
+    lower: float | None = None
+    upper: float | None = None
+
+
+class DataSection(Section):
+    """Where the measurements come from.
+
+    ``source: experiment`` builds the numerical experiment of the paper (§3.3) on a
+    synthetic track; ``source: measured`` reads measured accelerations and the
+    matching track geometry from files.
+    """
+
+    source: Literal["experiment", "measured"] = "experiment"
+    track: TrackOptions = Field(default_factory=TrackOptions, description="synthetic track options (experiment)")
+    w_ref: dict[str, float] = Field(default_factory=dict, description="known 'damaged' parameters (experiment)")
+    reference: ReferenceOptions = Field(default_factory=ReferenceOptions,
+                                        description="how the reference-date measurements for the noise model are made")
+    measurement: MeasurementOptions = Field(
+        default_factory=MeasurementOptions, description="how the measurement-date 'measurements' are simulated "
+        "(experiment), e.g. simulator_options with a hidden effect")
+    measurements: ConfigPath | None = Field(default=None, description="measured data file or folder")
+    track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
+
+    @field_validator("measurements", "track_file")
+    @classmethod
+    def _exists(cls, value: Path | None) -> Path | None:
+        if value is not None and not value.exists():
+            raise ValueError(f"file not found: {value}")
+        return value
+
+
+class NoiseSection(NoiseOptions):
+    """``noise:``: how B is identified at the reference date (eq. 3), or the file of a B identified before."""
+
+    path: ConfigPath | None = Field(default=None, description="noise model written by a reference-date run")
+
+
+class OutputSection(Section):
+    dir: ConfigPath | None = Field(default=None, description="run directory; default runs/<name>/")
+    figure_channel: str | None = Field(default=None, description="channel of Figure 1; default: first carbody vertical")
+
+
+# -- study -------------------------------------------------------------------------------------
+class Variant(Section):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
+    set: dict[str, Any] = Field(default_factory=dict, description="key.path -> value overrides")
+
+
+class StudyOptions(Section):
+    """``study:``: variants of the config, each run in its own directory (:mod:`suspid.workflows.study`)."""
+
+    variants: list[Variant] = Field(min_length=1)
+    seeds: list[int] | None = None
+
+    @field_validator("variants")
+    @classmethod
+    def _unique(cls, variants: list[Variant]) -> list[Variant]:
+        names = [v.name for v in variants]
+        if len(set(names)) != len(names):
+            raise ValueError(f"variant names must be unique, got {names}")
+        return variants
+
+
+# -- monitor -----------------------------------------------------------------------------------
+class ReferenceSection(Section):
+    noise_model: ConfigPath | None = Field(
+        default=None, description="noise model of the reference date (a noise_model.npz written by a run)")
+
+
+class Campaign(Section):
+    date: dt.date
+    data: dict[str, Any] = Field(default_factory=dict, description="overrides of the data section at this date")
+
+
+class Scenario(Section):
+    parameter: str
+    loss: float = Field(default=0.4, gt=0.0, lt=1.0, description="fraction of the nominal value lost at the last date")
+    dates: list[dt.date] | None = None
+    n_dates: int | None = Field(default=None, ge=2)
+    start: dt.date | None = None
+    interval_days: int = Field(default=30, ge=1)
+
+
+class MonitorOptions(Section):
+    """The validated ``monitor:`` section (see the module docstring)."""
+
+    reference: ReferenceSection = Field(default_factory=ReferenceSection)
+    acceptable: dict[str, tuple[float | None, float | None]] = Field(default_factory=dict)
+    campaigns: list[Campaign] = Field(default_factory=list)
+    scenario: Scenario | None = None
+
+
+# -- diagnose ----------------------------------------------------------------------------------
+class DiagnoseOptions(Section):
+    """The ``diagnose:`` section of a config."""
+
+    at: Literal["identified", "nominal"] = Field(
+        default="identified", description="base model: identified parameters (a run first) or nominal ones")
+    bands_per_octave: float = Field(default=3.0, gt=0.0, le=24.0, description="band width: 1/bands_per_octave octave")
+    min_bins_per_band: int = Field(default=3, ge=1, description="least grid frequencies per band (merged upwards)")
+    alpha: float = Field(default=0.05, gt=0.0, lt=1.0, description="false discovery rate (Benjamini-Yekutieli)")
+    n_bootstrap: int = Field(default=200, ge=0, description="parametric bootstrap replicates of the null (0: analytic)")
+    effects: list[str] | None = Field(default=None, description="candidate effects (default: every registered "
+                                      "effect the simulator supports)")
+    margin: float = Field(default=10.0, ge=0.0, description="score margin over the runner-up and the bump to name")
+    min_explained: float = Field(default=0.5, ge=0.0, le=1.0,
+                                 description="share of the flagged cells' discrepancy the named effect must explain")
+    n_starts: int = Field(default=2, ge=1, description="starting points refined per effect")
+    max_evaluations: int = Field(default=30, ge=3, description="simulator calls per refinement")
+    reidentify: bool = Field(default=True, description="run the identification again with the named effect")

@@ -1,0 +1,120 @@
+"""J(w) through the run ledger and an executor (paper eq. 5 with common random numbers).
+
+One evaluation is one parameter vector w through the simulator on the run's
+segments, its spectra y_sim (v, n_channels, n_freqs) dB and J = Σ α_k Ψ_k
+with Y_mod = y_sim + b_i. Each result is committed to the ledger the moment
+it arrives, keyed by the simulator's identity, w and the data identity, so
+that a resumed run reads it instead of simulating it again.
+
+Workers receive picklable tasks with resolved options
+(:func:`simulate_spectra_task`); the simulator is built once per process.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+import numpy as np
+
+from suspid import registry
+from suspid.errors import SimulatorError
+from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
+from suspid.interfaces import Executor, Simulator
+from suspid.method.objective import ObjectiveFunction
+from suspid.workflows.problem import Problem, simulate_spectra
+
+
+def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
+                 y_mes: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra)."""
+    fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
+                           problem.b if b is None else b, weights=problem.weights, channels=problem.channels)
+    J, psi = fn.evaluate(y_sim)
+    return J, psi
+
+
+def simulate_spectra_task(task: tuple) -> np.ndarray:
+    """Worker side of one evaluation: ``(plugin, options, w, segments, spectra) -> y_sim``.
+
+    Module-level and built from picklable parts so that process and cluster
+    executors can run it; the simulator is rebuilt from the registry.
+    """
+    plugin, options, w, segments, spectra_options = task
+    y_sim, _ = simulate_spectra(_simulator(plugin, options), w, segments, spectra_options)
+    return y_sim
+
+
+_SIMULATORS: dict[str, Simulator] = {}
+
+
+def _simulator(plugin: str, options: dict) -> Simulator:
+    """The simulator for ``(plugin, options)``, built once per process (models keep caches per instance)."""
+    key = stable_hash(plugin, options)
+    if key not in _SIMULATORS:
+        if len(_SIMULATORS) >= 4:
+            _SIMULATORS.pop(next(iter(_SIMULATORS)))
+        _SIMULATORS[key] = registry.get("simulator", plugin)(**options)
+    return _SIMULATORS[key]
+
+
+def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str, float]]:
+    """The ledger key of ``x_si (q,)`` SI and its parameter mapping w."""
+    w = problem.w_of(x_si)
+    return evaluation_key(problem.simulator_identity, w, problem.data_identity), w
+
+
+def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: Executor,
+                  on_done: Callable[[int, Evaluation | None, bool], None] = lambda i, ev, reused: None
+                  ) -> list[Evaluation | None]:
+    """J at many parameter vectors: reused from the ledger, or simulated by ``executor``.
+
+    Each result is committed to the ledger the moment it arrives. A failed
+    simulation is recorded as failed and gives ``None`` in the returned list.
+
+    :param X_si: ``(n_points, q)`` SI values.
+    :param on_done: called as ``on_done(index, evaluation, reused)`` for every point.
+    """
+    out: list[Evaluation | None] = [None] * len(X_si)
+    todo, keys = [], {}
+    for i, x in enumerate(np.asarray(X_si, float)):
+        key, w = evaluation_key_of(problem, x)
+        found = ledger.get(key)
+        if found is not None and found.ok:
+            out[i] = found
+            on_done(i, found, True)
+        else:
+            keys[len(todo)] = (i, key, w)
+            todo.append((problem.config.simulator.plugin, dict(problem.config.simulator.options), w,
+                         problem.segments, problem.config.spectra))
+    t0 = time.perf_counter()
+    for j, result in executor.map_unordered(simulate_spectra_task, todo):
+        i, key, w = keys[j]
+        wall = time.perf_counter() - t0
+        if isinstance(result, BaseException):
+            ev = Evaluation(key, w, None, None, status="failed", error=f"{type(result).__name__}: {result}",
+                            wall_time_s=wall)
+            ledger.put(ev)
+            on_done(i, None, False)
+            if not isinstance(result, SimulatorError):  # bad data, bad options or a bug: fatal
+                raise result
+            continue
+        J, psi = j_of_spectra(problem, result)
+        ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=wall)
+        ledger.put(ev)
+        out[i] = ev
+        on_done(i, ev, False)
+    return out
+
+
+def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray) -> Evaluation:
+    """J at one parameter vector in this process: :func:`evaluate_many` with the serial executor.
+
+    :param x_si: ``(q,)`` SI values in the order of ``problem.names``.
+    :raises SimulatorError: when the simulator fails (the failure is recorded first).
+    """
+    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], registry.get("executor", "serial")())[0]
+    if ev is None:
+        key, _ = evaluation_key_of(problem, x_si)
+        raise SimulatorError(ledger.get(key).error)
+    return ev

@@ -1,0 +1,266 @@
+"""The problem of one identification: data, noise model and objective (paper §2.3, §3.1, §3.3).
+
+:func:`build_problem` gathers everything J(w) needs, once per run:
+
+1. the measured spectra y_mes of the measurement date: read from files
+   (``data.source: measured``), or the numerical experiment of §3.3, where
+   y_mes_i = y_sim_i(w_ref) + b_i (eq. 10) on a synthetic track;
+2. the noise model B, identified at the reference date from
+   b_i = y_mes_i − y_sim_i(w0) (eq. 3), or loaded from ``noise.path``;
+3. the noise paths b_i of Y_mod = Y_sim(w) + b_i, drawn once from the run's
+   seed (common random numbers), the objective plugin and the weights α_k.
+
+Expensive spectra (the reference date, the measurement date) are cached in the
+run ledger, so that a resumed run does not simulate them again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from suspid import registry
+from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
+from suspid.data.experiment import apply_model_error
+from suspid.data.track import read_accelerations, read_track, synthetic_segments
+from suspid.errors import DataError
+from suspid.infra.ledger import Ledger, stable_hash
+from suspid.infra.seeds import rng as named_rng
+from suspid.infra.seeds import seed_for
+from suspid.interfaces import Objective, Response, Simulator, TrackSegment
+from suspid.method.noise import NoiseModel, fit_noise_model
+from suspid.method.spectra import SpectraOptions, compute_spectra
+from suspid.optimize.design import from_unit, to_unit
+
+
+def array_digest(*arrays: np.ndarray) -> str:
+    """A content hash of arrays (shape, dtype and bytes)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.shape, a.dtype.str)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def segments_digest(segments: Sequence[TrackSegment]) -> str:
+    """A content hash of track segments (geometry, distance and speed)."""
+    parts = []
+    for s in segments:
+        parts.append(array_digest(np.asarray(s.distance, float), np.asarray(s.irregularities, float),
+                                  np.atleast_1d(np.asarray(s.speed, float))))
+    return stable_hash(parts)
+
+
+@dataclass
+class Problem:
+    """Everything J(w) needs, built once per run.
+
+    :ivar names: identified parameter names, ``(q,)``.
+    :ivar bounds: ``(q, 2)`` SI lower and upper bounds.
+    :ivar segments: measurement-date track segments (v of them).
+    :ivar y_mes: ``(v, n_channels, n_freqs)`` dB measured spectra.
+    :ivar b: ``(v, n_channels, n_freqs)`` dB noise paths for Y_mod.
+    :ivar freqs: ``(n_freqs,)`` Hz.
+    """
+
+    config: Config
+    simulator: Simulator
+    names: list[str]
+    bounds: np.ndarray
+    segments: list[TrackSegment]
+    channels: list[str]
+    freqs: np.ndarray
+    y_mes: np.ndarray
+    b: np.ndarray
+    objective: Objective
+    weights: np.ndarray
+    data_identity: str
+    w_ref: dict[str, float] | None = None
+    reference: dict[str, np.ndarray] = field(default_factory=dict)  # y_mes0, y_sim0 at the reference date
+    noise_model: NoiseModel | None = None
+
+    @property
+    def q(self) -> int:
+        return len(self.names)
+
+    def w_of(self, x_si: np.ndarray) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.names, np.asarray(x_si, float))}
+
+    def to_unit(self, x_si: np.ndarray) -> np.ndarray:
+        """SI ``(..., q)`` to ``[0, 1]^q`` (:func:`suspid.optimize.design.to_unit`)."""
+        return to_unit(x_si, self.bounds)
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """``[0, 1]^q`` ``(..., q)`` to SI (:func:`suspid.optimize.design.from_unit`)."""
+        return from_unit(u, self.bounds)
+
+    @cached_property
+    def simulator_identity(self) -> str:
+        """The simulator's identity (plugin, version, options), computed once per run."""
+        return self.simulator.identity()
+
+    @cached_property
+    def segments_digest(self) -> str:
+        """Content hash of the measurement-date segments, computed once per run."""
+        return segments_digest(self.segments)
+
+
+def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarray, np.ndarray]]
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Spectra ``(y, freqs)`` from the ledger's artifacts, or computed and stored there."""
+    y, f = ledger.get_array(key + ":y"), ledger.get_array(key + ":freqs")
+    if y is None or f is None:
+        y, f = make()
+        ledger.put_array(key + ":y", y)
+        ledger.put_array(key + ":freqs", f)
+    return y, f
+
+
+def simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequence[TrackSegment],
+                     spectra_options: SpectraOptions | dict[str, Any] | None,
+                     transform: Callable[[list[Response]], list[Response]] | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Spectra ``(y (v, n_channels, n_freqs) dB, freqs (n_freqs,) Hz)`` of ``simulator`` at ``w`` on ``segments``.
+
+    :param transform: applied to the responses before the spectra (e.g. a measurement process).
+    """
+    responses = simulator.simulate(w, segments)
+    if transform is not None:
+        responses = transform(responses)
+    return compute_spectra(responses, spectra_options)
+
+
+def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
+    """The synthetic track of one date of a numerical experiment (seeded by the config's seed)."""
+    options = config.data.track
+    update = {} if "seed" in options.model_fields_set else {"seed": seed_for(config.seed, f"track-{date}")}
+    if n_segments is not None:
+        update["n_segments"] = n_segments
+    return synthetic_segments(options.model_copy(update=update))
+
+
+def read_measurements(measurements: Path, track_file: Path | None, channels: Sequence[str]
+                      ) -> tuple[list[TrackSegment], list[Response]]:
+    """Measured accelerations and the track geometry measured with them, paired by segment name.
+
+    :raises DataError: naming the file, when a segment has no track, the
+        channels differ, or a record's duration does not match its segment.
+    """
+    if track_file is None:
+        raise DataError(f"{measurements}: measured accelerations need the track measured with them "
+                        f"(data.track_file)")
+    files = sorted(Path(measurements).glob("*.csv")) if Path(measurements).is_dir() else [Path(measurements)]
+    records = [(f, r) for f in files for r in read_accelerations(f, channels)]  # each error names its file
+    if not records:
+        raise DataError(f"{measurements}: no acceleration records found")
+    by_name = {s.name: s for s in read_track(track_file)}
+    segments = []
+    for f, r in records:
+        seg = by_name.get(r.segment)
+        if seg is None:
+            raise DataError(f"{f}: record '{r.segment}' has no track segment of that name in "
+                            f"{track_file} (segments: {', '.join(sorted(by_name)) or 'none'})")
+        expected = seg.duration()
+        if abs(r.duration - expected) > max(0.02 * expected, 2.0 / r.fs):
+            raise DataError(f"{f}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
+                            f"segment takes {expected:.2f} s at the recorded speed")
+        segments.append(seg)
+    return segments, [r for _, r in records]
+
+
+def validate_data(config: Config) -> int:
+    """Read and check measured data as a run would (files, channels, durations, spectra grid).
+
+    :returns: the number of measured segments (0 for a numerical experiment).
+    :raises DataError: one line naming the file and what is wrong.
+    """
+    if config.data.source != "measured":
+        return 0
+    simulator = build_simulator(config)
+    if config.data.measurements is None:
+        raise config.error("measured data need data.measurements", "data.measurements")
+    segments, responses = read_measurements(config.data.measurements, config.data.track_file,
+                                            simulator.channels())
+    compute_spectra(responses, config.spectra)
+    return len(segments)
+
+
+def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
+    """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3)."""
+    simulator = build_simulator(config)
+    bounds_map = identified_bounds(config, simulator)
+    names = list(bounds_map)
+    bounds = np.array([bounds_map[n] for n in names], dtype=float)
+    spectra_options = config.spectra
+    sim_id = simulator.identity()
+    channels = simulator.channels()
+    noise_options = config.noise.model_dump(exclude={"path"})
+    noise_path = config.noise.path
+    reference: dict[str, np.ndarray] = {}
+
+    if config.data.source == "experiment":
+        w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
+        segments = synthetic_track(config, "measurement")
+        ref_opt = config.data.reference
+        if noise_path:
+            noise_model = NoiseModel.load(noise_path)
+        else:
+            log("reference date: simulating w0 and identifying the noise model B (eq. 3)")
+            ref_segments = synthetic_track(config, "reference", ref_opt.n_segments or len(segments))
+            ref_sim = simulator
+            if ref_opt.simulator_options:
+                ref_sim = type(simulator)(**(dict(config.simulator.options) | ref_opt.simulator_options))
+            key = stable_hash("reference", sim_id, ref_sim.identity(), segments_digest(ref_segments),
+                              ref_opt.model_dump(), spectra_options.model_dump(), config.seed)
+            err_rng = named_rng(config.seed, "reference-model-error")
+            y_mes0, freqs = _cached_spectra(ledger, key + ":mes", lambda: simulate_spectra(
+                ref_sim, {}, ref_segments, spectra_options, lambda rs: apply_model_error(rs, ref_opt, err_rng)))
+            y_sim0, _ = _cached_spectra(ledger, key + ":sim", lambda: simulate_spectra(
+                simulator, {}, ref_segments, spectra_options))
+            noise_model = fit_noise_model(y_mes0, y_sim0, noise_options,
+                                          freqs=freqs, channels=channels)
+            reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
+        log("measurement date: simulating w_ref (eq. 10)")
+        meas_opt = config.data.measurement
+        meas_sim, meas_id = simulator, sim_id
+        if meas_opt.simulator_options:   # the "real" vehicle: e.g. with an effect the model lacks
+            merged = validate_options(type(simulator), dict(config.simulator.options) | meas_opt.simulator_options,
+                                      file=config.file, key="data.measurement.simulator_options")
+            meas_sim = type(simulator)(**merged)
+            meas_id = meas_sim.identity()
+        # identified effect parameters (<effect>/<parameter>) keep the measurement simulator's own values
+        w_meas = {k: v for k, v in w_ref.items() if meas_sim is simulator or "/" not in k or k in config.data.w_ref}
+        key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump())
+        y_sim_ref, freqs = _cached_spectra(ledger, key, lambda: simulate_spectra(
+            meas_sim, w_meas, segments, spectra_options))
+        # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
+        b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
+                                                            + segments_digest(segments)[:16]))
+        y_mes = y_sim_ref + b_ref
+    else:
+        w_ref = None
+        segments, responses = read_measurements(config.data.measurements, config.data.track_file,
+                                                channels=channels)
+        y_mes, freqs = compute_spectra(responses, spectra_options)
+        if not noise_path:
+            raise config.error("measured data need a noise model identified at the reference date "
+                               "(noise.path: a file written by a reference-date run)", "noise.path")
+        noise_model = NoiseModel.load(noise_path)
+    noise_model.check_grid(freqs, channels)
+    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"))
+
+    objective_cls = registry.get("objective", config.objective.plugin)
+    objective = objective_cls(**config.objective.options)
+    weights = channel_weights(config, channels)
+    data_identity = stable_hash("data", array_digest(y_mes, b), segments_digest(segments),
+                                config.objective.plugin, config.objective.options, weights.tolist(),
+                                spectra_options.model_dump())
+    return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
+                   channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
+                   data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model)

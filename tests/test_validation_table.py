@@ -1,0 +1,165 @@
+"""One validation pass: every section and every plugin's options, the same mistake worded the same way.
+
+For every config section (and every built-in plugin's ``options``) an unknown
+key and a value of the wrong type go through ``suspid validate`` and
+``suspid run``: each is exit code 2, one line on stderr naming the file, the
+YAML line, the key path and what was expected, and ``run`` touches nothing:
+no run directory, so no simulation.
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+
+from suspid.cli import main
+
+BASE = {
+    "name": "table",
+    "seed": 3,
+    "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0}},
+    "parameters": {"k_sec_z": {}, "c_sec_z": {}},
+    "data": {"source": "experiment", "track": {"n_segments": 4, "length_m": 1000.0},
+             "w_ref": {"k_sec_z": 400.0e3}, "reference": {"model_error_db": 1.0}, "measurement": {}},
+    "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
+    "noise": {},
+    "objective": {"plugin": "overlap", "options": {}},
+    "surrogate": {"plugin": "gpy-kriging", "options": {}},
+    "design": {"n_initial": 6},
+    "ego": {"max_iter": 2, "refine": {"enabled": False}},
+    "executor": {"plugin": "serial", "options": {}},
+    "identifiability": {},
+    "output": {},
+    "diagnose": {},
+}
+
+STUDY = {"variants": [{"name": "a", "set": {}}]}
+MONITOR = {"acceptable": {"c_sec_z": [1.0e4, None]},
+           "scenario": {"parameter": "c_sec_z", "loss": 0.2, "dates": ["2026-01-01", "2026-02-01"]}}
+
+# (section path, a field of it, a value of the wrong type, the plugin the section needs)
+SECTIONS = [
+    ((), "seed", "three", None),
+    (("simulator",), "plugin", [1], None),
+    (("simulator", "options"), "fs_hz", "fast", None),
+    (("parameters", "k_sec_z"), "lower", "low", None),
+    (("data",), "source", 3, None),
+    (("data", "track"), "n_segments", "many", None),
+    (("data", "reference"), "sensor_noise_rms", "loud", None),
+    (("data", "measurement"), "simulator_options", 3, None),
+    (("spectra",), "f_max_hz", "high", None),
+    (("noise",), "path", [1], None),
+    (("objective",), "weights", "equal", None),
+    (("objective", "options"), "min_bandwidth_db", "wide", None),
+    (("surrogate", "options"), "kernel", 3, None),
+    (("design",), "n_initial", "many", None),
+    (("ego",), "max_iter", "many", None),
+    (("ego", "refine"), "enabled", "sometimes", None),
+    (("executor", "options"), "workers", "many", "processes"),
+    (("executor", "options"), "n_workers", "many", "dask"),
+    (("identifiability",), "n_redraws", "many", None),
+    (("output",), "figure_channel", [1], None),
+    (("study",), "seeds", "all", None),
+    (("monitor",), "acceptable", 3, None),
+    (("monitor", "scenario"), "loss", "most", None),
+    (("diagnose",), "alpha", "small", None),
+]
+PLUGIN_OPTIONS = [  # every built-in plugin's options: (section, plugin)
+    ("objective", "likelihood"), ("objective", "overlap"), ("surrogate", "gpy-kriging"),
+    ("executor", "serial"), ("executor", "processes"), ("executor", "dask"), ("simulator", "exudyn-train"),
+]
+
+LINE = re.compile(r"^error: (?P<file>\S+\.yaml):(?P<line>\d+), key '(?P<key>[^']+)': (?P<what>.+)$")
+
+
+def _config(section: tuple, key: str, value, plugin: str | None) -> dict:
+    cfg = yaml.safe_load(yaml.safe_dump(BASE))
+    cfg["study"], cfg["monitor"] = copy.deepcopy(STUDY), copy.deepcopy(MONITOR)
+    if plugin is not None:
+        cfg[section[0]]["plugin"] = plugin
+    node = cfg
+    for part in section:
+        node = node.setdefault(part, {})
+    node[key] = value
+    return cfg
+
+
+def _cases():
+    for section, field, wrong, plugin in SECTIONS:
+        path = ".".join(section)
+        yield pytest.param(section, "colour", "red", plugin, "unknown", id=f"{path or 'top'}-unknown")
+        yield pytest.param(section, field, wrong, plugin, "type", id=f"{path or 'top'}.{field}-type")
+    for kind, plugin in PLUGIN_OPTIONS:
+        yield pytest.param((kind, "options"), "colour", "red", plugin, "unknown", id=f"{plugin}-options-unknown")
+
+
+def _cli(capsys, *args: str) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_:
+        main(list(args))
+    out, err = capsys.readouterr()
+    return exit_.value.code, out, err
+
+
+@pytest.mark.parametrize("section, key, value, plugin, kind", list(_cases()))
+def test_every_section_reports_the_same_way_before_any_simulation(tmp_path, capsys, section, key, value,
+                                                                   plugin, kind):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(_config(section, key, value, plugin), sort_keys=False))
+    expected_key = ".".join([*section, key])
+    for command in ("validate", "run"):
+        code, out, err = _cli(capsys, command, str(path))
+        assert code == 2, (command, out, err)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and "Traceback" not in err, err
+        m = LINE.match(lines[0])
+        assert m, lines[0]
+        assert Path(m["file"]) == path and int(m["line"]) >= 1
+        assert m["key"] == expected_key, lines[0]
+        if kind == "unknown":
+            assert re.match(r"unknown key; expected (one of: \w+|no keys here)", m["what"]), lines[0]
+        else:
+            assert re.search(r"(should be|Input should|valid|expected)", m["what"]), lines[0]
+            assert "(got " in m["what"] or "Input should be a valid" in m["what"], lines[0]
+        assert not (tmp_path / "runs").exists(), f"{command} touched the run directory"
+
+
+def test_the_good_base_config_is_valid(tmp_path, capsys):
+    cfg = yaml.safe_load(yaml.safe_dump(BASE))
+    cfg["study"], cfg["monitor"] = copy.deepcopy(STUDY), copy.deepcopy(MONITOR)
+    path = tmp_path / "good.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    code, out, err = _cli(capsys, "validate", str(path))
+    assert code == 0, err
+    assert "valid" in out
+
+
+@pytest.mark.parametrize("mutate, key, words", [
+    (lambda c: c["executor"].update(plugin="dsk"), "executor.plugin", "not available"),
+    (lambda c: c["output"].update(figure_channel="roof"), "output.figure_channel", "unknown channel 'roof'"),
+    (lambda c: c["objective"].update(weights=[1.0, 2.0]), "objective.weights", "weights"),
+    (lambda c: c["diagnose"].update(effects=["bending"]), "diagnose.effects.0", "unknown effect 'bending'"),
+    (lambda c: c["monitor"]["acceptable"].update(k_prim_z=[1.0, 2.0]), "monitor.acceptable.k_prim_z",
+     "not an identified parameter"),
+    (lambda c: c["study"]["variants"].append({"name": "b", "set": {"ego.max_itr": 3}}), "ego.max_itr",
+     "unknown key"),
+    (lambda c: c["data"]["measurement"].update(simulator_options={"fs_hz": -1}),
+     "data.measurement.simulator_options.fs_hz", "greater than"),
+    (lambda c: c["data"]["reference"].update(simulator_options={"colour": 1}),
+     "data.reference.simulator_options.colour", "unknown key"),
+])
+def test_cross_section_checks_are_in_validate_too(tmp_path, capsys, mutate, key, words):
+    """What run would reject from the config alone, validate rejects first (executor, channels, weights, ...)."""
+    cfg = yaml.safe_load(yaml.safe_dump(BASE))
+    cfg["study"], cfg["monitor"] = copy.deepcopy(STUDY), copy.deepcopy(MONITOR)
+    mutate(cfg)
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    for command in ("validate", "run"):
+        code, out, err = _cli(capsys, command, str(path))
+        assert code == 2, (command, out, err)
+        assert len(err.strip().splitlines()) == 1 and f"key '{key}'" in err and words in err, err
+        assert not (tmp_path / "runs").exists()
