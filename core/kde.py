@@ -174,7 +174,7 @@ def log_kde(points: np.ndarray, centres: np.ndarray, h: np.ndarray,
     :param method: ``"numba"`` the compiled kernel, ``"numpy"`` the vectorised reference,
         ``"auto"`` the kernel when numba is importable (see the module docstring).
     :returns: ``(n_rows, m)`` log p in log(1/dB).
-    :raises ValueError: ``method="numba"`` without numba, or an unknown method.
+    :raises ValueError: ``method="numba"`` without numba, an unknown method, or shapes that do not match.
     """
     if method == "auto":
         method = "numba" if HAVE_NUMBA else "numpy"
@@ -186,8 +186,15 @@ def log_kde(points: np.ndarray, centres: np.ndarray, h: np.ndarray,
         raise ValueError("log_kde method 'numba' needs the numba package")
     points = np.ascontiguousarray(points, dtype=float)
     centres = np.ascontiguousarray(centres, dtype=float)
-    h = np.asarray(h, dtype=float)
+    h = np.ascontiguousarray(h, dtype=float)
+    # the compiled kernel does not check bounds: check the shapes here
+    if points.ndim != 2 or centres.ndim != 2 or h.shape != (points.shape[0],) or centres.shape[0] != h.size \
+            or centres.shape[1] < 1:
+        raise ValueError(f"log_kde needs points (n_rows, m), centres (n_rows, n >= 1) and h (n_rows,), "
+                         f"got {points.shape}, {centres.shape} and {h.shape}")
     out = np.empty(points.shape)
+    if out.size == 0:
+        return out
     _log_kernel_sums(points, centres, 1.0 / (math.sqrt(2.0) * h), out)
     return out - np.log(centres.shape[1] * math.sqrt(2.0 * math.pi) * h)[:, None]
 

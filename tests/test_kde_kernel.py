@@ -130,3 +130,14 @@ def test_without_numba_auto_falls_back_to_numpy(monkeypatch):
         kde.log_kde(points, centres, h, method="numba")
     with pytest.raises(ValueError, match="'auto', 'numba' or 'numpy'"):
         kde.log_kde(points, centres, h, method="scipy")
+
+
+def test_kernel_checks_shapes_and_accepts_no_points():
+    """The compiled loops do not check bounds, so the wrapper does."""
+    rng = np.random.default_rng(16)
+    points, centres, h = rng.normal(size=(3, 5)), rng.normal(size=(3, 6)), np.ones(3)
+    for bad in ((points, centres[:2], h), (points, centres, h[:2]), (points[0], centres, h),
+                (points, centres[:, :0], h)):
+        with pytest.raises(ValueError, match="log_kde needs points"):
+            kde.log_kde(*bad, method="numba")
+    assert kde.log_kde(points[:, :0], centres, h, method="numba").shape == (3, 0)
