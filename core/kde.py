@@ -25,9 +25,9 @@ over frequencies; loops run over blocks of 65536 kernel values):
     by ln 2 and a degree-11 polynomial, within 2 ulp of the correctly rounded
     value; its arguments are clamped at -708 so it never leaves the normal
     range) so that the compiler vectorises the loop over the points. Where the
-    sum falls below 1e-250 (a point further than ~24 h from every centre) that
+    sum falls below 1e-250 (a point further than ~34 h from every centre) that
     point is redone with the largest exponent subtracted first, so log p
-    stays finite and exact. Compiled on first use (a few seconds) and cached
+    stays finite and exact. Compiled on first use (about a second) and cached
     on disk (``cache=True``), so the compilation is paid once per machine.
   * ``method="numpy"``, the reference and the fallback without numba, below.
 

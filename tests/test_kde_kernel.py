@@ -47,7 +47,8 @@ def cases():
     points[1, 3] = 1.0e4                    # far beyond the numpy path's 100 √2 h
     points[2, :] = -3.0e3                   # a whole row of far points
     centres[3, 0], points[3, 0] = 5.0e3, 5.0e3 + 0.3 * h[3]  # far outlier centre with a point next to it
-    points[4, 2] = centres[4].max() + 26.0 * h[4]  # just past the switch to the shifted sum
+    points[4, 2] = centres[4].max() + 33.0 * h[4]  # plain sum ~1e-237: just before the switch at 1e-250
+    points[4, 3] = centres[4].min() - 34.5 * h[4]  # just past it: shifted sum
     out.append(("far outliers: underflow and shifted log-sum-exp", points, centres, h))
     centres = np.full((3, 12), 2.0)
     points = np.array([[2.0] * 5, [2.0, 2.0005, 1.999, 2.01, 2.0], [1.0, 3.0, 2.0, 2.0, 2.0]])
