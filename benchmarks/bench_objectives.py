@@ -1,33 +1,45 @@
-"""Time one evaluation of J (eq. 5) with each objective, against a straightforward scipy loop.
+"""Time one evaluation of J (eq. 5) with each objective, against the numpy reference and a scipy loop.
 
-Case of issue 3: v = 100 measured and 100 modelled samples, n = 8 channels,
-1000 frequencies (8000 (channel, ω) pairs). J is evaluated through
+Case: v = 100 measured and 100 modelled samples, n = 8 channels, 1000
+frequencies (8000 (channel, ω) pairs). J is evaluated through
 :class:`suspid.method.objective.ObjectiveFunction` (y_mod = y_sim + b, Ψ_k,
-α-weighted sum). The reference is a plain loop over (channel, ω) with
-``scipy.stats.gaussian_kde`` on a subset of pairs, timed in the same run and
-scaled to 8000 pairs; the ratio is reference / suspid. The reference's values
-on the subset are also compared with suspid's.
+α-weighted sum); each figure is the best of ``--repeat`` calls after a warm-up.
 
-Run on one core (BLAS threads pinned to 1 before numpy loads)::
+- likelihood: the compiled kernel (``kernel: auto``) against the numpy
+  reference (``kernel: numpy``) timed in the same run; the ratio is
+  reference / kernel, and the largest relative difference is taken over the
+  8000 per-(channel, ω) log-likelihoods Σ_i log p and over J.
+- overlap: one implementation (numpy, binned), no separate reference.
+- both: a plain loop over (channel, ω) with ``scipy.stats.gaussian_kde`` on a
+  subset of pairs, scaled to 8000 pairs, as an independent check of the values.
+- first call of the kernel: compile and cache write in a fresh process with an
+  empty numba cache, then a second process loading that cache.
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_objectives.py [--repeat 7] [--subset 40]
+Run on one core (BLAS and numba threads pinned to 1 before numpy loads)::
+
+    python benchmarks/bench_objectives.py [--repeat 5] [--subset 40]
 """
 
 from __future__ import annotations
 
 import os
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
 import datetime  # noqa: E402
 import platform  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
 
+import numba  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.stats import gaussian_kde  # noqa: E402
 
+from suspid.method.kde import bandwidths, log_kde, prepare  # noqa: E402
 from suspid.method.noise import NoiseModel  # noqa: E402
 from suspid.method.objective import ObjectiveFunction  # noqa: E402
 from suspid.plugins.objectives.likelihood import LikelihoodObjective  # noqa: E402
@@ -88,47 +100,98 @@ def reference_overlap(y_mes, y_mod, pairs, points=2048):
     return np.array(out)
 
 
+FIRST_CALL = """
+import time
+t0 = time.perf_counter()
+import numpy as np
+from suspid.method.kde import log_kde
+t1 = time.perf_counter()
+rng = np.random.default_rng(0)
+log_kde(rng.normal(size=(4, 100)), rng.normal(size=(4, 100)), np.ones(4), method="numba")
+print(t1 - t0, time.perf_counter() - t1)
+"""
+
+
+def first_call() -> tuple[tuple[float, float], tuple[float, float]]:
+    """(import s, first call s) of the kernel with an empty numba cache, then with the cache it wrote."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        runs = [subprocess.run([sys.executable, "-c", FIRST_CALL], env=env, check=True, capture_output=True,
+                               text=True).stdout.split() for _ in range(2)]
+    return tuple(tuple(float(v) for v in run) for run in runs)
+
+
+def row_log_likelihoods(y_mes, y_mod, freqs, method):
+    """Σ_i log p per (channel, ω), ``(8000,)``, by one log_kde implementation (Silverman, as the objective)."""
+    x, y, _, _ = prepare(y_mes, y_mod, freqs)
+    return log_kde(x, y, bandwidths(y, "silverman", 1e-3), method=method).sum(axis=1)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=7, help="timed calls per objective (best is reported)")
+    parser.add_argument("--repeat", type=int, default=5, help="timed calls per objective (best is reported)")
     parser.add_argument("--subset", type=int, default=40, help="(channel, ω) pairs in the scipy reference loop")
     args = parser.parse_args()
 
     rng = np.random.default_rng(2026)
     freqs, y_mes, y_sim, noise = synthetic_spectra(rng)
     pairs = [(k % N_CH, int(j)) for k, j in enumerate(rng.choice(N_F, size=args.subset, replace=False))]
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
     print(f"# bench_objectives  {datetime.date.today()}  python {platform.python_version()}  "
-          f"numpy {np.__version__}  {platform.processor() or platform.machine()}  "
-          f"load average {load:.2f}  threads: OMP={os.environ['OMP_NUM_THREADS']}")
+          f"numpy {np.__version__}  numba {numba.__version__}  {platform.processor() or platform.machine()}  "
+          f"{os.cpu_count()} cpus  load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}  "
+          f"threads: OMP={os.environ['OMP_NUM_THREADS']} NUMBA={os.environ['NUMBA_NUM_THREADS']}")
     print(f"# case: v = {V} measured and {V} modelled samples, {N_CH} channels, {N_F} frequencies "
-          f"({N_CH * N_F} (channel, ω) pairs); reference: scipy.stats.gaussian_kde loop on {args.subset} pairs")
+          f"({N_CH * N_F} (channel, ω) pairs); best of {args.repeat} J evaluations after a warm-up")
     print()
-    print("| objective | J evaluation, best wall (s) | median wall (s) | best CPU (s) | scipy loop, "
-          "scaled to all pairs (s) | speed-up | max difference on the subset |")
+    print("| objective | implementation | best wall (s) | median wall (s) | best CPU (s) | "
+          "numpy reference / this, wall (CPU) | max relative difference to the numpy reference |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
-    for objective, reference in ((LikelihoodObjective(), reference_likelihood),
-                                 (OverlapObjective(), reference_overlap)):
+    scipy_rows = []
+    for name, objective, reference in (
+            ("likelihood", LikelihoodObjective(), LikelihoodObjective(kernel="numpy")),
+            ("overlap", OverlapObjective(), None)):
         j_of = ObjectiveFunction.from_noise_model(objective, y_mes, freqs, noise, seed=1)
-        j_of(y_sim)  # warm-up (imports, caches)
+        j_val, psi = j_of(y_sim)  # warm-up (imports, compilation or cache load)
         best, median, cpu = best_time(lambda: j_of(y_sim), args.repeat)
         y_mod = y_sim + j_of.noise_paths
+        if reference is None:
+            print(f"| {name} | numpy (binned, unchanged) | {best:.3f} | {median:.3f} | {cpu:.3f} | - | - |")
+        else:
+            j_ref_of = ObjectiveFunction(reference, y_mes, freqs, j_of.noise_paths)
+            j_ref, psi_ref = j_ref_of(y_sim)
+            ref_best, ref_median, ref_cpu = best_time(lambda: j_ref_of(y_sim), args.repeat)
+            rows = row_log_likelihoods(y_mes, y_mod, freqs, "numba")
+            rows_ref = row_log_likelihoods(y_mes, y_mod, freqs, "numpy")
+            diff = (f"{np.max(np.abs(rows - rows_ref) / np.abs(rows_ref)):.1e} over the {rows.size} "
+                    f"Σ_i log p, {np.max(np.abs(psi - psi_ref) / np.abs(psi_ref)):.1e} over the "
+                    f"{psi.size} Ψ_k, {abs(j_val - j_ref) / abs(j_ref):.1e} on J")
+            print(f"| {name} | numba kernel | {best:.3f} | {median:.3f} | {cpu:.3f} | "
+                  f"{ref_best / best:.2f} ({ref_cpu / cpu:.2f}) | {diff} |")
+            print(f"| {name} | numpy reference | {ref_best:.3f} | {ref_median:.3f} | {ref_cpu:.3f} | 1 | 0 |")
         t0 = time.perf_counter()
-        ref = reference(y_mes, y_mod, pairs)
+        ref = (reference_likelihood if name == "likelihood" else reference_overlap)(y_mes, y_mod, pairs)
         t_ref = (time.perf_counter() - t0) * (N_CH * N_F) / len(pairs)
-        if objective.name == "likelihood":
-            ours = np.array([LikelihoodObjective().psi(y_mes[:, [k]][:, :, [j]], y_mod[:, [k]][:, :, [j]],
-                                                       freqs[[j]])[0] for k, j in pairs])
+        ours = np.array([type(objective)().psi(y_mes[:, [k]][:, :, [j]], y_mod[:, [k]][:, :, [j]],
+                                               freqs[[j]])[0] for k, j in pairs])
+        if name == "likelihood":
             diff = f"{np.max(np.abs(ours - ref) / np.abs(ref)):.1e} (relative)"
         else:
-            ours = np.array([OverlapObjective().psi(y_mes[:, [k]][:, :, [j]], y_mod[:, [k]][:, :, [j]],
-                                                    freqs[[j]])[0] for k, j in pairs])
             diff = f"{np.max(np.abs(ours - ref)):.1e} (absolute)"
-        print(f"| {objective.name} | {best:.3f} | {median:.3f} | {cpu:.3f} | {t_ref:.1f} | "
-              f"{t_ref / best:.0f}x | {diff} |")
+        scipy_rows.append(f"| {name} | {t_ref:.1f} | {t_ref / best:.0f}x | {diff} |")
     print()
-    print(f"# floor of the exact likelihood: numpy exp of {V * V * N_CH * N_F:.0e} float64 values "
-          f"(one per kernel term) takes {exp_floor(args.repeat):.3f} s CPU here")
+    print(f"Independent check: scipy.stats.gaussian_kde loop on {args.subset} pairs, scaled to all pairs")
+    print()
+    print("| objective | scipy loop (s) | scipy / suspid, wall | max difference on the subset |")
+    print("| --- | --- | --- | --- |")
+    print("\n".join(scipy_rows))
+    print()
+    (imp_cold, call_cold), (imp_warm, call_warm) = first_call()
+    print(f"# first call of the kernel in a new process: {call_cold:.2f} s with an empty numba cache "
+          f"(compilation; import of suspid.method.kde {imp_cold:.2f} s), {call_warm:.2f} s once cached "
+          f"(import {imp_warm:.2f} s)")
+    print(f"# numpy exp of {V * V * N_CH * N_F:.0e} float64 values (one per kernel term) takes "
+          f"{exp_floor(args.repeat):.3f} s CPU here (the numpy reference's floor)")
 
 
 if __name__ == "__main__":
