@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -54,21 +54,11 @@ class _Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-def _matching(effect: Effect, flagged: Sequence[tuple[str, float, float, float]]) -> list[tuple[str, float, float, float]]:
-    """The flagged cells that the effect's signature covers (channel and band at the cell's speed)."""
-    out = []
-    for channel, lo, hi, v in flagged:
-        sig = effect.signature(v)
-        if sig.matches_channel(channel) and sig.overlaps(lo, hi):
-            out.append((channel, lo, hi, v))
-    return out
-
-
 def _frequencies_in_cells(effect: Effect, parameter: str, flagged, per_cell: int = 4) -> list[float]:
     """Frequencies spread over each matching flagged cell, within the parameter's bounds (Hz)."""
     lo_b, hi_b = effect.bounds(parameter)
     values: list[float] = []
-    for _, lo, hi, _ in _matching(effect, flagged):
+    for _, lo, hi, _ in effect.matching_cells(flagged):
         a, b = max(lo, lo_b), min(hi, hi_b)
         if a <= b:
             values += list(np.linspace(a, b, per_cell + 2)[1:-1]) if b > a else [a]
@@ -174,7 +164,7 @@ class WheelPolygon(Effect):
         d = self.Options.model_validate(self.options).wheel_diameter_m
         k_lo, k_hi = self.bounds("order")
         orders: set[int] = set()
-        for _, lo, hi, v in _matching(self, flagged):
+        for _, lo, hi, v in self.matching_cells(flagged):
             f1 = v / (math.pi * d)
             ks = range(max(int(k_lo), math.ceil(lo / f1 - 1e-9)), min(int(k_hi), math.floor(hi / f1 + 1e-9)) + 1)
             orders.update(ks)
@@ -241,7 +231,7 @@ class SensorTilt(Effect):
         return EffectSignature(("carbody", "bogie", "axlebox", "wheelset"), ("lateral",), (0.0, math.inf), "none")
 
     def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
-        lateral = sorted({c for c, *_ in _matching(self, flagged)})
+        lateral = sorted({c for c, *_ in self.matching_cells(flagged)})
         choices = [[c] for c in lateral] + ([lateral] if len(lateral) > 1 else [])
         return [{"channels": ch, "angle_deg": a} for ch in choices for a in (2.0, 6.0, 12.0)]
 
