@@ -1,8 +1,9 @@
 """The built-in effects: parameters (units, bounds, sources), signatures and fit starting points.
 
-Values and bands come from ``shared/reference/railway-data.md`` §3 unless a
-field's description says "assumption". Frequencies in Hz, speeds in m/s,
-lengths in m, masses in kg, stiffnesses in N/m, angles in degrees.
+Values and bands are typical figures from public sources on high-speed
+vehicles and track unless a field's description says "assumption".
+Frequencies in Hz, speeds in m/s, lengths in m, masses in kg, stiffnesses in
+N/m, angles in degrees.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def beam_modal_mass_ratio() -> float:
 
 
 def klingel_hz(speed_mps: float, conicity: float, r0: float = 0.46, l0: float = 0.75) -> float:
-    """Klingel kinematic frequency of a free wheelset, f = v/(2π) sqrt(λ/(r0 l0)) (railway-data.md §1)."""
+    """Klingel kinematic frequency of a free wheelset, f = v/(2π) sqrt(λ/(r0 l0))."""
     return speed_mps / (2 * math.pi) * math.sqrt(conicity / (r0 * l0))
 
 
@@ -178,7 +179,7 @@ class WheelPolygon(Effect):
 class YawDamperSeriesStiffnessOptions(_Params):
     stiffness_n_per_m: float = Field(default=10.0e6, ge=0.5e6, le=100.0e6, json_schema_extra=LOG,
                                      description="series stiffness of each yaw damper (rubber mounts, oil "
-                                     "compressibility), N/m; railway-data.md §3: e.g. 10 MN/m")
+                                     "compressibility), N/m; e.g. 10 MN/m")
 
 
 class YawDamperSeriesStiffness(Effect):
@@ -239,7 +240,7 @@ class SensorTilt(Effect):
 # ------------------------------------------------------------------------------------------ conicity
 class ConicityChangeOptions(_Params):
     conicity: float = Field(default=0.25, ge=0.05, le=0.5,
-                            description="equivalent conicity λ (worn wheels and rails: 0.05-0.3, railway-data.md §1)")
+                            description="equivalent conicity λ (worn wheels and rails: 0.05-0.3)")
 
 
 class ConicityChange(Effect):
@@ -268,7 +269,7 @@ class ConicityChange(Effect):
 class TrackFlexibilityOptions(_Params):
     frequency_hz: float = Field(default=60.0, ge=30.0, le=120.0,
                                 description="P2 resonance: wheelset and track mass on the track support, Hz "
-                                "(50-70 Hz, railway-data.md §3)")
+                                "(typically 50-70 Hz)")
     damping: float = Field(default=0.3, ge=0.05, le=0.9, description="damping ratio of the P2 resonance")
     track_mass_kg: float = Field(default=400.0, ge=50.0, le=3000.0,
                                  description="rail and sleeper mass moving with one wheelset, kg (assumption)")
