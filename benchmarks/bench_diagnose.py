@@ -1,4 +1,4 @@
-"""The discrepancy workflow on hidden-effect experiments (issue 8): the table of benchmarks/RESULTS.md.
+"""The discrepancy workflow on hidden-effect experiments: the table of benchmarks/RESULTS.md.
 
 For each effect of the catalogue, the measurement-date data are simulated
 with the effect (``data.measurement.simulator_options``) and the

@@ -367,6 +367,20 @@ class Effect(ABC):
         lo, hi = self.bounds(self.main_parameter)
         return [{self.main_parameter: float(v)} for v in np.linspace(lo, hi, 7)[1:-1]]
 
+    def matching_cells(self, flagged: Sequence[tuple[str, float, float, float]]
+                       ) -> list[tuple[str, float, float, float]]:
+        """The cells of ``flagged`` that the signature covers: the cell's channel, and its band at the cell's speed.
+
+        :param flagged: ``(channel, f_low_hz, f_high_hz, speed_mps)`` of cells, as :meth:`candidates` receives them.
+        :returns: the covered cells, in the same order. A diagnosis does not fit an effect that covers none.
+        """
+        out = []
+        for channel, lo, hi, v in flagged:
+            sig = self.signature(v)
+            if sig.matches_channel(channel) and sig.overlaps(lo, hi):
+                out.append((channel, lo, hi, v))
+        return out
+
     @classmethod
     def bounds(cls, parameter: str) -> tuple[float, float]:
         """``(lower, upper)`` of a parameter, from the ``ge``/``gt``/``le``/``lt`` of its field."""

@@ -1,4 +1,4 @@
-"""The discrepancy workflow (issue 8): locate, name, add, show the gap shrink (``suspid diagnose``).
+"""The discrepancy workflow: locate, name, add, show the gap shrink (``suspid diagnose``).
 
 Unit tests of the statistics run on synthetic spectra (no simulator). The
 hidden-effect experiments simulate the measurement-date data with an effect

@@ -1,4 +1,4 @@
-"""Built-in effects: the catalogue of what rigid-body models miss (``railway-data.md`` §3).
+"""Built-in effects: the catalogue of what rigid-body models miss (``docs/diagnose.md``, "The catalogue").
 
 Each class declares one effect: its parameters with units and bounds, its
 signature (channels, band, speed dependence) and what a diagnosis fits. The

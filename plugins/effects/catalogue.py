@@ -1,15 +1,16 @@
 """The built-in effects: parameters (units, bounds, sources), signatures and fit starting points.
 
-Values and bands come from ``shared/reference/railway-data.md`` §3 unless a
-field's description says "assumption". Frequencies in Hz, speeds in m/s,
-lengths in m, masses in kg, stiffnesses in N/m, angles in degrees.
+Values and bands are typical figures from public sources on high-speed
+vehicles and track unless a field's description says "assumption".
+Frequencies in Hz, speeds in m/s, lengths in m, masses in kg, stiffnesses in
+N/m, angles in degrees.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
@@ -46,7 +47,7 @@ def beam_modal_mass_ratio() -> float:
 
 
 def klingel_hz(speed_mps: float, conicity: float, r0: float = 0.46, l0: float = 0.75) -> float:
-    """Klingel kinematic frequency of a free wheelset, f = v/(2π) sqrt(λ/(r0 l0)) (railway-data.md §1)."""
+    """Klingel kinematic frequency of a free wheelset, f = v/(2π) sqrt(λ/(r0 l0))."""
     return speed_mps / (2 * math.pi) * math.sqrt(conicity / (r0 * l0))
 
 
@@ -54,21 +55,11 @@ class _Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-def _matching(effect: Effect, flagged: Sequence[tuple[str, float, float, float]]) -> list[tuple[str, float, float, float]]:
-    """The flagged cells that the effect's signature covers (channel and band at the cell's speed)."""
-    out = []
-    for channel, lo, hi, v in flagged:
-        sig = effect.signature(v)
-        if sig.matches_channel(channel) and sig.overlaps(lo, hi):
-            out.append((channel, lo, hi, v))
-    return out
-
-
 def _frequencies_in_cells(effect: Effect, parameter: str, flagged, per_cell: int = 4) -> list[float]:
     """Frequencies spread over each matching flagged cell, within the parameter's bounds (Hz)."""
     lo_b, hi_b = effect.bounds(parameter)
     values: list[float] = []
-    for _, lo, hi, _ in _matching(effect, flagged):
+    for _, lo, hi, _ in effect.matching_cells(flagged):
         a, b = max(lo, lo_b), min(hi, hi_b)
         if a <= b:
             values += list(np.linspace(a, b, per_cell + 2)[1:-1]) if b > a else [a]
@@ -174,7 +165,7 @@ class WheelPolygon(Effect):
         d = self.Options.model_validate(self.options).wheel_diameter_m
         k_lo, k_hi = self.bounds("order")
         orders: set[int] = set()
-        for _, lo, hi, v in _matching(self, flagged):
+        for _, lo, hi, v in self.matching_cells(flagged):
             f1 = v / (math.pi * d)
             ks = range(max(int(k_lo), math.ceil(lo / f1 - 1e-9)), min(int(k_hi), math.floor(hi / f1 + 1e-9)) + 1)
             orders.update(ks)
@@ -188,7 +179,7 @@ class WheelPolygon(Effect):
 class YawDamperSeriesStiffnessOptions(_Params):
     stiffness_n_per_m: float = Field(default=10.0e6, ge=0.5e6, le=100.0e6, json_schema_extra=LOG,
                                      description="series stiffness of each yaw damper (rubber mounts, oil "
-                                     "compressibility), N/m; railway-data.md §3: e.g. 10 MN/m")
+                                     "compressibility), N/m; e.g. 10 MN/m")
 
 
 class YawDamperSeriesStiffness(Effect):
@@ -241,7 +232,7 @@ class SensorTilt(Effect):
         return EffectSignature(("carbody", "bogie", "axlebox", "wheelset"), ("lateral",), (0.0, math.inf), "none")
 
     def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
-        lateral = sorted({c for c, *_ in _matching(self, flagged)})
+        lateral = sorted({c for c, *_ in self.matching_cells(flagged)})
         choices = [[c] for c in lateral] + ([lateral] if len(lateral) > 1 else [])
         return [{"channels": ch, "angle_deg": a} for ch in choices for a in (2.0, 6.0, 12.0)]
 
@@ -249,7 +240,7 @@ class SensorTilt(Effect):
 # ------------------------------------------------------------------------------------------ conicity
 class ConicityChangeOptions(_Params):
     conicity: float = Field(default=0.25, ge=0.05, le=0.5,
-                            description="equivalent conicity λ (worn wheels and rails: 0.05-0.3, railway-data.md §1)")
+                            description="equivalent conicity λ (worn wheels and rails: 0.05-0.3)")
 
 
 class ConicityChange(Effect):
@@ -278,7 +269,7 @@ class ConicityChange(Effect):
 class TrackFlexibilityOptions(_Params):
     frequency_hz: float = Field(default=60.0, ge=30.0, le=120.0,
                                 description="P2 resonance: wheelset and track mass on the track support, Hz "
-                                "(50-70 Hz, railway-data.md §3)")
+                                "(typically 50-70 Hz)")
     damping: float = Field(default=0.3, ge=0.05, le=0.9, description="damping ratio of the P2 resonance")
     track_mass_kg: float = Field(default=400.0, ge=50.0, le=3000.0,
                                  description="rail and sleeper mass moving with one wheelset, kg (assumption)")

@@ -1,0 +1,268 @@
+"""Fitting candidate explanations: a registered effect's parameters, or the generic bump.
+
+Method: ``docs/diagnose.md``, "Name".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from scipy.optimize import minimize
+
+from suspid.config import Config, validate_options
+from suspid.errors import ConfigError, SimulatorError
+from suspid.infra.files import canonical
+from suspid.sections import DiagnoseOptions
+from suspid.workflows.problem import simulate_spectra
+
+from .cells import CellGrid
+from .locate import DiscrepancyMap
+from .null import NullCalibration
+
+
+@dataclass
+class Candidate:
+    """One ranked explanation: an effect with fitted parameters, or the generic bump."""
+
+    effect: str
+    status: str
+    n_parameters: int = 0
+    parameters: dict[str, Any] = field(default_factory=dict)
+    D: float = math.inf
+    delta_D: float = -math.inf
+    delta_D_flagged: float = -math.inf
+    explained: float = 0.0
+    score: float = -math.inf
+    delta_J: float | None = None
+    evaluations: int = 0
+    signature: dict[str, Any] | None = None
+    y_sim: np.ndarray | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        def num(x):
+            return None if x is None or not math.isfinite(x) else round(float(x), 6)
+
+        return {"effect": self.effect, "status": self.status, "score": num(self.score),
+                "parameters": canonical(self.parameters), "n_parameters": self.n_parameters,
+                "D": num(self.D), "delta_D": num(self.delta_D), "delta_D_flagged": num(self.delta_D_flagged),
+                "explained": num(self.explained), "delta_J": num(self.delta_J), "evaluations": self.evaluations,
+                "signature": self.signature}
+
+
+class Discrepancy:
+    """The fit criterion D = Σ (m / σ)² over every (speed group, channel, frequency bin), and over the bins
+    of the flagged cells; m the group mean of y_mes - y_sim - μ_B (dB), σ its null sd (``null.bin_sd``).
+
+    ``D0`` and ``D0_flagged`` are the base model's (``y_base``).
+    """
+
+    def __init__(self, grid: CellGrid, null: NullCalibration, y_mes: np.ndarray, noise_model,
+                 flagged: np.ndarray, y_base: np.ndarray) -> None:
+        self.grid = grid
+        self.target = grid.group_means(y_mes - noise_model.mean_[None])          # m = target - mean(y_sim)
+        self.scale = null.bin_sd
+        self.flagged = grid.cell_to_bins(flagged.astype(float)) > 0
+        self.base_means = grid.group_means(y_base)
+        self.D0, self.D0_flagged = self.of_means(self.target - self.base_means)
+
+    @property
+    def n_terms(self) -> int:
+        return int(self.target.size)
+
+    def of_means(self, m: np.ndarray) -> tuple[float, float]:
+        z2 = (m / self.scale) ** 2
+        return float(z2.sum()), float(z2[self.flagged].sum())
+
+    def __call__(self, y_sim: np.ndarray) -> tuple[float, float]:
+        return self.of_means(self.target - self.grid.group_means(y_sim))
+
+
+class EffectFitter:
+    """Fits effects' parameters to the measurements at fixed suspension parameters ``w`` (frequency solver)."""
+
+    def __init__(self, config: Config, problem, w: dict[str, float], discrepancy: Discrepancy,
+                 flagged: list[tuple[str, float, float, float]], options: DiagnoseOptions,
+                 log: Callable[[str], None] = lambda s: None) -> None:
+        self.config, self.problem, self.w, self.disc, self.flagged, self.opts, self.log = (
+            config, problem, dict(w), discrepancy, flagged, options, log)
+        self.sim_cls = type(problem.simulator)
+        self.file = str(config.source_file)
+        self._sims: dict[str, Any] = {}
+        self.evaluations = 0
+
+    def simulator_with(self, spec: dict[str, Any]):
+        """The configured simulator with one more effect ``spec`` (validated; cached by spec)."""
+        key = json.dumps(canonical(spec), sort_keys=True)
+        if key not in self._sims:
+            options = dict(self.config.simulator.options)
+            options["effects"] = list(options.get("effects") or []) + [spec]
+            validated = validate_options(self.sim_cls, options, file=self.file, key="simulator.options")
+            self._sims[key] = self.sim_cls(**validated)
+        return self._sims[key]
+
+    def simulate(self, sim, w_effect: dict[str, float]) -> np.ndarray | None:
+        self.evaluations += 1
+        try:
+            return simulate_spectra(sim, self.w | w_effect, self.problem.segments, self.config.spectra)[0]
+        except SimulatorError:
+            return None       # e.g. an unstable vehicle: not a candidate there
+
+    def fit(self, cls) -> Candidate:
+        """Fit one effect class at ``w``: every starting point of its ``candidates()``, then refine the best."""
+        effect = cls()
+        speeds = sorted({float(s.mean_speed) for s in self.problem.segments})
+        sigs = {f"{v * 3.6:.1f} km/h": _signature_dict(effect.signature(v)) for v in speeds}
+        if not effect.matching_cells(self.flagged):
+            return Candidate(cls.name, "excluded by signature (no flagged cell in its channels and band)",
+                             signature=sigs)
+        starts = effect.candidates(speeds, self.flagged, self.problem.channels)
+        if not starts:
+            return Candidate(cls.name, "no starting point in the flagged cells", signature=sigs)
+        defaults = cls.defaults()
+        fitted = list(cls.fitted)
+        structural = sorted({k for s in starts for k in s if k not in fitted})
+        n_params = len(fitted) + len(structural)
+        transforms = [_Transform(cls, p) for p in fitted]
+        n0 = self.evaluations
+        # 1. every starting point
+        evaluated = []
+        for start in starts:
+            spec = {"name": cls.name, **defaults, **{k: start[k] for k in structural if k in start}}
+            try:
+                sim = self.simulator_with(spec)
+            except ConfigError:
+                continue
+            x = np.array([start.get(p, defaults[p]) for p in fitted], dtype=float)
+            y = self.simulate(sim, self._w_effect(cls.name, fitted, x))
+            if y is not None:
+                evaluated.append((self.disc(y)[0], spec, x, y))
+        if not evaluated:
+            return Candidate(cls.name, "failed: no starting point could be simulated", n_params, signature=sigs,
+                             evaluations=self.evaluations - n0)
+        evaluated.sort(key=lambda e: e[0])
+        # 2. refine the best starts on the continuous parameters
+        best = evaluated[0]
+        for D0, spec, x0, y0 in evaluated[: self.opts.n_starts]:
+            if not fitted:
+                continue
+            result = self._refine(cls.name, fitted, transforms, spec, x0, D0, y0)
+            if result[0] < best[0]:
+                best = result
+        D, spec, x, y = best
+        params = dict(spec)
+        params.pop("name")
+        params.update({p: float(v) for p, v in zip(fitted, x)})
+        D_all, D_f = self.disc(y)
+        return Candidate(cls.name, "fitted", n_params, params, D_all, evaluations=self.evaluations - n0,
+                         signature=sigs, y_sim=y, delta_D_flagged=self.disc.D0_flagged - D_f)
+
+    @staticmethod
+    def _w_effect(name: str, fitted: list[str], x: np.ndarray) -> dict[str, float]:
+        return {f"{name}/{p}": float(v) for p, v in zip(fitted, x)}
+
+    def _refine(self, name, fitted, transforms, spec, x0, D0, y0):
+        sim = self.simulator_with(spec)
+        u0 = np.array([t.to_unit(v) for t, v in zip(transforms, x0)])
+        cache: dict[tuple, tuple[float, np.ndarray | None]] = {}
+
+        def objective(u):
+            u = np.clip(u, 0.0, 1.0)
+            key = tuple(np.round(u, 10))
+            if key not in cache:
+                x = np.array([t.from_unit(ui) for t, ui in zip(transforms, u)])
+                y = self.simulate(sim, self._w_effect(name, fitted, x))
+                cache[key] = (math.inf if y is None else self.disc(y)[0], y)
+            return cache[key][0]
+
+        cache[tuple(np.round(np.clip(u0, 0, 1), 10))] = (D0, y0)
+        simplex = [u0] + [np.clip(u0 + 0.04 * e * (1 if u0[i] < 0.5 else -1), 0, 1)
+                          for i, e in enumerate(np.eye(len(u0)))]
+        res = minimize(objective, u0, method="Nelder-Mead",
+                       options={"initial_simplex": np.array(simplex), "maxfev": self.opts.max_evaluations,
+                                "xatol": 2e-3, "fatol": 1e-3 * max(D0, 1.0)})
+        u = np.clip(res.x, 0.0, 1.0)
+        D, y = cache.get(tuple(np.round(u, 10)), (math.inf, None))
+        if y is None or D > D0:
+            return D0, spec, x0, y0
+        return D, spec, np.array([t.from_unit(ui) for t, ui in zip(transforms, u)]), y
+
+
+class _Transform:
+    """A fitted parameter <-> [0, 1] (linear or log between its bounds)."""
+
+    def __init__(self, cls, parameter: str) -> None:
+        self.lo, self.hi = cls.bounds(parameter)
+        self.log = cls.log_scale(parameter) and self.lo > 0
+        if not (math.isfinite(self.lo) and math.isfinite(self.hi)):
+            raise ConfigError(f"effect {cls.name}: fitted parameter '{parameter}' needs finite bounds (ge/le)")
+
+    def to_unit(self, v: float) -> float:
+        v = min(max(float(v), self.lo), self.hi)
+        if self.log:
+            return math.log(v / self.lo) / math.log(self.hi / self.lo)
+        return (v - self.lo) / (self.hi - self.lo)
+
+    def from_unit(self, u: float) -> float:
+        u = min(max(float(u), 0.0), 1.0)
+        if self.log:
+            return self.lo * (self.hi / self.lo) ** u
+        return self.lo + u * (self.hi - self.lo)
+
+
+def _signature_dict(sig) -> dict[str, Any]:
+    lo, hi = sig.band_hz
+    return {"bodies": list(sig.bodies), "directions": list(sig.directions),
+            "band_hz": [round(float(lo), 3), None if not math.isfinite(hi) else round(float(hi), 3)],
+            "speed_dependence": sig.speed_dependence}
+
+
+def fit_bump(disc: Discrepancy, dmap: DiscrepancyMap, n_parameters: int) -> Candidate:
+    """The generic bump with ``n_parameters`` parameters, fitted with the same D as the effects.
+
+    bump(k, f) = a_g(k) exp(-½ (log2(f / f_c) / w)²) dB on the flagged channels; amplitudes by weighted least
+    squares, f_c and w on grids.
+    """
+    grid = disc.grid
+    G, K = len(grid.speeds), len(grid.channels)
+    flagged_c = np.nonzero(dmap.flagged)[0]
+    if flagged_c.size == 0:
+        return Candidate("generic-bump", "nothing flagged", n_parameters)
+    per_channel: dict[int, float] = {}
+    for c in flagged_c:
+        k = grid.index(int(c))[1]
+        per_channel[k] = per_channel.get(k, 0.0) + float(dmap.evidence[c])
+    order = sorted(per_channel, key=lambda k: -per_channel[k])
+    n_amp = max(1, n_parameters - 2)
+    groups = [[k] for k in order[: n_amp - 1]] + [order[n_amp - 1:]] if len(order) >= n_amp else [[k] for k in order]
+    top = flagged_c[np.argmax(dmap.evidence[flagged_c])]
+    f_top = float(np.sqrt(np.prod(grid.band_edges[grid.index(int(top))[2]])))
+    f_lo = float(min(grid.band_edges[grid.index(int(c))[2], 0] for c in flagged_c))
+    f_hi = float(max(grid.band_edges[grid.index(int(c))[2], 1] for c in flagged_c))
+    centres = [f_top] if n_parameters < 2 else list(np.geomspace(max(f_lo, grid.freqs[0]), f_hi, 48))
+    widths = [1 / 6] if n_parameters < 3 else [1 / 12, 1 / 6, 1 / 3, 2 / 3, 1.0, 2.0]
+    m0 = (disc.target - disc.base_means).ravel()
+    weight = 1.0 / disc.scale.ravel() ** 2
+    best = (math.inf, None, None)
+    F = grid.freqs.size
+    for fc in centres:
+        for w in widths:
+            shape = np.exp(-0.5 * (np.log2(np.maximum(grid.freqs, 1e-9) / fc) / w) ** 2)      # (F,)
+            columns = []
+            for members in groups:
+                col = np.zeros((G, K, F))
+                col[:, members, :] = shape
+                columns.append(col.ravel())
+            X = np.array(columns).T                                  # (n_bins, n_amp)
+            Xw = X * weight[:, None]
+            a = np.linalg.solve(X.T @ Xw + 1e-12 * np.eye(X.shape[1]), Xw.T @ m0)
+            D, D_f = disc.of_means((m0 - X @ a).reshape(G, K, F))
+            if D < best[0]:
+                best = (D, {"centre_hz": round(fc, 4), "width_octaves": w,
+                            "amplitudes_db": {",".join(grid.channels[k] for k in g): round(float(ai), 4)
+                                              for g, ai in zip(groups, a)}}, D_f)
+    D, params, D_f = best
+    return Candidate("generic-bump", "fitted", n_parameters, params, D, delta_D_flagged=disc.D0_flagged - D_f)

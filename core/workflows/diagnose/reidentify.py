@@ -1,0 +1,84 @@
+"""The models compared: the base model and the one augmented with the named effect (``augmented.yaml``).
+
+Method: ``docs/diagnose.md``, "Add and re-identify".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import yaml
+
+from suspid.config import Config
+from suspid.infra.files import canonical, write_text
+from suspid.infra.ledger import Ledger
+from suspid.sections import OutputSection
+from suspid.workflows.identify import run
+from suspid.workflows.problem import build_problem, simulate_spectra
+
+from .fit import Candidate
+from .locate import DiscrepancyMap
+
+
+@dataclass
+class Stage:
+    """One model of the comparison: its problem (data, noise model), parameters, spectra and map."""
+
+    label: str
+    config: Config
+    problem: Any
+    w: dict[str, float]
+    y_sim: np.ndarray
+    result: dict[str, Any] | None = None
+    dmap: DiscrepancyMap | None = None
+
+    def gap(self) -> dict[str, Any]:
+        out = self.dmap.gap() if self.dmap is not None else {}
+        out["w"] = {k: float(v) for k, v in self.w.items()}
+        if self.result is not None and "errors_percent" in self.result:
+            out["errors_percent"] = self.result["errors_percent"]
+            out["w_ref"] = self.result.get("w_ref")
+        return out
+
+
+def _with_output(config: Config, run_dir: Path) -> Config:
+    return config.model_copy(update={"output": OutputSection(dir=run_dir, figure_channel=config.output.figure_channel)})
+
+
+def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fresh: bool, progress: bool,
+               log: Callable[[str], None]) -> Stage:
+    """The model of ``config`` at its identified parameters (a full run in ``run_dir``) or at the nominal ones."""
+    cfg = _with_output(config, run_dir)
+    if identify:
+        log(f"{label}: identification (suspid run in {run_dir})")
+        out = run(cfg, fresh=fresh, progress=progress, log=log)
+        problem, result, w = out.problem, out.to_dict(), dict(out.w_opt)
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        ledger = Ledger(run_dir / "ledger.sqlite")
+        if fresh:
+            ledger.clear()
+        problem, result, w = build_problem(cfg, ledger, log), None, {}
+        problem.noise_model.save(run_dir / "noise_model.npz")
+    y_sim = simulate_spectra(problem.simulator, w, problem.segments, cfg.spectra)[0]
+    return Stage(label, cfg, problem, w, y_sim, result)
+
+
+def write_augmented(config: Config, candidate: Candidate, out_dir: Path, noise_path: Path) -> Path:
+    """``augmented.yaml``: the config with the named effect and the base run's noise model."""
+    data = config.model_dump(mode="json", exclude={"source_file"})
+    options = dict(data["simulator"].get("options") or {})
+    options["effects"] = list(options.get("effects") or []) + [{"name": candidate.effect,
+                                                                **canonical(candidate.parameters)}]
+    data["simulator"]["options"] = options
+    data["noise"] = {**(data.get("noise") or {}), "path": str(noise_path)}
+    data["name"] = config.name if config.name.endswith("-augmented") else f"{config.name}-augmented"
+    data["output"] = {"dir": str(out_dir / "after"), "figure_channel": config.output.figure_channel}
+    path = out_dir / "augmented.yaml"
+    header = (f"# Written by suspid diagnose from {config.source_file}:\n"
+              f"# the model with the named effect '{candidate.effect}' and its fitted parameters,\n"
+              f"# and the noise model of the base run (the measurements and B are unchanged).\n")
+    return write_text(path, header + yaml.safe_dump(data, sort_keys=False))

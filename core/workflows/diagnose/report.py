@@ -1,0 +1,187 @@
+"""``diagnosis.md`` and its figures: the maps before and after, the spectra of the most discrepant channel."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from suspid import registry
+from suspid.infra.files import pyplot, save_figure, write_text
+from suspid.workflows.report import markdown_table
+
+from .fit import Candidate
+from .locate import DiscrepancyMap
+from .reidentify import Stage
+
+
+def figure_map(path: Path, dmap: DiscrepancyMap, title: str, limit_db: float | None = None) -> Path:
+    """Heat map of the cell magnitudes (dB, + measured above the model) per speed group; flagged cells framed."""
+    plt = pyplot()
+    grid = dmap.grid
+    G, K, B = len(grid.speeds), len(grid.channels), grid.band_edges.shape[0]
+    m = dmap.magnitude_db.reshape(G, K, B)
+    fl = dmap.flagged.reshape(G, K, B)
+    lim = limit_db or max(1.0, float(np.max(np.abs(m))))
+    fig, axes = plt.subplots(G, 1, figsize=(max(7, 0.42 * B + 3), 0.38 * K * G + 1.6), squeeze=False)
+    centres = np.sqrt(grid.band_edges[:, 0] * np.maximum(grid.band_edges[:, 1], 1e-9))
+    for g, ax in enumerate(axes[:, 0]):
+        im = ax.imshow(m[g], cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        for k, b in zip(*np.nonzero(fl[g])):
+            ax.add_patch(plt.Rectangle((b - 0.5, k - 0.5), 1, 1, fill=False, lw=1.6, ec="black"))
+        ax.set_yticks(range(K), grid.channels, fontsize=7)
+        ax.set_xticks(range(B), [f"{c:.3g}" for c in centres], rotation=90, fontsize=7)
+        ax.set_title(f"{title}: {grid.speeds[g] * 3.6:.0f} km/h" if G > 1 else title, fontsize=9)
+        fig.colorbar(im, ax=ax, label="y_mes - y_sim - μ_B (dB): band mean or peak bin", fraction=0.04)
+    axes[-1, 0].set_xlabel("band centre (Hz); framed: flagged (BY)")
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | None, channel: int,
+                       dmap: DiscrepancyMap) -> Path:
+    """Mean measured spectrum against the modelled mean y_sim + μ_B before and after, one channel."""
+    plt = pyplot()
+    p = stage_before.problem
+    f = p.freqs
+    mu = p.noise_model.mean_[channel]
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.plot(f, p.y_mes[:, channel].mean(axis=0), color="black", lw=1.5, label="Y_mes (mean)")
+    ax.plot(f, stage_before.y_sim[:, channel].mean(axis=0) + mu, color="tab:red", lw=1.2,
+            label="Y_sim + μ_B, base model")
+    if stage_after is not None:
+        ax.plot(f, stage_after.y_sim[:, channel].mean(axis=0) + stage_after.problem.noise_model.mean_[channel],
+                color="tab:blue", lw=1.2, ls="--", label="Y_sim + μ_B, augmented model")
+    grid = dmap.grid
+    for c in np.nonzero(dmap.flagged)[0]:
+        g, k, b = grid.index(int(c))
+        if k == channel:
+            ax.axvspan(*grid.band_edges[b], color="orange", alpha=0.2, lw=0)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("Y (dB)")
+    ax.set_title(f"channel {p.channels[channel]} (shaded: flagged bands before)")
+    if f[-1] / max(f[0], 1e-9) > 20:
+        ax.set_xscale("log")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def _fmt_params(params: dict[str, Any]) -> str:
+    out = []
+    for k, v in params.items():
+        if isinstance(v, float):
+            out.append(f"{k}={v:.4g}")
+        elif isinstance(v, dict):
+            out.append(f"{k}={{{', '.join(f'{a}: {b:.3g}' if isinstance(b, float) else f'{a}: {b}' for a, b in v.items())}}}")
+        else:
+            out.append(f"{k}={v}")
+    return ", ".join(out)
+
+
+def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Stage, after: Stage | None,
+                           ranking: list[Candidate], bumps: dict[int, Candidate]) -> Path:
+    """``diagnosis.md`` and its figures."""
+    dmap = before.dmap
+    lim = max(1.0, float(np.max(np.abs(dmap.magnitude_db))))
+    figure_map(out_dir / "diagnosis_map_before.png", dmap, "before (base model)", lim)
+    if after is not None:
+        figure_map(out_dir / "diagnosis_map_after.png", after.dmap, "after (augmented model)", lim)
+    per_channel = np.zeros(len(before.problem.channels))
+    for c in np.nonzero(dmap.flagged)[0]:
+        per_channel[dmap.grid.index(int(c))[1]] += dmap.evidence[c]
+    channel = int(np.argmax(per_channel)) if dmap.flagged.any() else dmap.grid.index(int(np.argmax(dmap.evidence)))[1]
+    figure_spectra_gap(out_dir / "diagnosis_spectra.png", before, after, channel, dmap)
+
+    flagged = sorted(dmap.rows(only_flagged=True), key=lambda r: r["p"])
+    flag_rows = [[r["channel"], f"{r['f_low_hz']:.3g}-{r['f_high_hz']:.3g}", f"{r['speed_kmh']:.0f}", r["sign"],
+                  f"{r['magnitude_db']:+.2f}", r["test"], f"{r['q']:.2g}"] for r in flagged[:30]]
+    rank_rows = []
+    for c in ranking:
+        score = f"{c.score:.1f}" if math.isfinite(c.score) else "-"
+        main = ""
+        if c.status == "fitted":
+            cls = registry.get("effect", c.effect)
+            main = f"{cls.main_parameter} = {c.parameters.get(cls.main_parameter)}"
+            if isinstance(c.parameters.get(cls.main_parameter), float):
+                main = f"{cls.main_parameter} = {c.parameters[cls.main_parameter]:.4g}"
+        rank_rows.append([f"**{c.effect}**" if c.effect == diagnosis["named"] else c.effect, c.status, score,
+                          c.n_parameters or "-", f"{c.delta_D:.1f}" if math.isfinite(c.delta_D) else "-",
+                          f"{100 * c.explained:.0f} %" if c.status == "fitted" else "-",
+                          f"{c.delta_J:+.4f}" if c.delta_J is not None else "-", main,
+                          _fmt_params(c.parameters) if c.status == "fitted" else ""])
+    for p, b in sorted(bumps.items()):
+        rank_rows.append([f"generic bump ({p} parameters)", b.status, f"{b.score:.1f}" if math.isfinite(b.score)
+                          else "-", p, f"{b.delta_D:.1f}" if math.isfinite(b.delta_D) else "-",
+                          f"{100 * b.explained:.0f} %" if b.status == "fitted" else "-", "-", "",
+                          _fmt_params(b.parameters) if b.status == "fitted" else ""])
+    gb, ga = diagnosis["gap_before"], diagnosis["gap_after"]
+
+    def shrink(a, b):
+        return f"{100 * (1 - b / a):.0f} %" if a and b is not None and a > 0 else "-"
+
+    gap_rows = [["flagged cells", f"{gb['n_flagged']} of {gb['n_cells']} ({100 * gb['share_flagged']:.1f} %)",
+                 f"{ga['n_flagged']} ({100 * ga['share_flagged']:.1f} %)" if ga else "-",
+                 shrink(gb["share_flagged"], ga["share_flagged"]) if ga else "-"],
+                ["integrated discrepancy (dB·Hz)", f"{gb['integrated_db_hz']:.2f}",
+                 f"{ga['integrated_db_hz']:.2f}" if ga else "-",
+                 shrink(gb["integrated_db_hz"], ga["integrated_db_hz"]) if ga else "-"],
+                ["J (run objective)", f"{gb['J']:.5g}", f"{ga['J']:.5g}" if ga else "-", ""]]
+    if "errors_percent" in gb or (ga and "errors_percent" in ga):
+        names = list((ga or gb).get("errors_percent", gb.get("errors_percent", {})))
+        for n in names:
+            eb = gb.get("errors_percent", {}).get(n)
+            ea = (ga or {}).get("errors_percent", {}).get(n)
+            gap_rows.append([f"error of {n} (% of interval)", f"{eb:.2f}" if eb is not None else "-",
+                             f"{ea:.2f}" if ea is not None else "-", ""])
+    named = diagnosis["named"]
+    verdict = (f"**Named: `{named}`** with {_fmt_params(diagnosis['named_parameters'])}. {diagnosis['reason']}."
+               if named else f"**Nothing named.** {diagnosis['reason']}.")
+    st = diagnosis["statistics"]
+    text = f"""# Discrepancy diagnosis `{diagnosis['name']}`
+
+Base model: the config's model at its {'identified' if diagnosis['base_model'] == 'identified' else 'nominal'}
+parameters. Measurements: {before.problem.y_mes.shape[0]} segments, {len(before.problem.channels)} channels,
+{before.problem.freqs.size} frequencies. Wall time {diagnosis['wall_time_s']:.0f} s (ranking {diagnosis['ranking_time_s']:.0f} s).
+
+{verdict}
+
+## 1. Where the model and the measurements disagree
+
+{gb['n_flagged']} of {gb['n_cells']} cells (speed group × channel × band) are flagged at a false discovery rate
+of {st['alpha']:g} (Benjamini-Yekutieli); integrated discrepancy {gb['integrated_db_hz']:.2f} dB·Hz. Sign +: the
+measurements are above the model; magnitude: the band mean (mean test) or the most deviant bin (shape and
+peak tests: a moved resonance, a narrow line). Null calibrated by {st['n_bootstrap']} parametric-bootstrap replicates
+(median scale κ {st['kappa_median']:.3f}, unfloored {st['kappa_raw_median'] if st['kappa_raw_median'] is None else round(st['kappa_raw_median'], 3)}).
+
+{markdown_table(['channel', 'band (Hz)', 'km/h', 'sign', 'magnitude (dB)', 'test', 'q (BY)'], flag_rows) if flag_rows else '(no flagged cell)'}
+{f'(and {len(flagged) - 30} more)' if len(flagged) > 30 else ''}
+
+![map before](diagnosis_map_before.png)
+
+## 2. Which effect is missing
+
+Each candidate's parameters are fitted to minimise D = Σ z² over every channel and frequency (z: the mean
+residual over its null standard deviation); score = ΔD - p ln(n) ({st['penalty_per_parameter']:.2f} per
+parameter p); a generic bump of the same size is the yardstick. Named
+only with a margin of {st['margin']:g} over the runner-up and the bump, explaining at least
+{100 * st['min_explained']:.0f} % of the flagged discrepancy.
+
+{markdown_table(['candidate', 'status', 'score', 'p', 'ΔD', 'explained', 'ΔJ', 'main parameter', 'parameters'], rank_rows)}
+
+## 3. The gap before and after adding the effect
+
+{f"Augmented config: `{diagnosis['augmented_config']}`" if diagnosis['augmented_config'] else 'No augmented config (nothing named).'}
+
+{markdown_table(['', 'before', 'after', 'shrink'], gap_rows)}
+
+{'![map after](diagnosis_map_after.png)' if after is not None else ''}
+
+![spectra](diagnosis_spectra.png)
+
+Method: `docs/diagnose.md`.
+"""
+    return write_text(out_dir / "diagnosis.md", text)
