@@ -100,7 +100,7 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
 
 
 def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False,
-             progress: bool = False, log: Log | None = None) -> IdentificationResult:
+             progress: bool = False, log: Log | None = None, retry_failed: bool = False) -> IdentificationResult:
     """The identification (``suspid run``): noise model, maximin design, Kriging, EGO, intervals.
 
     Writes ``result.json``, ``report.md``, the figures, ``noise_model.npz`` and
@@ -110,10 +110,12 @@ def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool =
     :param fresh: forget the ledger of a previous run in the same directory.
     :param progress: show rich progress bars.
     :param log: receives one line per step (default: silent).
+    :param retry_failed: simulate again the points whose simulation failed in an earlier run.
     :returns: the typed result; ``result.to_dict()`` equals ``result.json``.
     """
     cfg = validate(config, overrides).config
-    return _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None))
+    return _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None),
+                         retry_failed=retry_failed)
 
 
 def study(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,

@@ -7,6 +7,8 @@ with code 130 and keeps what is already in the run ledger.
 
 from __future__ import annotations
 
+import errno
+import sqlite3
 import sys
 import warnings
 from pathlib import Path
@@ -78,13 +80,16 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> No
 @app.command()
 def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
         fresh: bool = typer.Option(False, "--fresh", help="Start over: forget the run's ledger."),
+        retry_failed: bool = typer.Option(False, "--retry-failed",
+                                          help="Simulate again the points whose simulation failed before."),
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
     """Identify the parameters: design, Kriging, EGO; writes result.json and report.md in the run directory.
 
     Interrupt with Ctrl-C at any time; running the same command again resumes
     from the ledger without recomputing finished simulations.
     """
-    out = api.identify(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    out = api.identify(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet),
+                       retry_failed=retry_failed)
     _print_result(out.to_dict(), out.run_dir)
 
 
@@ -187,6 +192,40 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"warning: {message}", file=sys.stderr)
 
 
+def _one_line(exc: BaseException) -> tuple[str, int]:
+    """The one-line message and exit code of an error that ended a command.
+
+    suspid's own errors say what went wrong (exit 2, or 1 for a plugin's bug);
+    the operating system's (a path, a full disk, permissions), SQLite's and
+    memory errors are user-side conditions (exit 2); an exception raised inside
+    a plugin's code is the plugin's bug, reported with its name and
+    distribution (exit 1); anything else is a bug of suspid (exit 1).
+    """
+    if isinstance(exc, SuspidError):
+        return str(exc), exc.exit_code
+    what = f"{type(exc).__name__}: {exc}"
+    if isinstance(exc, OSError):
+        where = " -> ".join(str(p) for p in (exc.filename, exc.filename2) if p is not None)
+        return f"{where + ': ' if where else ''}{exc.strerror or exc}" + (
+            " (disk full?)" if exc.errno == errno.ENOSPC else ""), 2
+    if isinstance(exc, sqlite3.Error):
+        return f"run ledger: {exc} (disk full, read-only folder or a damaged ledger.sqlite; "\
+               f"--fresh starts over)", 2
+    if isinstance(exc, MemoryError):
+        return "out of memory: reduce the sizes in the config (segments, n_initial, n_freqs)", 2
+    if isinstance(exc, RecursionError):
+        return "input nested too deeply (recursion limit)", 2
+    modules, tb = [], exc.__traceback__
+    while tb is not None:
+        modules.append(tb.tb_frame.f_globals.get("__name__", ""))
+        tb = tb.tb_next
+    row = registry.provider_of(modules)
+    if row is not None:
+        return (f"{registry.describe(row.kind, row.name)} failed: {what} "
+                f"(a bug in the plugin; --debug shows the traceback)"), 1
+    return f"internal error: {what} (a bug in suspid; --debug shows the traceback)", 1
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point; returns (and exits with) the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -198,11 +237,6 @@ def main(argv: list[str] | None = None) -> int:
         returned = app(args=argv, prog_name="suspid", standalone_mode=False)
         code = returned if isinstance(returned, int) else 0
         interrupted = code == 130
-    except SuspidError as exc:
-        if debug:
-            raise
-        print(f"error: {exc}", file=sys.stderr)
-        code = 2
     except click.exceptions.Exit as exc:
         code = exc.exit_code
     except click.ClickException as exc:
@@ -210,6 +244,11 @@ def main(argv: list[str] | None = None) -> int:
         code = exc.exit_code
     except (KeyboardInterrupt, click.exceptions.Abort):
         interrupted, code = True, 130
+    except Exception as exc:  # noqa: BLE001 - every error becomes one line; --debug shows the traceback
+        if debug:
+            raise
+        message, code = _one_line(exc)
+        print(f"error: {message}", file=sys.stderr)
     if interrupted:
         err_console.print("interrupted: finished evaluations are kept in the run ledger; "
                           "run the same command to resume")

@@ -121,16 +121,65 @@ def _line_map(node: yaml.Node, file: str, path: tuple = ()) -> dict[tuple, int]:
     return lines
 
 
+MAX_DEPTH = 64
+"""Deepest nesting of mappings and sequences a config may have."""
+MAX_VALUES = 100_000
+"""Most values a config may expand to, aliases expanded (a config has a few hundred)."""
+
+
+def _check_shape(text: str, file: str) -> None:
+    """Refuse, in linear time, YAML nested too deeply or expanding to too many values through aliases.
+
+    A 1 KB document of nested aliases (a "billion laughs") expands to billions of
+    values; 20 000 nested brackets exhaust the parser's recursion. The event
+    stream is read once, iteratively, and the expanded size of every anchored
+    node is counted once (an alias adds the size of its anchor).
+    """
+    depth, sizes, open_sizes, open_anchors = 0, {}, [0], []
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise ConfigError(f"YAML nested deeper than {MAX_DEPTH} levels", file=file,
+                                  line=event.start_mark.line + 1)
+            open_sizes.append(1)
+            open_anchors.append(event.anchor)
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+            size, anchor = open_sizes.pop(), open_anchors.pop()
+            if anchor is not None:
+                sizes[anchor] = size
+            open_sizes[-1] += size
+        elif isinstance(event, yaml.ScalarEvent):
+            if event.anchor is not None:
+                sizes[event.anchor] = 1
+            open_sizes[-1] += 1
+        elif isinstance(event, yaml.AliasEvent):
+            open_sizes[-1] += sizes.get(event.anchor, 1)
+        if open_sizes[-1] > MAX_VALUES or sum(open_sizes) > MAX_VALUES:
+            raise ConfigError(f"YAML expands to more than {MAX_VALUES} values (aliases expanded); "
+                              f"a config needs far fewer", file=file,
+                              line=getattr(event, "start_mark", None) and event.start_mark.line + 1)
+
+
 def read_yaml(path: Path) -> tuple[dict[str, Any], dict[tuple, int]]:
-    """Safe-load a YAML mapping and the line of every key path."""
+    """Safe-load a YAML mapping and the line of every key path.
+
+    A UTF-8 byte-order mark (what spreadsheet programs write) is accepted.
+    """
     file = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise ConfigError("config file not found", file=file) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read config: {exc}", file=file) from None
+    except IsADirectoryError:
+        raise ConfigError("expected a YAML file, got a directory", file=file) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not a UTF-8 text file ({exc.reason} at byte {exc.start})", file=file) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read config: {exc.strerror or exc}", file=file) from None
     try:
+        _check_shape(text, file)
         node = yaml.compose(text, Loader=yaml.SafeLoader)
         data = yaml.safe_load(text)
     except yaml.MarkedYAMLError as exc:

@@ -11,6 +11,8 @@ from __future__ import annotations
 class SuspidError(Exception):
     """Base class of suspid's user-facing errors (exit code 2 in the CLI)."""
 
+    exit_code = 2
+
 
 class ConfigError(SuspidError):
     """A config file, a key in it or a ``--set`` override is invalid.
@@ -45,3 +47,12 @@ class DataError(SuspidError):
 
 class SimulatorError(SuspidError):
     """A simulator run failed (external program, invalid output, unstable model)."""
+
+
+class PluginBugError(PluginError):
+    """A plugin raised an exception that is not one of suspid's: a bug in the plugin (exit code 1).
+
+    The message names the plugin and its distribution, so the user knows whom to tell.
+    """
+
+    exit_code = 1

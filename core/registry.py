@@ -218,6 +218,27 @@ def plugins() -> tuple[list[Registered], list[PluginInfo]]:
     return rows, list(reg.failures)
 
 
+def describe(kind: str, name: str) -> str:
+    """``plugin 'name' (distribution D V, module M)``: who to tell when a plugin misbehaves."""
+    row = registry().classes.get(kind, {}).get(name)
+    if row is None:
+        return f"{kind} plugin '{name}'"
+    dist = " ".join(x for x in (row.plugin.distribution, row.plugin.version) if x) or "no distribution"
+    return f"{kind} plugin '{name}' ({dist}, module {row.cls.__module__})"
+
+
+def provider_of(module_names: list[str]) -> Registered | None:
+    """The registered class whose module is the innermost of ``module_names`` (a traceback's modules,
+    outermost first), or None when none of them belongs to a plugin."""
+    rows = plugins()[0] if _registry is not None else []
+    for module in reversed(module_names):
+        for row in rows:
+            home = row.plugin.module
+            if module == home or module.startswith(home + ".") or module == row.cls.__module__:
+                return row
+    return None
+
+
 def add_plugin(obj: Any, name: str) -> None:
     """Register a plugin object (a module or an instance with hook implementations) in code.
 

@@ -253,11 +253,11 @@ def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatc
     path = _write(tmp_path, monitor, small.replace("max_iter: 10", "max_iter: 2"))
     real = identify.evaluate_many
 
-    def interrupted(problem, ledger, X_si, executor, on_done=lambda i, ev, reused: None):
+    def interrupted(problem, ledger, X_si, executor, on_done=lambda i, ev, reused: None, **kwargs):
         if problem.config.name.endswith("2026-03-01"):  # Ctrl-C after 3 design points of the second date
-            real(problem, ledger, X_si[:3], executor, on_done)
+            real(problem, ledger, X_si[:3], executor, on_done, **kwargs)
             raise KeyboardInterrupt
-        return real(problem, ledger, X_si, executor, on_done)
+        return real(problem, ledger, X_si, executor, on_done, **kwargs)
 
     monkeypatch.setattr(identify, "evaluate_many", interrupted)
     with single_blas_thread(), pytest.raises(KeyboardInterrupt):

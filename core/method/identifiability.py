@@ -43,6 +43,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
+from suspid.method.sensitivity import surrogate_sensitivity
 from suspid.options import Section
 
 
@@ -135,8 +136,6 @@ def assess(names: list[str], u_opt: np.ndarray, sigma_g: np.ndarray, surrogate,
     :param curvature: ``(q,)`` d²J/du_k² at w_opt from simulations (NaN where unknown);
         without it the metamodel's Hessian is used alone.
     """
-    from suspid.method.sensitivity import surrogate_sensitivity
-
     q = len(names)
     mean_fn = lambda U: surrogate.predict(np.atleast_2d(U))[0]  # noqa: E731
     sens = surrogate_sensitivity(surrogate, q, seed=int(rng.integers(2**31)), names=names)

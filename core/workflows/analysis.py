@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from suspid.config import Config
-from suspid.infra.ledger import Ledger, stable_hash
+from suspid.errors import SimulatorError
+from suspid.infra.ledger import Evaluation, Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.method.identifiability import assess
 from suspid.optimize.ego import EGOResult
@@ -23,7 +24,8 @@ from suspid.workflows.problem import Problem, _cached_spectra, simulate_spectra
 
 
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
-                   paired: bool = True) -> tuple[np.ndarray, np.ndarray, float]:
+                   paired: bool = True, failed: list[dict[str, Any]] | None = None,
+                   retry_failed: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
     """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
 
     J is estimated from v measured spectra and v modelled ones (y_sim_i + b_i).
@@ -40,21 +42,42 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     The same 2q + 1 spectra with the run's own data give the curvature of J
     along each axis, d²J/du_k² (central second differences).
 
+    A ±h point whose simulation fails is replaced by w_opt itself (a one-sided
+    difference along that axis, no curvature there) and appended to ``failed``.
+
     :returns: ``(Σ_g (q, q), curvature (q,), σ_J)``, σ_J the scatter of J(w_opt) itself.
     """
     config = problem.config
     q = problem.q
 
     def y_sim_at(u: np.ndarray) -> np.ndarray:
+        """Spectra at ``u``, cached in the ledger; a failure is cached too, and raised again."""
         w = problem.w_of(problem.from_unit(u))
         key = stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest)
-        return _cached_spectra(ledger, key, lambda: simulate_spectra(problem.simulator, w, problem.segments,
-                                                                      config.spectra))[0]
+        known = ledger.get(key)
+        if known is not None and not known.ok and not retry_failed:
+            raise SimulatorError(known.error)
+        try:
+            return _cached_spectra(ledger, key, lambda: simulate_spectra(problem.simulator, w, problem.segments,
+                                                                          config.spectra))[0]
+        except SimulatorError as exc:
+            ledger.put(Evaluation(key, w, None, None, status="failed", error=str(exc)))
+            raise
 
-    plus = np.clip(u_opt + h * np.eye(q), 0.0, 1.0)
-    minus = np.clip(u_opt - h * np.eye(q), 0.0, 1.0)
+    y_opt = y_sim_at(u_opt)  # w_opt was simulated by EGO: it cannot fail here
+
+    def y_or_centre(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        try:
+            return u, y_sim_at(u)
+        except SimulatorError as exc:
+            if failed is not None:
+                failed.append({"phase": "intervals", "w": problem.w_of(problem.from_unit(u)), "error": str(exc)})
+            return u_opt, y_opt
+
+    plus, y_plus = map(list, zip(*[y_or_centre(u) for u in np.clip(u_opt + h * np.eye(q), 0.0, 1.0)]))
+    minus, y_minus = map(list, zip(*[y_or_centre(u) for u in np.clip(u_opt - h * np.eye(q), 0.0, 1.0)]))
+    plus, minus = np.array(plus), np.array(minus)
     step = np.diag(plus - minus)
-    y_plus, y_minus, y_opt = [y_sim_at(u) for u in plus], [y_sim_at(u) for u in minus], y_sim_at(u_opt)
     rng = named_rng(config.seed, "noise-redraws")
     v = len(problem.segments)
     grads, j_opt = np.empty((n_redraws, q)), np.empty(n_redraws)
@@ -64,7 +87,8 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
         i_mod = i_mes if paired else rng.integers(0, v, v)
         y_mes = problem.y_mes[i_mes]
         J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes)[0]  # noqa: E731
-        grads[k] = [(J(yp) - J(ym)) / step[i] for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
+        grads[k] = [(J(yp) - J(ym)) / step[i] if step[i] > 0 else 0.0  # both sides failed: no gradient
+                    for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
         j_opt[k] = J(y_opt)
     J0 = j_of_spectra(problem, y_opt)[0]
     Jp = np.array([j_of_spectra(problem, y)[0] for y in y_plus])
@@ -77,14 +101,20 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     return np.atleast_2d(np.cov(grads, rowvar=False)), curvature, float(np.std(j_opt, ddof=1))
 
 
-def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config) -> dict[str, Any]:
-    """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict."""
+def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
+            failed: list[dict[str, Any]] | None = None, retry_failed: bool = False) -> dict[str, Any]:
+    """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict.
+
+    :param failed: the points whose simulation failed during the design and EGO (listed in the result).
+    """
+    failed = list(failed or [])
     opts = config.identifiability
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
     x_opt = np.asarray(ego.x_opt, float)
     u_opt = problem.to_unit(x_opt)
     sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
-                                                 paired=opts.bootstrap == "paired")
+                                                 paired=opts.bootstrap == "paired", failed=failed,
+                                                 retry_failed=retry_failed)
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     interval_si = lo[:, None] + verdict.interval_unit * (hi - lo)[:, None]
@@ -116,6 +146,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config) ->
         "surrogate": config.surrogate.plugin,
         "simulator": config.simulator.plugin,
         "seed": config.seed,
+        "failed_points": failed,
     }
     if problem.w_ref is not None:
         w_ref = np.array([problem.w_ref[n] for n in names])

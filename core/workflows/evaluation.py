@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from suspid import registry
-from suspid.errors import SimulatorError
+from suspid.errors import SimulatorError, SuspidError
 from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
 from suspid.interfaces import Executor, Simulator
 from suspid.method.objective import ObjectiveFunction
@@ -65,24 +65,29 @@ def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str
 
 
 def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: Executor,
-                  on_done: Callable[[int, Evaluation | None, bool], None] = lambda i, ev, reused: None
-                  ) -> list[Evaluation | None]:
+                  on_done: Callable[[int, Evaluation | None, bool], None] = lambda i, ev, reused: None,
+                  retry_failed: bool = False) -> list[Evaluation | None]:
     """J at many parameter vectors: reused from the ledger, or simulated by ``executor``.
 
     Each result is committed to the ledger the moment it arrives. A failed
-    simulation is recorded as failed and gives ``None`` in the returned list.
+    simulation (a :class:`~suspid.errors.SimulatorError`) is recorded as failed
+    with its message and gives ``None`` in the returned list; a later call does
+    not simulate it again unless ``retry_failed``. Any other exception of the
+    simulator is a bug of its plugin: it is not recorded and ends the run as a
+    :class:`~suspid.errors.PluginBugError` naming the plugin.
 
     :param X_si: ``(n_points, q)`` SI values.
-    :param on_done: called as ``on_done(index, evaluation, reused)`` for every point.
+    :param on_done: called as ``on_done(index, evaluation, reused)`` for every point
+        (``evaluation`` None for a failed point).
     """
     out: list[Evaluation | None] = [None] * len(X_si)
     todo, keys = [], {}
     for i, x in enumerate(np.asarray(X_si, float)):
         key, w = evaluation_key_of(problem, x)
         found = ledger.get(key)
-        if found is not None and found.ok:
-            out[i] = found
-            on_done(i, found, True)
+        if found is not None and (found.ok or not retry_failed):
+            out[i] = found if found.ok else None
+            on_done(i, out[i], True)
         else:
             keys[len(todo)] = (i, key, w)
             todo.append((problem.config.simulator.plugin, dict(problem.config.simulator.options), w,
@@ -91,14 +96,14 @@ def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: 
     for j, result in executor.map_unordered(simulate_spectra_task, todo):
         i, key, w = keys[j]
         wall = time.perf_counter() - t0
-        if isinstance(result, BaseException):
-            ev = Evaluation(key, w, None, None, status="failed", error=f"{type(result).__name__}: {result}",
-                            wall_time_s=wall)
-            ledger.put(ev)
+        if isinstance(result, SimulatorError):
+            ledger.put(Evaluation(key, w, None, None, status="failed", error=str(result), wall_time_s=wall))
             on_done(i, None, False)
-            if not isinstance(result, SimulatorError):  # bad data, bad options or a bug: fatal
-                raise result
             continue
+        if isinstance(result, SuspidError):  # bad data or options, a plugin's bug: the run cannot go on
+            raise result
+        if isinstance(result, BaseException):  # the executor lost the task (a worker died, ...)
+            raise result
         J, psi = j_of_spectra(problem, result)
         ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=wall)
         ledger.put(ev)
@@ -107,13 +112,14 @@ def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: 
     return out
 
 
-def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray) -> Evaluation:
+def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray, retry_failed: bool = False) -> Evaluation:
     """J at one parameter vector in this process: :func:`evaluate_many` with the serial executor.
 
     :param x_si: ``(q,)`` SI values in the order of ``problem.names``.
-    :raises SimulatorError: when the simulator fails (the failure is recorded first).
+    :raises SimulatorError: when the simulator fails (the failure is recorded first), or failed before.
     """
-    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], registry.get("executor", "serial")())[0]
+    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], registry.get("executor", "serial")(),
+                       retry_failed=retry_failed)[0]
     if ev is None:
         key, _ = evaluation_key_of(problem, x_si)
         raise SimulatorError(ledger.get(key).error)

@@ -36,7 +36,7 @@ from suspid.infra.threads import single_blas_thread
 from suspid.optimize.design import from_unit, make_design
 from suspid.optimize.ego import EGOResult, run_ego
 from suspid.workflows.analysis import analyse
-from suspid.workflows.evaluation import evaluate, evaluate_many
+from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import write_report
 
@@ -142,19 +142,34 @@ def prepare_run_dir(config: Config, fresh: bool = False) -> tuple[Path, Ledger]:
     return run_dir, ledger
 
 
+def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> dict[str, Any]:
+    """A failed point for ``result.json``: its phase, w and the simulator's message from the ledger."""
+    key, w = evaluation_key_of(problem, x_si)
+    found = ledger.get(key)
+    return {"phase": phase, "w": w, "error": found.error if found is not None else "unknown"}
+
+
 def surrogate_for(config: Config):
     """The configured surrogate; its options were resolved (seed included) when the config was loaded."""
     return registry.get("surrogate", config.surrogate.plugin)(**config.surrogate.options)
 
 
 def run(config: Config, *, fresh: bool = False, progress: bool = False,
-        log: Callable[[str], None] = lambda s: None) -> IdentificationResult:
+        log: Callable[[str], None] = lambda s: None, retry_failed: bool = False) -> IdentificationResult:
     """The whole identification (see the module docstring); writes result.json and report.md.
+
+    A simulation that fails (a :class:`~suspid.errors.SimulatorError`) at a point
+    of the design, of EGO or of the refinement does not end the run: the failure
+    is kept in the ledger with its message, the point is infeasible for the
+    metamodel (it takes the worst J found so far, so EI leads away from it and it
+    is never w_opt), and ``result.json``/``report.md`` list it. Running again
+    does not simulate recorded failures unless ``retry_failed``.
 
     :param config: a loaded config (:func:`suspid.config.load_config`).
     :param fresh: forget the ledger of a previous run in the same directory.
     :param progress: show rich progress bars.
     :param log: receives one line per step.
+    :param retry_failed: simulate again the points whose simulation failed before.
     """
     t_start = time.perf_counter()
     run_dir, ledger = prepare_run_dir(config, fresh)
@@ -178,8 +193,9 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
             bars.update(design_task, advance=1, status=f"J_max {j_max:.4g}" if ev else "failed point")
 
         with executor_cls(**config.executor.options) as executor:
-            evs = evaluate_many(problem, ledger, X0, executor, design_done)
+            evs = evaluate_many(problem, ledger, X0, executor, design_done, retry_failed=retry_failed)
             ok = np.array([e is not None for e in evs])
+            failed = [failure(problem, ledger, "design", x) for x, e in zip(X0, evs) if e is None]
             if ok.sum() < 2:
                 raise SimulatorError(f"only {int(ok.sum())} of {len(evs)} design points could be simulated; "
                                      f"see the failures in {ledger.path}")
@@ -191,15 +207,22 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
             ego_task = bars.add_task("EGO", total=ego_opts.max_iter + (ego_opts.refine.max_iter
                                                                        if ego_opts.refine.enabled else 0), status="")
 
+            worst = [float(np.min(y0))]  # J given to failed points: the worst J found so far
+
+            def value(x: np.ndarray, ev: Evaluation | None) -> float:
+                if ev is None:
+                    failed.append(failure(problem, ledger, "ego", x))
+                    return worst[0]
+                worst[0] = min(worst[0], ev.J)
+                return ev.J
+
             def func(x: np.ndarray) -> float:
-                return evaluate(problem, ledger, x).J
+                return func_batch(np.asarray(x, float)[None, :])[0]
 
             def func_batch(X: np.ndarray) -> list[float]:
-                """A batch of EGO points simulated in parallel by the executor (``ego.batch`` > 1)."""
-                out = evaluate_many(problem, ledger, X, executor)
-                if any(e is None for e in out):
-                    raise SimulatorError(f"a simulation of an EGO batch failed; see the failures in {ledger.path}")
-                return [e.J for e in out]
+                """EGO points, simulated in parallel by the executor when ``ego.batch`` > 1."""
+                out = evaluate_many(problem, ledger, X, executor, retry_failed=retry_failed)
+                return [value(x, e) for x, e in zip(X, out)]
 
             def callback(record) -> None:
                 if record.phase != "initial":
@@ -220,7 +243,7 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
         bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
 
     with single_blas_thread():
-        result = analyse(problem, ledger, ego, config)
+        result = analyse(problem, ledger, ego, config, failed, retry_failed)
     result.update({
         "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),

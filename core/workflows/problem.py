@@ -28,7 +28,7 @@ from suspid import registry
 from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
 from suspid.data.experiment import apply_model_error
 from suspid.data.track import read_accelerations, read_track, synthetic_segments
-from suspid.errors import DataError
+from suspid.errors import DataError, PluginBugError, SimulatorError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.seeds import seed_for
@@ -130,7 +130,17 @@ def simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequen
 
     :param transform: applied to the responses before the spectra (e.g. a measurement process).
     """
-    responses = simulator.simulate(w, segments)
+    try:
+        responses = simulator.simulate(w, segments)
+    except SuspidError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - not one of suspid's errors: a bug of the plugin
+        raise PluginBugError(f"{registry.describe('simulator', simulator.name)} failed at w = {dict(w)}: "
+                             f"{type(exc).__name__}: {exc}") from exc
+    for r in responses:
+        if not np.all(np.isfinite(np.asarray(r.accelerations, dtype=float))):
+            raise SimulatorError(f"simulator '{simulator.name}' returned non-finite accelerations (NaN or inf) "
+                                 f"for segment '{r.segment}' at w = {dict(w)}; the model may be unstable there")
     if transform is not None:
         responses = transform(responses)
     return compute_spectra(responses, spectra_options)

@@ -191,4 +191,11 @@ bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn 
     if result.get("correlated_with"):
         text += "\n## Correlated components\n\n" + "\n".join(
             f"- `{n}` with {', '.join(c)}" for n, c in result["correlated_with"].items()) + "\n"
+    if result.get("failed_points"):
+        rows = [[p["phase"], ", ".join(f"{k} = {v:.4g}" for k, v in p["w"].items()), p["error"]]
+                for p in result["failed_points"]]
+        text += (f"\n## Failed simulations\n\n{len(rows)} simulation(s) failed; the run went on without them "
+                 f"(in EGO a failed point takes the worst J found so far, so it is never w_opt). A rerun does "
+                 f"not simulate them again unless `--retry-failed`.\n\n"
+                 + markdown_table(["phase", "w", "error"], rows) + "\n")
     return write_text(run_dir / "report.md", text)

@@ -21,13 +21,16 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
+import h5py
 import numpy as np
 
 from suspid.errors import SimulatorError
 from suspid.infra.files import canonical, pyplot, save_figure, write_text
+from suspid.method.spectra import compute_spectra
 from suspid.interfaces import Response, Simulator, TrackSegment
 from suspid.data.track import read_accelerations_h5, write_accelerations_h5
 
@@ -38,8 +41,6 @@ SpectraFn = Callable[[Sequence[Response]], tuple[np.ndarray, np.ndarray]]
 def default_spectra(responses: Sequence[Response], options: Mapping[str, Any] | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Spectra of :func:`suspid.method.spectra.compute_spectra` with the given ``spectra:`` options."""
-    from suspid.method.spectra import compute_spectra
-
     return compute_spectra(responses, options)
 
 
@@ -77,11 +78,10 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         named.append(Response(tuple(r.channels), float(r.fs), np.asarray(r.accelerations, dtype=float), name))
     y, freqs = (spectra_fn or default_spectra)(named)
     path = out / "simulation.h5"
-    write_accelerations_h5(named, path)
-    import h5py
-
+    tmp = out / ".simulation.h5.tmp"  # written whole, then moved over the target (a failure keeps the old file)
+    write_accelerations_h5(named, tmp)
     values = _parameter_values(simulator, w)
-    with h5py.File(path, "a") as f:
+    with h5py.File(tmp, "a") as f:
         f.create_dataset("y", data=np.asarray(y, dtype=float))
         f.create_dataset("freqs", data=np.asarray(freqs, dtype=float))
         f["y"].attrs["units"] = "dB re 1 m s^-1.5 (10 log10 |A_hat|, paper eq. 1)"
@@ -89,6 +89,7 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         f.attrs["simulator"] = simulator.name
         f.attrs["parameters"] = json.dumps(values, sort_keys=True)
         f.attrs["identity"] = json.dumps(canonical(simulator.identity()), sort_keys=True)
+    os.replace(tmp, path)
     plot_spectra(y, freqs, list(named[0].channels), out / "spectra.png",
                  title=f"{simulator.name}: {len(named)} segment(s)")
     return path
@@ -96,8 +97,6 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
 
 def read_simulation(path: str | Path) -> tuple[list[Response], np.ndarray, np.ndarray]:
     """Records, spectra ``y`` and ``freqs`` of a ``simulation.h5``."""
-    import h5py
-
     responses = read_accelerations_h5(path)
     with h5py.File(path, "r") as f:
         return responses, np.asarray(f["y"][()]), np.asarray(f["freqs"][()])
