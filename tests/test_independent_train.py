@@ -208,3 +208,17 @@ def test_perfect_track_leaves_the_configured_noise_floor():
     assert level.mean() == pytest.approx(1.0, rel=0.05)                 # ten channels: ~2 %
     # the anti-alias filter: -3 dB at 0.4 fs
     assert abs(inst.antialias(np.array([40.0]))[0]) == pytest.approx(math.sqrt(0.5), rel=1e-6)
+
+
+def test_two_date_protocol_config_passes_suspid_validate(tmp_path):
+    """The measurement date's files, a noise model fitted on the reference date, a measured-data config."""
+    from suspid.config import load_config
+    from suspid.pipeline import check_sections, validate_data
+
+    from independent import protocol
+
+    cfg_path = protocol.prepare(tmp_path, seed=3, n_segments=3, n_initial=10, max_iter=2)
+    assert (tmp_path / "noise.npz").is_file()
+    cfg = load_config(cfg_path)            # what `suspid validate` calls
+    check_sections(cfg)
+    assert validate_data(cfg) == 3
