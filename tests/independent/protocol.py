@@ -21,7 +21,7 @@ Then ``suspid validate config.yaml`` and ``suspid run config.yaml``;
 Command line (``tests`` on ``PYTHONPATH``)::
 
     python -m independent.protocol OUT_DIR [--seed 7] [--segments 24] [--nominal]
-        [--objective overlap|likelihood] [--n-initial 30] [--max-iter 40]
+        [--objective overlap|likelihood] [--n-initial 30] [--max-iter 40] [--physics NAME=VALUE ...]
 """
 
 from __future__ import annotations
@@ -85,11 +85,19 @@ def write_config(path: Path, measurement_dir: Path, noise_path: Path, *, seed: i
 
 
 def prepare(out_dir: Path, *, seed: int = 7, n_segments: int = 24, w_ref: Mapping[str, float] | None = None,
-            objective: str = "overlap", n_initial: int = 30, max_iter: int = 40) -> Path:
-    """Generate both dates, fit the reference noise model, write ``config.yaml``; returns its path."""
+            objective: str = "overlap", n_initial: int = 30, max_iter: int = 40,
+            physics: Mapping[str, float] | None = None) -> Path:
+    """Generate both dates, fit the reference noise model, write ``config.yaml``; returns its path.
+
+    :param w_ref: the measurement date's parameters (default: the quickstart's damaged set).
+    :param physics: values of the independent train's parameters on both dates (e.g.
+        ``{"k_yaw_series": 1e9}``); ``w_ref`` overrides them on the measurement date.
+    """
     out_dir = Path(out_dir).resolve()
-    ref, mes = TR.generate_two_dates(out_dir, {}, dict(QUICKSTART_W_REF if w_ref is None else w_ref),
-                                     seed=seed, n_segments=n_segments, speed_mps=300.0 / 3.6)
+    base = dict(physics or {})
+    w_mes = base | dict(QUICKSTART_W_REF if w_ref is None else w_ref)
+    ref, mes = TR.generate_two_dates(out_dir, base, w_mes, seed=seed, n_segments=n_segments,
+                                     speed_mps=300.0 / 3.6)
     noise = fit_reference_noise(ref, out_dir / "noise.npz")
     return write_config(out_dir / "config.yaml", mes, noise, seed=seed, objective=objective,
                         n_initial=n_initial, max_iter=max_iter)
@@ -117,9 +125,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--objective", default="overlap")
     ap.add_argument("--n-initial", type=int, default=30)
     ap.add_argument("--max-iter", type=int, default=40)
+    ap.add_argument("--physics", nargs="*", default=[], metavar="NAME=VALUE",
+                    help="independent-train parameters on both dates, e.g. k_yaw_series=1e9")
     a = ap.parse_args(argv)
+    physics = {k: float(v) for k, v in (item.split("=", 1) for item in a.physics)}
     cfg = prepare(a.out_dir, seed=a.seed, n_segments=a.segments, w_ref={} if a.nominal else None,
-                  objective=a.objective, n_initial=a.n_initial, max_iter=a.max_iter)
+                  objective=a.objective, n_initial=a.n_initial, max_iter=a.max_iter, physics=physics)
     print(cfg)
 
 
