@@ -534,8 +534,8 @@ class Instrument:
     :ivar oversampling: the response is computed at oversampling x fs, then
         anti-alias filtered and sampled.
     :ivar noise_asd: sensor noise amplitude spectral density, m/s^2/sqrt(Hz), white.
-    :ivar antialias_order, antialias_ratio: Butterworth low-pass order and
-        cut-off as a fraction of fs.
+    :ivar antialias_order, antialias_ratio: Butterworth low-pass order (0: an
+        ideal sampler, for checks) and cut-off as a fraction of fs.
     :ivar calibration_std: std of the per-channel calibration gain (fixed per train).
     :ivar segment_gain_std: std of the per-channel, per-segment gain.
     """
@@ -549,7 +549,9 @@ class Instrument:
     segment_gain_std: float = 0.01
 
     def antialias(self, f: np.ndarray) -> np.ndarray:
-        """Complex response ``(n,)`` of the analog anti-alias filter at ``f`` ``(n,)`` Hz."""
+        """Complex response ``(n,)`` of the analog anti-alias filter at ``f`` ``(n,)`` Hz (order 0: none)."""
+        if self.antialias_order == 0:
+            return np.ones(np.shape(f), dtype=complex)
         b, a = signal.butter(self.antialias_order, 2 * math.pi * self.antialias_ratio * self.fs_hz,
                              analog=True)
         return signal.freqs(b, a, worN=2 * math.pi * np.asarray(f, dtype=float))[1]
