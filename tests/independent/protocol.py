@@ -22,6 +22,7 @@ Command line (``tests`` on ``PYTHONPATH``)::
 
     python -m independent.protocol OUT_DIR [--seed 7] [--segments 24] [--nominal]
         [--objective overlap|likelihood] [--n-initial 30] [--max-iter 40] [--physics NAME=VALUE ...]
+        [--table1]
 """
 
 from __future__ import annotations
@@ -38,6 +39,10 @@ from . import train as TR
 QUICKSTART_W_REF = {"k_sec_z": 340.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.30e6, "c_sec_y": 11.0e3,
                     "c_yaw": 560.0e3}
 """The damaged suspension of suspid's quickstart (SI)."""
+
+TABLE1_W_REF = {"k_sec_z": 340.0e3, "k_prim_z": 1.00e6, "c_sec_z": 14.0e3, "k_sec_y": 130.0e3,
+                "c_sec_y": 11.0e3, "c_yaw": 560.0e3, "k_prim_y": 3.2e6}
+"""The damaged suspension of suspid's Table 1 config (q = 7, SI)."""
 
 SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200}
 """The quickstart's ``spectra:`` section."""
@@ -62,14 +67,15 @@ def fit_reference_noise(reference_dir: Path, out_path: Path, simulator_options: 
 
 
 def write_config(path: Path, measurement_dir: Path, noise_path: Path, *, seed: int = 7,
-                 objective: str = "overlap", n_initial: int = 30, max_iter: int = 40) -> Path:
+                 objective: str = "overlap", n_initial: int = 30, max_iter: int = 40,
+                 identified: tuple[str, ...] = tuple(QUICKSTART_W_REF)) -> Path:
     """A quickstart-sized identification config on measured files (paths relative to ``path``)."""
     base = path.parent
     cfg = {
         "name": path.stem,
         "seed": seed,
         "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0}},
-        "parameters": {n: {} for n in QUICKSTART_W_REF},
+        "parameters": {n: {} for n in identified},
         "data": {"source": "measured",
                  "measurements": str(Path(measurement_dir, "accelerations").relative_to(base)),
                  "track_file": str(Path(measurement_dir, "track").relative_to(base))},
@@ -86,10 +92,12 @@ def write_config(path: Path, measurement_dir: Path, noise_path: Path, *, seed: i
 
 def prepare(out_dir: Path, *, seed: int = 7, n_segments: int = 24, w_ref: Mapping[str, float] | None = None,
             objective: str = "overlap", n_initial: int = 30, max_iter: int = 40,
-            physics: Mapping[str, float] | None = None) -> Path:
+            physics: Mapping[str, float] | None = None,
+            identified: tuple[str, ...] = tuple(QUICKSTART_W_REF)) -> Path:
     """Generate both dates, fit the reference noise model, write ``config.yaml``; returns its path.
 
     :param w_ref: the measurement date's parameters (default: the quickstart's damaged set).
+    :param identified: the parameters the config identifies (default bounds).
     :param physics: values of the independent train's parameters on both dates (e.g.
         ``{"k_yaw_series": 1e9}``); ``w_ref`` overrides them on the measurement date.
     """
@@ -100,7 +108,7 @@ def prepare(out_dir: Path, *, seed: int = 7, n_segments: int = 24, w_ref: Mappin
                                      speed_mps=300.0 / 3.6)
     noise = fit_reference_noise(ref, out_dir / "noise.npz")
     return write_config(out_dir / "config.yaml", mes, noise, seed=seed, objective=objective,
-                        n_initial=n_initial, max_iter=max_iter)
+                        n_initial=n_initial, max_iter=max_iter, identified=tuple(identified))
 
 
 def errors(result_json: Path, truth_json: Path) -> dict[str, dict[str, float]]:
@@ -122,6 +130,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--segments", type=int, default=24)
     ap.add_argument("--nominal", action="store_true", help="measurement date at w0 (no damage)")
+    ap.add_argument("--table1", action="store_true", help="identify Table 1's q = 7 (its damaged w_ref)")
     ap.add_argument("--objective", default="overlap")
     ap.add_argument("--n-initial", type=int, default=30)
     ap.add_argument("--max-iter", type=int, default=40)
@@ -129,8 +138,10 @@ def main(argv: list[str] | None = None) -> None:
                     help="independent-train parameters on both dates, e.g. k_yaw_series=1e9")
     a = ap.parse_args(argv)
     physics = {k: float(v) for k, v in (item.split("=", 1) for item in a.physics)}
-    cfg = prepare(a.out_dir, seed=a.seed, n_segments=a.segments, w_ref={} if a.nominal else None,
-                  objective=a.objective, n_initial=a.n_initial, max_iter=a.max_iter, physics=physics)
+    damaged = TABLE1_W_REF if a.table1 else QUICKSTART_W_REF
+    cfg = prepare(a.out_dir, seed=a.seed, n_segments=a.segments, w_ref={} if a.nominal else damaged,
+                  objective=a.objective, n_initial=a.n_initial, max_iter=a.max_iter, physics=physics,
+                  identified=tuple(damaged))
     print(cfg)
 
 

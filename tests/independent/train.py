@@ -3,8 +3,8 @@
 Everything here is numpy/scipy and written apart from suspid's own train
 model (``exudyn-train``), its effects and its spectra/noise code: the point
 is data that suspid's model did not make (circular validation is the thing
-to avoid). suspid is only used, optionally, for nothing here: the CSV files
-are written by this module in suspid's documented measured-data layout.
+to avoid). Nothing from suspid is imported: the CSV files are written by this
+module in suspid's documented measured-data layout.
 
 Model
 -----
