@@ -80,6 +80,20 @@ Differences from suspid's built-in ``exudyn-train`` model
    0.25 m with noise, an odometry offset and a long-wavelength high-pass;
    the true track under the train is another, finer, periodic signal.
 
+Not modelled (the same as suspid, or left out on purpose): creep saturation,
+flange contact and bump stops, air-spring pneumatics, carbody torsion, wheel
+out-of-roundness, sleeper passing, lateral track flexibility, couplers to
+neighbouring cars, curves and speed changes.
+
+Modes at 300 km/h with the nominal values (:func:`eigenvalues`; all damped,
+every corner of suspid's identification box stable from 30 to 90 m/s):
+carbody lateral 0.61 Hz (zeta 0.13), bounce 1.09, yaw 1.11, roll 1.19,
+pitch 1.32 Hz; bogie kinematic modes 6.4 Hz (heavily damped: the Maxwell yaw
+dampers tie the bogies' yaw to the carbody); bogie bounce 8.1 Hz; carbody
+bending 9.5 Hz (zeta 0.038 with the secondary dampers); carbody longitudinal
+on the traction rods with bogie pitch 9.7 Hz; wheelset longitudinal/spin
+18 Hz; wheelsets on the elastic track (P2) above 50 Hz.
+
 Parameters: suspid's names (:data:`SHARED`) with suspid's meaning, per-element
 convention and nominal values (so w0 is comparable), plus this model's own
 (:data:`OWN`). Unknown names raise ``KeyError``.
