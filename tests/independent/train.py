@@ -145,7 +145,7 @@ SHARED: dict[str, float] = {
 per damper as in suspid). ``c_yaw`` here is the damper of a Maxwell element."""
 
 OWN: dict[str, float] = {
-    "k_yaw_series": 10e6,        # N/m, yaw damper series stiffness (railway data: 10 MN/m)
+    "k_yaw_series": 10e6,        # N/m, yaw damper series stiffness (Math. Probl. Eng. 2019, art. 7163732: 10 MN/m)
     "k_bush_sec_z": 2.0e6,       # N/m, series bush of the secondary vertical damper (assumption)
     "k_bush_sec_y": 4.0e6,       # N/m, series bush of the secondary lateral damper (assumption)
     "k_traction": 5.0e6,         # N/m, traction rod per bogie (assumption)
@@ -154,8 +154,8 @@ OWN: dict[str, float] = {
     "f_bend": 9.5,               # Hz, carbody first vertical bending (EMU carbodies 7-12 Hz)
     "zeta_bend": 0.02,
     "car_length": 26.0,          # m, carbody length for the beam mode shape
-    "f11_ref": 9.9e6,            # N, Kalker f11 at the reference load (railway data §6)
-    "f22_ref": 8.75e6,           # N, Kalker f22 at the reference load (railway data §6)
+    "f11_ref": 9.9e6,            # N, Kalker f11 at 54.5 kN, 300 mm rail crown (published: 9.4-10.4 MN)
+    "f22_ref": 8.75e6,           # N, Kalker f22 at 54.5 kN, 300 mm rail crown (published: 8.3-9.2 MN)
     "creep_load_ref": 54.5e3,    # N
     "creep_factor": 0.75,        # in-service reduction of Kalker's coefficients (assumption)
     "f23_length": 0.0025,        # m, f23 = f23_length f22 (spin-lateral, order sqrt(ab) C23/C22)
