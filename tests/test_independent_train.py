@@ -156,10 +156,10 @@ def dates(tmp_path_factory):
 
 
 def test_files_are_read_and_accepted_by_suspid(dates):
-    from suspid.pipeline import read_measurements
+    from suspid.workflows.problem import read_measurements
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
-    from suspid.spectra import compute_spectra
-    from suspid.track import read_accelerations, read_track
+    from suspid.method.spectra import compute_spectra
+    from suspid.data.track import read_accelerations, read_track
 
     channels = ExudynTrain().channels()
     assert list(TR.CHANNELS) == list(channels)
@@ -213,14 +213,13 @@ def test_perfect_track_leaves_the_configured_noise_floor():
 def test_two_date_protocol_config_passes_suspid_validate(tmp_path):
     """The measurement date's files, a noise model fitted on the reference date, a measured-data config."""
     from suspid.config import load_config
-    from suspid.pipeline import check_sections, validate_data
+    from suspid.workflows.problem import validate_data
 
     from independent import protocol
 
     cfg_path = protocol.prepare(tmp_path, seed=3, n_segments=3, n_initial=10, max_iter=2)
     assert (tmp_path / "noise.npz").is_file()
     cfg = load_config(cfg_path)            # what `suspid validate` calls
-    check_sections(cfg)
     assert validate_data(cfg) == 3
 
 
@@ -257,7 +256,7 @@ def test_identification_on_independent_data_recovers_w0(tmp_path):
     identifies the independent train's suspension within 8 % of each interval (4.3 % seen, k_sec_z;
     seeds 11-14 give 3.1-9.6 %). About a minute."""
     from suspid.config import load_config
-    from suspid.pipeline import run
+    from suspid.workflows.identify import run
 
     from independent import protocol
 

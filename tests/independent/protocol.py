@@ -11,7 +11,7 @@ Steps (:func:`prepare`):
 2. the noise model of the reference date (paper eq. 3): spectra of the
    reference records minus spectra that suspid's simulator computes at w0 on
    the reference date's *measured* track, fitted by
-   :func:`suspid.noise.fit_noise_model` and saved as ``noise.npz``;
+   :func:`suspid.method.noise.fit_noise_model` and saved as ``noise.npz``;
 3. a config (``config.yaml``) with ``data.source: measured`` on the
    measurement date's files and ``noise.path: noise.npz``.
 
@@ -52,9 +52,9 @@ def fit_reference_noise(reference_dir: Path, out_path: Path, simulator_options: 
                         spectra: Mapping | None = None, noise: Mapping | None = None) -> Path:
     """Noise model of a reference date measured at w0 (suspid's model at its nominal values)."""
     from suspid import registry
-    from suspid.noise import fit_noise_model
-    from suspid.pipeline import read_measurements
-    from suspid.spectra import compute_spectra
+    from suspid.method.noise import fit_noise_model
+    from suspid.workflows.problem import read_measurements
+    from suspid.method.spectra import compute_spectra
 
     sim = registry.get("simulator", "exudyn-train")(**dict(simulator_options or {"solver": "frequency",
                                                                                  "fs_hz": 100.0}))

@@ -1,6 +1,6 @@
 """Track for the independent train: true irregularities and the recording car's measurement of them.
 
-Written apart from :mod:`suspid.track` (numpy/scipy only).
+Written apart from :mod:`suspid.data.track` (numpy/scipy only).
 
 True track
 ----------
