@@ -32,7 +32,8 @@ from suspid.workflows import monitor as _monitor
 from suspid.workflows import simulate as _simulate
 from suspid.workflows import study as _study
 from suspid.workflows.identify import IdentificationResult
-from suspid.workflows.problem import synthetic_track, validate_data
+from suspid.workflows.checks import dry_run
+from suspid.workflows.problem import synthetic_track
 
 ConfigSource = Union[str, Path, Mapping[str, Any], Config]
 """A config: a YAML file, a mapping with the same content, or a loaded :class:`~suspid.config.Config`."""
@@ -90,7 +91,7 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
     :raises suspid.errors.SuspidError: the first problem, in one line.
     """
     cfg = load_config(config, overrides)
-    n = validate_data(cfg)
+    n = dry_run(cfg)
     source, extra = _source(cfg if not overrides else config), _override_list(overrides)
     if cfg.study is not None:
         _study.study_variants(source, extra, cfg)

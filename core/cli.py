@@ -27,7 +27,6 @@ from suspid.workflows.simulate import format_modes
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
 console = Console(soft_wrap=True)
-err_console = Console(stderr=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
 SetOpt = typer.Option(None, "--set", help="Override a config value: key.path=value (repeatable).")
@@ -250,8 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         message, code = _one_line(exc)
         print(f"error: {message}", file=sys.stderr)
     if interrupted:
-        err_console.print("interrupted: finished evaluations are kept in the run ledger; "
-                          "run the same command to resume")
+        print("interrupted: every finished simulation is kept in the run ledger; run the same command to resume",
+              file=sys.stderr)
     sys.exit(code)
 
 

@@ -20,6 +20,7 @@ authors get the same behaviour by typing a field as :data:`ConfigPath`.
 from __future__ import annotations
 
 import copy
+import math
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -377,6 +378,14 @@ def check_parameters(config: Config, simulator) -> None:
     bounds = identified_bounds(config, simulator)
     for name in config.parameters:
         lower, upper = bounds[name]
+        if not (math.isfinite(lower) and math.isfinite(upper)):
+            raise ConfigError(f"bounds must be finite numbers, got [{lower:g}, {upper:g}] ({known[name].unit})",
+                              file=file, key=f"parameters.{name}", line=lines.get(("parameters", name)))
+        domain = known[name].domain
+        if not (domain[0] < lower and upper < domain[1]):
+            raise ConfigError(f"bounds [{lower:g}, {upper:g}] leave the physical domain ({domain[0]:g}, "
+                              f"{domain[1]:g}) {known[name].unit} of this parameter",
+                              file=file, key=f"parameters.{name}", line=lines.get(("parameters", name)))
         if not lower < upper:
             raise ConfigError(f"lower bound {lower:g} must be below upper bound {upper:g} ({known[name].unit})",
                               file=file, key=f"parameters.{name}", line=lines.get(("parameters", name)))

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+import math
 from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 import numpy as np
@@ -51,6 +52,9 @@ class Parameter:
     lower: float
     upper: float
     description: str = ""
+    domain: tuple[float, float] = (-math.inf, math.inf)
+    """Where the parameter is physical, an open interval (SI): identification bounds must lie inside it
+    (``(0, inf)`` for a stiffness or a damping rate: zero and negative values are refused)."""
 
 
 @dataclass
@@ -147,6 +151,15 @@ class Simulator(ABC):
         :returns: one :class:`Response` per segment, in order.
         :raises suspid.errors.SimulatorError: when a run fails.
         """
+
+    def sampling_rate_hz(self) -> float | None:
+        """The sampling rate of the accelerations :meth:`simulate` returns, Hz, when known in advance.
+
+        Lets a dry run check the frequency grid against the Nyquist frequency and
+        the records' length before anything is simulated; ``None`` (the default)
+        skips those checks until the first simulation.
+        """
+        return None
 
     def identity(self) -> dict[str, Any]:
         """What determines this simulator's output besides ``w`` and the track.

@@ -168,6 +168,40 @@ def fourier_amplitude(accelerations: np.ndarray, fs: float,
     return np.fft.rfftfreq(n_t, 1.0 / fs), spectrum.reshape(a.shape[:-1] + (n_t // 2 + 1,))
 
 
+def grid_lines(n_t: int, fs: float, options: SpectraOptions | Mapping[str, Any] | None = None,
+               what: str = "record") -> tuple[np.ndarray, np.ndarray]:
+    """Which native DFT lines of a record of ``n_t`` samples at ``fs`` Hz fall in each cell of Ω.
+
+    Needs only the record's length, so that a dry run can check a run's records
+    before anything is simulated.
+
+    :returns: ``(start, stop)``, each ``(n_freqs,)``: cell j holds lines k = start_j + 1 .. stop_j
+        (line 0, DC, is never in Ω).
+    :raises DataError: the grid reaches above the Nyquist frequency, or a cell holds fewer
+        than ``min_lines_per_cell`` lines (the record is too short for the grid).
+    """
+    opt = parse_options(SpectraOptions, options, "spectra")
+    freqs, lower, upper = frequency_grid(opt)
+    duration = n_t / fs
+    if upper[-1] > fs / 2:
+        raise DataError(f"{what}: the grid reaches {upper[-1]:.4g} Hz, above the Nyquist frequency "
+                        f"fs/2 = {fs / 2:.4g} Hz; lower spectra.f_max_hz or sample faster")
+    f_native = np.fft.rfftfreq(n_t, 1.0 / fs)
+    # native line k >= 1 (DC is never in Ω) is in cell j when lower[j] <= f_k < upper[j]
+    start = np.searchsorted(f_native[1:], lower, side="left")
+    stop = np.searchsorted(f_native[1:], upper, side="left")
+    count = stop - start
+    short = np.flatnonzero(count < opt.min_lines_per_cell)
+    if short.size:
+        j = short[0]
+        raise DataError(
+            f"{what} is too short for the frequency grid: T = {duration:.4g} s gives lines every "
+            f"{1 / duration:.4g} Hz, but the cell at {freqs[j]:.4g} Hz ({upper[j] - lower[j]:.4g} Hz wide) "
+            f"holds {count[j]} (at least {opt.min_lines_per_cell} needed); use longer records, fewer "
+            f"frequencies (spectra.n_freqs) or spectra.smoothing_octaves")
+    return start, stop
+
+
 def record_spectrum(accelerations: np.ndarray, fs: float,
                     options: SpectraOptions | Mapping[str, Any] | None = None,
                     name: str = "") -> np.ndarray:
@@ -188,25 +222,9 @@ def record_spectrum(accelerations: np.ndarray, fs: float,
         raise DataError(f"{what}: sampling rate must be a positive number of Hz, got {fs!r}")
     if not np.all(np.isfinite(a)):
         raise DataError(f"{what}: accelerations contain NaN or infinite values")
-    freqs, lower, upper = frequency_grid(opt)
-    n_t = a.shape[1]
-    duration = n_t / fs
-    if upper[-1] > fs / 2:
-        raise DataError(f"{what}: the grid reaches {upper[-1]:.4g} Hz, above the Nyquist frequency "
-                        f"fs/2 = {fs / 2:.4g} Hz; lower spectra.f_max_hz or resample faster")
-    f_native, a_hat = fourier_amplitude(a, fs, opt)
-    # native line k >= 1 (DC is never in Ω) is in cell j when lower[j] <= f_k < upper[j]
-    start = np.searchsorted(f_native[1:], lower, side="left")
-    stop = np.searchsorted(f_native[1:], upper, side="left")
+    start, stop = grid_lines(a.shape[1], fs, opt, what)
     count = stop - start
-    short = np.flatnonzero(count < opt.min_lines_per_cell)
-    if short.size:
-        j = short[0]
-        raise DataError(
-            f"{what} is too short for the frequency grid: T = {duration:.4g} s gives lines every "
-            f"{1 / duration:.4g} Hz, but the cell at {freqs[j]:.4g} Hz ({upper[j] - lower[j]:.4g} Hz wide) "
-            f"holds {count[j]} (at least {opt.min_lines_per_cell} needed); use longer records, fewer "
-            f"frequencies (spectra.n_freqs) or spectra.smoothing_octaves")
+    f_native, a_hat = fourier_amplitude(a, fs, opt)
     power = np.abs(a_hat[:, 1:]) ** 2
     power = np.concatenate([power, np.zeros((power.shape[0], 1))], axis=1)  # reduceat may index the end
     # exact sums over [start, stop) per cell (cells may overlap with smoothing): every other reduceat slot

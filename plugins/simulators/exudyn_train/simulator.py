@@ -191,6 +191,10 @@ class ExudynTrain(Simulator):
             self._opts = parse_options(Options, self.options, "simulator.options")
         return self._opts
 
+    def sampling_rate_hz(self) -> float:
+        """The output sampling rate ``fs_hz``, Hz."""
+        return float(self.opts.fs_hz)
+
     def _nominal(self) -> dict[str, float]:
         values = P.nominal_values()
         values.update(self.opts.vehicle)
@@ -229,7 +233,7 @@ class ExudynTrain(Simulator):
         for p in P.PARAMETERS:
             v = nominal[p.name]
             out.append(Parameter(p.name, p.unit, v, min(p.lower, v), max(p.upper, v),
-                                 f"{p.description}; source: {p.source}"))
+                                 f"{p.description}; source: {p.source}", domain=(0.0, math.inf)))
         return out + self._effect_parameters()
 
     def default_parameters(self) -> list[str]:
