@@ -55,8 +55,9 @@ class DesignOptions(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     method: str = "maximin-lhs"
-    n_initial: int | None = Field(default=None, ge=2)
-    seed: int = 0
+    n_initial: int | None = Field(default=None, ge=2, le=20_000,
+                                  description="m0; a Kriging model of more points is beyond reach (O(m0^3))")
+    seed: int = Field(default=0, ge=0, lt=2**63, description="seed of the design's random draws")
     iterations: int = Field(default=100, ge=0)
     p: float = Field(default=50.0, gt=0)
 
