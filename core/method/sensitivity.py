@@ -32,6 +32,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from suspid.errors import ConfigError
+from suspid.optimize.design import from_unit
 
 __all__ = ["SensitivityResult", "sobol_indices", "surrogate_sensitivity"]
 
@@ -145,21 +146,17 @@ def surrogate_sensitivity(surrogate, q: int, *, bounds=None, n: int = 4096, seed
     :returns: a :class:`SensitivityResult` with ``lengthscales`` relative to
         the box width when the surrogate has ``lengthscales_``.
     """
-    lower = np.zeros(q)
-    width = np.ones(q)
-    if bounds is not None:
-        b = np.asarray(bounds, dtype=float)
-        if b.shape != (q, 2):
-            raise ConfigError(f"bounds must have shape ({q}, 2), got {b.shape}")
-        lower, width = b[:, 0], b[:, 1] - b[:, 0]
+    b = np.array([[0.0, 1.0]] * q) if bounds is None else np.asarray(bounds, dtype=float)
+    if b.shape != (q, 2):
+        raise ConfigError(f"bounds must have shape ({q}, 2), got {b.shape}")
 
     def mean(U: np.ndarray) -> np.ndarray:
-        X = lower + U * width
+        X = from_unit(U, b)
         return np.concatenate([surrogate.predict(X[i:i + batch])[0]
                                for i in range(0, X.shape[0], batch)])
 
     result = sobol_indices(mean, q, n=n, seed=seed, n_bootstrap=n_bootstrap, names=names)
     ls = surrogate.lengthscales_
     if ls is not None:
-        result.lengthscales = np.asarray(ls, dtype=float).reshape(-1) / width
+        result.lengthscales = np.asarray(ls, dtype=float).reshape(-1) / (b[:, 1] - b[:, 0])
     return result

@@ -117,7 +117,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
                                                  retry_failed=retry_failed)
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
-    interval_si = lo[:, None] + verdict.interval_unit * (hi - lo)[:, None]
+    interval_si = problem.from_unit(verdict.interval_unit.T).T  # (q, 2): lower and upper ends, SI
     units = {p.name: p.unit for p in problem.simulator.parameters()}
     result: dict[str, Any] = {
         "name": config.name,
