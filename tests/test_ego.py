@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from suspid.optimize.ego import (EGOOptions, _log_ei_and_grad, expected_improvement,
+from suspid.optimize.ego import (EGOOptions, expected_improvement,
                         log_expected_improvement, maximize, run_ego)
+from suspid.optimize.acquisition import log_ei_and_grad as _log_ei_and_grad
 from suspid.errors import ConfigError, SuspidError, UnknownPluginError
 from suspid.interfaces import Surrogate
 from suspid.plugins.surrogates.gpy_kriging import GPyKriging

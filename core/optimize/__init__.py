@@ -1,6 +1,11 @@
 """Maximising J: the initial maximin design and EGO on a Kriging metamodel (paper §3.2, eq. 9).
 
 - :mod:`~suspid.optimize.design`: space-filling initial designs in [0, 1]^q;
-- :mod:`~suspid.optimize.ego`: the EGO loop, as composable ask/tell pieces;
+- :mod:`~suspid.optimize.ego`: the EGO loop as an ask/tell object (:class:`~suspid.optimize.ego.EGO`)
+  and the loops over it (:func:`~suspid.optimize.ego.run_ego`, :func:`~suspid.optimize.ego.maximize`);
+- :mod:`~suspid.optimize.loop`: its pieces: loop state, records, EI proposer, stopping rules;
+- :mod:`~suspid.optimize.acquisition`: the expected improvement and its maximisation;
+- :mod:`~suspid.optimize.refine`: the local trust-region refinement (proposer and radius rule);
+- :mod:`~suspid.optimize.options`: the ``ego:`` options and the surrogate they name;
 - :mod:`~suspid.optimize.testfunctions`: analytic functions with known optima, for tests and benchmarks.
 """

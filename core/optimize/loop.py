@@ -1,0 +1,315 @@
+"""The pieces of the EGO loop: its state, its records, the EI proposer and the stopping rules.
+
+The loop is the paper's pseudo code (§3.2), for maximisation::
+
+    fit J~ on the m0 initial points (w_j, J(w_j))
+    for l = m0 + 1 .. m0 + m1:
+        J_max = max_j J(w_j)
+        w_l   = argmax_w EI(w),  EI(w) = E[max(0, J~(w) - J_max)]   (closed form)
+        if EI(w_l) < eps: break           eps = tol * (max J - min J), current data
+        evaluate J(w_l); refit J~ with it
+    return w_opt = the best evaluated point
+
+As in emukit's outer loop it is cut into small pieces that
+:class:`suspid.optimize.ego.EGO` composes behind an ask/tell interface:
+
+- :class:`LoopState`: the evaluated points ``U (n_points, q)`` in ``[0, 1]^q``,
+  their J ``(n_points,)``, the points whose evaluation failed and the
+  :class:`IterationRecord` ledger;
+- :class:`EIProposer`: fits the surrogate J~, maximises EI
+  (:func:`suspid.optimize.acquisition.maximize_ei`) and returns the next
+  point, or the next ``batch`` points by the kriging believer heuristic;
+- :class:`MaxIterations` (m1) and :class:`EIBelowTolerance` (EI < eps): the
+  paper's stopping rules. The refinement's proposer and radius rule are in
+  :mod:`suspid.optimize.refine`.
+
+Public API: :class:`IterationRecord`, :class:`EGOResult`, :class:`LoopState`,
+:class:`Proposal`, :class:`EIProposer`, :class:`MaxIterations`,
+:class:`EIBelowTolerance`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from suspid.interfaces import Surrogate
+from suspid.optimize.acquisition import ei_from_log, maximize_ei
+from suspid.optimize.options import EGOOptions
+
+__all__ = ["IterationRecord", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
+           "EIBelowTolerance"]
+
+
+@dataclass
+class IterationRecord:
+    """One line of the run ledger, passed to the ``callback``.
+
+    :ivar iteration: 0 for initial points, then l - m0 = 1, 2, ... for EGO
+        iterations (a batch shares its iteration), then on for the refinement.
+    :ivar index: position of the point in ``EGOResult.X`` (0-based); for the
+        ``"stop"`` record, the position it would have had.
+    :ivar phase: ``"initial"``, ``"ego"``, ``"stop"`` (the paper's EI stop),
+        or ``"refine"`` (a point of the local refinement).
+    :ivar x: ``(q,)`` the point in SI units; :ivar x_unit: the same in ``[0, 1]^q``.
+    :ivar J: the objective there (None for ``"stop"``).
+    :ivar EI: the expected improvement that chose the point (None for initial
+        points); :ivar log_EI: its logarithm, which does not underflow.
+    :ivar J_max: best J before this point; :ivar epsilon: the EI threshold then.
+    :ivar hyperparameters: the surrogate's ``hyperparameters_`` dict (may be empty).
+    :ivar fit_seconds, search_seconds, eval_seconds: wall times in s
+        (``eval_seconds`` is None when J came from ``y_init`` or was not timed).
+    """
+
+    iteration: int
+    index: int
+    phase: str
+    x: np.ndarray
+    x_unit: np.ndarray
+    J: float | None
+    EI: float | None = None
+    log_EI: float | None = None
+    J_max: float | None = None
+    epsilon: float | None = None
+    hyperparameters: dict[str, Any] = field(default_factory=dict)
+    fit_seconds: float = 0.0
+    search_seconds: float = 0.0
+    eval_seconds: float | None = None
+
+
+@dataclass
+class EGOResult:
+    """Outcome of an EGO run.
+
+    :ivar x_opt: ``(q,)`` w_opt, the best evaluated point, SI units.
+    :ivar y_opt: J(w_opt).
+    :ivar X: ``(n_points, q)`` every point in order (initial design first), SI units.
+    :ivar y: ``(n_points,)`` J at those points.
+    :ivar X_unit: ``(n_points, q)`` the same points in ``[0, 1]^q``.
+    :ivar n_initial: m0, the number of initial points.
+    :ivar stop_reason: why the paper's loop stopped: ``"ei_below_tol"``,
+        ``"max_iter"``, ``"callback"`` (a callback returned True), ``"stopped"``
+        (:meth:`suspid.optimize.ego.EGO.stop`), or ``"running"`` for a snapshot
+        of an unfinished run.
+    :ivar refine_stop_reason: why the refinement stopped (``"radius_below_min"``,
+        ``"max_iter"``, ``"callback"``, ``"stopped"``), None without one.
+    :ivar n_refine: points evaluated by the refinement (included in ``n_iterations``).
+    :ivar history: every :class:`IterationRecord`, in order.
+    :ivar surrogate: the surrogate fitted on all points (with
+        ``refit_final=False``: its last fit in the paper's loop, without the
+        last point and the refinement's points); None if it was never fitted.
+    :ivar bounds: ``(q, 2)`` the parameter box.
+    :ivar design_min_distance: smallest pairwise distance of the initial
+        points in ``[0, 1]^q``.
+    :ivar n_function_calls: evaluations of J made by this run, failed ones
+        included (values from ``y_init`` are not counted).
+    :ivar X_failed: ``(n_failed, q)`` SI points whose evaluation failed (not in ``X``).
+    """
+
+    x_opt: np.ndarray
+    y_opt: float
+    X: np.ndarray
+    y: np.ndarray
+    X_unit: np.ndarray
+    n_initial: int
+    stop_reason: str
+    history: list[IterationRecord]
+    surrogate: Surrogate | None
+    bounds: np.ndarray
+    design_min_distance: float
+    n_function_calls: int
+    refine_stop_reason: str | None = None
+    n_refine: int = 0
+    X_failed: np.ndarray | None = None
+
+    @property
+    def n_evaluations(self) -> int:
+        """Number of points with a value of J (initial ones included)."""
+        return int(self.y.shape[0])
+
+    @property
+    def n_iterations(self) -> int:
+        """Number of points evaluated after the initial design (EGO and refinement)."""
+        return self.n_evaluations - self.n_initial
+
+
+@dataclass
+class LoopState:
+    """What the loop knows: the evaluated points, in order, and the ledger.
+
+    :ivar q: number of parameters.
+    :ivar U: the points ``(q,)`` in ``[0, 1]^q``, in evaluation order.
+    :ivar y: J at those points.
+    :ivar U_failed: points whose evaluation failed (kept out of ``U``).
+    :ivar records: every :class:`IterationRecord`, in order.
+    :ivar n_initial: m0, fixed when the initial design is complete.
+    """
+
+    q: int
+    U: list[np.ndarray] = field(default_factory=list)
+    y: list[float] = field(default_factory=list)
+    U_failed: list[np.ndarray] = field(default_factory=list)
+    records: list[IterationRecord] = field(default_factory=list)
+    n_initial: int = 0
+
+    @property
+    def n_points(self) -> int:
+        """Number of evaluated points."""
+        return len(self.y)
+
+    @property
+    def U_array(self) -> np.ndarray:
+        """``(n_points, q)`` the evaluated points in [0, 1]^q."""
+        return np.array(self.U).reshape(-1, self.q)
+
+    @property
+    def y_array(self) -> np.ndarray:
+        """``(n_points,)`` J at the evaluated points."""
+        return np.array(self.y, dtype=float)
+
+    def j_max(self) -> float | None:
+        """The current best J (None before the first value)."""
+        return max(self.y) if self.y else None
+
+    def add(self, u: np.ndarray, J: float) -> int:
+        """Append a point ``u (q,)`` with its value; returns its index."""
+        self.U.append(u)
+        self.y.append(J)
+        return len(self.y) - 1
+
+
+class MaxIterations:
+    """Stopping rule: at most m1 = ``max_iter`` points after the initial design."""
+
+    reason = "max_iter"
+
+    def __init__(self, max_iter: int) -> None:
+        self.max_iter = max_iter
+
+    def should_stop(self, n_new_points: int) -> bool:
+        """True once ``n_new_points`` (points told after the design, failed ones included) reach m1."""
+        return n_new_points >= self.max_iter
+
+
+class EIBelowTolerance:
+    """The paper's stopping rule: EI(w_l) < eps, eps = tol * (max J - min J) over the current data.
+
+    With tol = 0, or all J equal, eps = 0 and the rule never fires.
+    """
+
+    reason = "ei_below_tol"
+
+    def __init__(self, tol: float) -> None:
+        self.tol = tol
+
+    def epsilon(self, y: np.ndarray) -> float:
+        """eps for the values ``y (n_points,)``, in units of J."""
+        return self.tol * float(y.max() - y.min())
+
+    def should_stop(self, log_ei: float, epsilon: float) -> bool:
+        """True when EI < eps (compared in log space, so an EI that underflows still counts)."""
+        return epsilon > 0 and log_ei < math.log(epsilon)
+
+
+@dataclass
+class Proposal:
+    """What :meth:`EIProposer.propose` returns: the points to evaluate next.
+
+    :ivar points: ``[(u (q,), log EI), ...]`` in [0, 1]^q, in batch order (may be empty).
+    :ivar rejected: the first point whose EI fell below eps, with its log EI,
+        None if every point was kept. When ``points`` is empty, this is the
+        point of the paper's stop record.
+    :ivar j_max: J_max of the data the proposal saw; :ivar epsilon: eps then.
+    :ivar hyperparameters: the surrogate's hyperparameters after the fit on the data.
+    :ivar fit_seconds: time of that fit; :ivar search_seconds: time of the EI
+        searches (and of the kriging believer's refits).
+    """
+
+    points: list[tuple[np.ndarray, float]]
+    rejected: tuple[np.ndarray, float] | None
+    j_max: float
+    epsilon: float
+    hyperparameters: dict[str, Any]
+    fit_seconds: float
+    search_seconds: float
+
+    @property
+    def EIs(self) -> list[float]:
+        """EI of each point of ``points``, 0 where it underflows."""
+        return [ei_from_log(v) for _, v in self.points]
+
+
+class EIProposer:
+    """Fits J~ on the data and returns the maximiser(s) of EI (the paper's step).
+
+    Batch (``batch = k > 1``), the *kriging believer* heuristic: maximise EI,
+    pretend J there equals the surrogate's mean, refit, maximise EI again, k
+    times; a later point whose EI falls below eps ends the batch early.
+    ``k = 1`` is the paper's loop exactly.
+
+    Failed points (evaluation returned no value) enter the fit with the worst
+    J seen, so that EI is not drawn back to them.
+
+    Determinism: the EI candidates of the iteration that follows the n-th
+    evaluation are drawn from ``default_rng([seed, 1, n])`` (``[seed, 1, n, j]``
+    for the j-th point of a batch).
+
+    :param surrogate: the run's surrogate, refitted in place (warm starts).
+    :param opts: the ``ego:`` options (search fields, ``seed``, ``batch``).
+    """
+
+    def __init__(self, surrogate: Surrogate, opts: EGOOptions) -> None:
+        self.surrogate = surrogate
+        self.opts = opts
+        self.fitted_on = 0  # number of evaluated points in the last fit on real data
+
+    def _data(self, state: LoopState) -> tuple[np.ndarray, np.ndarray]:
+        U, y = state.U_array, state.y_array
+        if state.U_failed:
+            U = np.vstack([U, np.array(state.U_failed)])
+            y = np.concatenate([y, np.full(len(state.U_failed), y.min())])
+        return U, y
+
+    def propose(self, state: LoopState, n_max: int, stop: EIBelowTolerance) -> Proposal:
+        """Up to ``min(batch, n_max)`` new points for the data of ``state``.
+
+        :param n_max: the budget left (at least 1).
+        :param stop: the EI rule: a point with EI < eps is not kept.
+        """
+        opts, model = self.opts, self.surrogate
+        Ua, ya = self._data(state)
+        y_real = state.y_array
+        t0 = time.perf_counter()
+        model.fit(Ua, ya)
+        self.fitted_on = state.n_points
+        t_fit = time.perf_counter() - t0
+        j_max = float(y_real.max())
+        eps = stop.epsilon(y_real)
+        rng = np.random.default_rng([opts.seed, 1, state.n_points])
+        t0 = time.perf_counter()
+        u_new, log_ei = maximize_ei(model, Ua, ya, j_max, opts, rng)
+        hyper = dict(model.hyperparameters_ or {})
+        points: list[tuple[np.ndarray, float]] = []
+        rejected = None
+        if stop.should_stop(log_ei, eps):
+            rejected = (u_new, log_ei)
+        else:
+            points.append((u_new, log_ei))
+        U_b, y_b = list(Ua), list(ya)
+        while rejected is None and len(points) < min(opts.batch, n_max):
+            u_prev = points[-1][0]
+            U_b.append(u_prev)
+            y_b.append(float(model.predict(u_prev[None, :])[0][0]))
+            model.fit(np.array(U_b), np.array(y_b))
+            rng_j = np.random.default_rng([opts.seed, 1, state.n_points, len(points)])
+            u_j, log_ei_j = maximize_ei(model, np.array(U_b), np.array(y_b), j_max, opts, rng_j)
+            if stop.should_stop(log_ei_j, eps):
+                rejected = (u_j, log_ei_j)
+                break
+            points.append((u_j, log_ei_j))
+        return Proposal(points=points, rejected=rejected, j_max=j_max, epsilon=eps, hyperparameters=hyper,
+                        fit_seconds=t_fit, search_seconds=time.perf_counter() - t0)
