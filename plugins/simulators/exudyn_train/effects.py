@@ -261,7 +261,8 @@ class SensorTilt(ExudynEffect):
         alpha = math.radians(self.get(values, "angle_deg"))
         for i in self.tilted(model.sensors):
             C[i] = math.cos(alpha) * R[i, 1] + math.sin(alpha) * R[i, 2]
-            if self.params["gravity_roll"]:
+            if self.params["gravity_roll"] and i not in model._gravity_roll_sensors():
+                # (the model adds g × roll to every lateral channel unless its gravity_roll option is off)
                 C_disp[i, model.free_position[(model.sensors[i].body, "roll")]] += P.GRAVITY
 
 
@@ -320,6 +321,7 @@ class TrackFlexibility(ExudynEffect):
 
     name = "track-flexibility"
     fitted = ("frequency_hz", "damping")
+    replaces = frozenset({"track_support"})
 
     def support(self, q: Mapping[str, float]) -> tuple[float, float, float]:
         m_t = float(self.params["track_mass_kg"])

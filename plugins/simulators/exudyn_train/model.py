@@ -106,13 +106,22 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
+from .effects import point_jacobian
 from suspid.threads import single_blas_thread
 
 TABLE_PAD = 2
 """Zero leaves before the first track sample (and at least as many after the last one)."""
 
 RESTRAINT_HZ = 300.0
-"""Natural frequency (Hz) of the stiff springs that hold the longitudinal and wheelset pitch coordinates."""
+"""Natural frequency (Hz) of the stiff springs that hold the wheelsets' longitudinal and pitch coordinates."""
+
+RESTRAINED = {"wheelset": (0, 4)}
+"""Body kind -> coordinates held by restraint springs (not degrees of freedom): the wheelset's
+longitudinal motion (held by the longitudinal creep forces and the train) and its spin perturbation."""
+
+MAXWELL_FAST_HZ = 2000.0
+"""The internal node of a Maxwell (yaw damper) element has mass c / (2π × this): its fast pole sits at
+this frequency, and its inertia changes the element's force by about f / 2000 Hz (1.5 % at 30 Hz)."""
 
 BODIES = ("carbody", "bogie_front", "bogie_rear", "wheelset_1", "wheelset_2", "wheelset_3", "wheelset_4")
 """Body names; wheelset 1 leads, wheelsets 1-2 are in the front bogie."""
@@ -233,8 +242,9 @@ class TrainModel:
     """The exudyn system of the car for given parameter values, sensors and time-solver features."""
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
-                 features: TimeFeatures | None = None, effects: Sequence = ()) -> None:
+                 features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True) -> None:
         self.features = features or TimeFeatures()
+        self.gravity_roll = bool(gravity_roll)
         self.sensors = list(sensors)
         self.values = dict(values)
         self.speed = float(speed)
@@ -279,7 +289,7 @@ class TrainModel:
         # connectors: exudyn's cost per item and step dominates this small model.
         n_r = 6 * len(BODIES)
         restrained = [(6 * i + k, name, k) for i, name in enumerate(BODIES)
-                      for k in ([0, 4] if name.startswith("wheelset") else [0])]
+                      for k in RESTRAINED.get(name.split("_")[0], ())]
         self.restraint = mbs.AddObject(ii.ObjectGenericODE2(
             nodeNumbers=[self.nodes[b] for b in BODIES], massMatrix=_sparse(n_r, []),
             stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i, _, _ in restrained]), dampingMatrix=_sparse(n_r, []),
@@ -304,6 +314,7 @@ class TrainModel:
 
         car = self.objects["carbody"]
         xw = wheelset_positions(p)
+        self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
         # --- primary suspension, per axlebox
         for b, bogie in enumerate(("bogie_front", "bogie_rear")):
             xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
@@ -315,7 +326,7 @@ class TrainModel:
                     m1 = self._marker(self.objects[bogie], (xw[j] - xb, side * p["b_prim"], p["r0"] - p["h_bogie"]))
                     self._cartesian(m0, m1,
                                     lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
-                                    lambda q: (0.0, 0.0, q["c_prim_z"]),
+                                    lambda q: (q["c_prim_x"], 0.0, q["c_prim_z"]),
                                     lambda q: (0.0, 0.0, P.static_loads(q)["axlebox"] / q["k_prim_z"]))
             # --- secondary suspension, per side (springs, vertical and lateral dampers)
             for side in (1.0, -1.0):
@@ -325,13 +336,11 @@ class TrainModel:
                                 lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
                                 lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
                                 lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
-            # --- yaw dampers, one per side
-            for side in (1.0, -1.0):
-                m0 = self._marker(self.objects[bogie], (0.0, side * p["b_yaw"], p["h_yaw"] - p["h_bogie"]))
-                m1 = self._marker(car, (xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))
-                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0),
-                                lambda q: (0.0 if "yaw_damper" in self.replaced else q["c_yaw"], 0.0, 0.0),
-                                lambda q: (0.0, 0.0, 0.0))
+            # --- traction rod: longitudinal link bogie frame - carbody at the bogie centre
+            m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_trac"] - p["h_bogie"]))
+            m1 = self._marker(car, (xb, 0.0, p["h_trac"] - p["h_car"]))
+            self._cartesian(m0, m1, lambda q: (q["k_trac"], 0.0, 0.0), lambda q: (0.0, 0.0, 0.0),
+                            lambda q: (0.0, 0.0, 0.0))
             # --- anti-roll bar: relative roll of carbody and bogie frame
             mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
             mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes["carbody"], coordinate=3))
@@ -367,8 +376,13 @@ class TrainModel:
                 raise ValueError(f"sensor '{s.name}': unknown body '{s.body}'")
             if s.direction not in DIRECTIONS:
                 raise ValueError(f"sensor '{s.name}': unknown direction '{s.direction}'")
+        # --- yaw dampers (Maxwell elements) and track support, unless an effect replaces them
+        if "yaw_damper" not in self.replaced:
+            self._add_yaw_dampers()
+        self.track_nodes: list[object] = []
+        if "track_support" not in self.replaced:
+            self._add_track_support()
         # --- effects: extra nodes and linear elements
-        self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
         for e in self.effects:
             e.check(self.sensors, 4)
             e.build(self)
@@ -378,7 +392,7 @@ class TrainModel:
         self.sensor_items = [(node, "acceleration", mbs.AddSensor(ii.SensorNode(
             nodeNumber=node, storeInternal=True, writeToFile=False,
             outputVariableType=exu.OutputVariableType.Coordinates_tt))) for node in recorded]
-        if any(e.needs_coordinates for e in self.effects):
+        if any(e.needs_coordinates for e in self.effects) or self._gravity_roll_sensors():
             self.sensor_items += [(node, "displacement", mbs.AddSensor(ii.SensorNode(
                 nodeNumber=node, storeInternal=True, writeToFile=False,
                 outputVariableType=exu.OutputVariableType.Coordinates))) for node in recorded]
@@ -390,6 +404,47 @@ class TrainModel:
         self.point_jacobians_xyz = self._sensor_jacobians()
         self.point_jacobians = np.array([self.point_jacobians_xyz[i, DIRECTIONS[s.direction]]
                                          for i, s in enumerate(self.sensors)]).reshape(len(self.sensors), 6)
+
+    def _add_yaw_dampers(self) -> None:
+        """Yaw dampers, one per side of each bogie: Maxwell elements (spring k_yaw_s in series with c_yaw).
+
+        One internal coordinate u per damper (longitudinal, m, labelled
+        ("yaw_damper", "<bogie>_<side>")) with a small mass c_yaw / (2π
+        :data:`MAXWELL_FAST_HZ`); a linear element on (bogie, carbody, u):
+        energy ½ k_yaw_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)²,
+        d the longitudinal displacement of the attachment points at
+        (±a_bogie, ±b_yaw, h_yaw).
+        """
+        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
+            for side, side_name in ((1.0, "left"), (-1.0, "right")):
+                node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
+                self.add_linear_element([self.nodes[bogie], self.nodes["carbody"], node], 13,
+                                        lambda q, b=b, s=side: maxwell_yaw_damper(q, b, s, q["k_yaw_s"]))
+
+    def _add_track_support(self) -> None:
+        """A rail mass under each wheel on the track support (pad and ballast), vertical.
+
+        Per wheelset a node with the vertical displacements (m) of the left
+        and right rail under it, labelled ("track", "wheelset_<j>_left|right");
+        linear element on (wheelset, rails): the Hertzian spring k_H of each
+        wheel now acts between the wheel and its rail, energy
+        ½ k_H (z ± l0 roll - z_rail - V ∓ C/2)², and each rail mass m_track
+        sits on k_track and c_track. The contact element keeps the wheel's
+        side of the Hertzian springs; this element adds the coupling and rail
+        terms (:func:`track_support_matrices`). Track inputs: -k_H (V ± C/2) on
+        each rail (:meth:`input_matrix_track`). The static wheel load passes
+        through the rail to the support (no preload: the rail's weight is left out).
+        """
+        for j in range(4):
+            node = self.add_effect_node("track", (f"wheelset_{j + 1}_left", f"wheelset_{j + 1}_right"))
+            self.track_nodes.append(node)
+            self.add_linear_element([self.nodes[f"wheelset_{j + 1}"], node], 8, track_support_matrices)
+
+    def _gravity_roll_sensors(self) -> list[int]:
+        """Indices of the lateral sensors that see g × roll (all lateral ones when ``gravity_roll``)."""
+        if not self.gravity_roll:
+            return []
+        return [i for i, s in enumerate(self.sensors) if s.direction == "lateral"]
 
     def _track(self, setter: Callable[[object], None], getter: Callable[[dict], object]) -> None:
         """Register an item field that depends on parameter values."""
@@ -479,7 +534,7 @@ class TrainModel:
         speed) only the Hertzian and gravitational terms stay here.
         """
         kh = P.hertz_stiffness(p)
-        f = P.creep_coefficient(p)
+        f11, f22 = P.creep_coefficients(p)
         lam, l0, r0 = p["conicity"], p["l0"], p["r0"]
         K = np.zeros((6, 6))
         D = np.zeros((6, 6))
@@ -487,10 +542,10 @@ class TrainModel:
         K[3, 3] = 2.0 * kh * l0 ** 2
         K[1, 1] = P.gravitational_stiffness(p)
         if not self.features.creep_in_user_function:
-            K[1, 5] = -2.0 * f
-            K[5, 1] = 2.0 * f * l0 * lam / r0
-            D[1, 1] = 2.0 * f / speed
-            D[5, 5] = 2.0 * f * l0 ** 2 / speed
+            K[1, 5] = -2.0 * f22
+            K[5, 1] = 2.0 * f11 * l0 * lam / r0
+            D[1, 1] = 2.0 * f22 / speed
+            D[5, 5] = 2.0 * f11 * l0 ** 2 / speed
         return K, D
 
     def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
@@ -511,13 +566,20 @@ class TrainModel:
         gravitational stiffness and the conicity term act on y - Y.
         """
         kh = P.hertz_stiffness(p)
-        f = P.creep_coefficient(p)
+        f11 = P.creep_coefficients(p)[0]
         G = np.zeros((6, 3))
         G[2, 0] = 2.0 * kh
         G[3, 2] = kh * p["l0"]
         G[1, 1] = P.gravitational_stiffness(p)
-        G[5, 1] = 2.0 * f * p["l0"] * p["conicity"] / p["r0"]
+        G[5, 1] = 2.0 * f11 * p["l0"] * p["conicity"] / p["r0"]
         return G
+
+    @staticmethod
+    def input_matrix_track(p: dict[str, float]) -> np.ndarray:
+        """G (2 x 3): force on the left and right rail mass under a wheelset per unit track input
+        (columns :data:`TRACK_INPUTS`): -k_H (V ± C/2)."""
+        kh = P.hertz_stiffness(p)
+        return np.array([[-kh, 0.0, -0.5 * kh], [-kh, 0.0, 0.5 * kh]])
 
     # ------------------------------------------------------------------ time-solver extras
     def _time_extras(self) -> None:
@@ -544,6 +606,7 @@ class TrainModel:
             uf = CreateSymbolicUserFunction(self.mbs, self._contact_force_function(j), "forceUserFunction", contact)
             self.mbs.SetObjectParameter(contact, "forceUserFunction", uf)
             self._keep.append(uf)
+        self._track_support_forces()
         for e in self.effects:
             e.build_time(self)
         if feat.variable_speed:
@@ -565,6 +628,40 @@ class TrainModel:
             self.mbs.SetObjectParameter(con, "offsetUserFunction_t", uf)
             self._keep.append(uf)
             self.speed_constraint = con
+
+    def _track_support_forces(self) -> None:
+        """Symbolic track input on the rail masses: -k_H (V ± C/2) at each wheelset's odometer."""
+        if not self.track_nodes:
+            return
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        kh = self.uf_values["kh"]
+        n = self.features.track_capacity
+        zeros = np.zeros((3, 3))
+        for j, node in enumerate(self.track_nodes):
+            element = self.mbs.AddObject(ii.ObjectGenericODE2(
+                nodeNumbers=[node, self.odometers[j]], massMatrix=zeros, stiffnessMatrix=zeros,
+                dampingMatrix=zeros, forceVector=[0.0, 0.0, 0.0]))
+
+            uf = CreateSymbolicUserFunction(self.mbs, self._rail_force_function(j, kh, n), "forceUserFunction",
+                                            element)
+            self.mbs.SetObjectParameter(element, "forceUserFunction", uf)
+            self._keep.append(uf)
+
+    def _rail_force_function(self, j: int, kh, n: int):
+        """Symbolic force on (left rail, right rail, odometer) under wheelset ``j``: -k_H (V ± C/2)."""
+        esym = self.exu.symbolic
+
+        def force(mbs, t, itemNumber, q, q_t):
+            q.SetVector([0.0, 0.0, 0.0])
+            q_t.SetVector([0.0, 0.0, 0.0])
+            V = self.vertical_input(j, q[2])
+            C = _lookup(esym, self.track_leaves[2], q[2], n)
+            return [-kh * (V + 0.5 * C), -kh * (V - 0.5 * C), 0.0]
+
+        return force
 
     def _periodic_leaves(self) -> None:
         """Symbolic amplitude, wavenumber and phase of each periodic wheel input, following the values."""
@@ -622,15 +719,15 @@ class TrainModel:
             v = q_t[6] * c["dx"]
             nu_y = q_t[1] / v - q[5]                                  # lateral creepage
             a_long = c["l0"] * q_t[5] / v + c["lam_r0"] * (q[1] - Y)  # minus the left wheel's long. creepage
-            fy_wheel = -c["f"] * nu_y                                 # lateral creep force per wheel
-            fx_left = c["f"] * a_long                                 # longitudinal, left wheel; right: -fx_left
+            fy_wheel = -c["f22"] * nu_y                               # lateral creep force per wheel
+            fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
             if feat.saturation:
-                n_left = esym.max(0.0, c["n0"] - c["kh"] * (q[2] + c["l0"] * q[3] - V - 0.5 * C))
-                n_right = esym.max(0.0, c["n0"] - c["kh"] * (q[2] - c["l0"] * q[3] - V + 0.5 * C))
-                eps_l = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_left)
-                eps_r = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_right)
-                fy = fy + (eps_l + eps_r) * fy_wheel
-                mz = -c["l0"] * (eps_l + eps_r) * fx_left
+                # friction limit mu N with the static wheel load N (the dynamic wheel load needs the rail
+                # deflection, which this element does not see; on the damped track support it varies by
+                # about 10 % rms at 300 km/h)
+                eps = _saturation(esym, fx_left, fy_wheel, c["mu"] * c["n0"])
+                fy = fy + 2.0 * eps * fy_wheel
+                mz = -2.0 * c["l0"] * eps * fx_left
             else:
                 fy = fy + 2.0 * fy_wheel
                 mz = -2.0 * c["l0"] * fx_left
@@ -646,8 +743,9 @@ class TrainModel:
             "kh": lambda q: P.hertz_stiffness(q),
             "kh_l0": lambda q: P.hertz_stiffness(q) * q["l0"],
             "kg": lambda q: P.gravitational_stiffness(q),
-            "f": lambda q: P.creep_coefficient(q),
-            "yaw_y": lambda q: 2.0 * P.creep_coefficient(q) * q["l0"] * q["conicity"] / q["r0"],
+            "f11": lambda q: P.creep_coefficients(q)[0],
+            "f22": lambda q: P.creep_coefficients(q)[1],
+            "yaw_y": lambda q: 2.0 * P.creep_coefficients(q)[0] * q["l0"] * q["conicity"] / q["r0"],
             "l0": lambda q: q["l0"],
             "lam_r0": lambda q: q["conicity"] / q["r0"],
             "n0": lambda q: P.static_loads(q)["wheel"],
@@ -695,7 +793,7 @@ class TrainModel:
             start = mbs.GetNodeODE2Index(self.nodes[name])
             self.node_index[name] = start
             for k, motion in enumerate(COORDINATES):
-                if k == 0 or (k == 4 and name.startswith("wheelset")):
+                if k in RESTRAINED.get(name.split("_")[0], ()):
                     continue
                 free.append(start + k)
                 labels.append((name, motion))
@@ -736,6 +834,11 @@ class TrainModel:
             for k, row in enumerate(self.contact_rows[j]):
                 if row >= 0:
                     G[j, row] = G6[k]
+        if self.track_nodes:
+            Gt = self.input_matrix_track(self.values)
+            for j in range(4):
+                for k, side in enumerate(("left", "right")):
+                    G[j, self.free_position[("track", f"wheelset_{j + 1}_{side}")]] = Gt[k]
         for e in self.effects:
             e.input_rows(self, G, self.values)
         C, C_disp = self.sensor_matrices()
@@ -781,6 +884,9 @@ class TrainModel:
             e.kinematic_rows(self, R, values)
         C = np.array([R[i, DIRECTIONS[s.direction]] for i, s in enumerate(self.sensors)]).reshape(n_s, n)
         C_disp = np.zeros((n_s, n))
+        for i in self._gravity_roll_sensors():
+            # body-fixed accelerometer: the lateral axis tilts with the body's roll and picks up g sin(roll)
+            C_disp[i, self.free_position[(self.sensors[i].body, "roll")]] += P.GRAVITY
         for e in self.effects:
             e.outputs(self, R, C, C_disp, values)
         return C, C_disp
@@ -932,3 +1038,39 @@ def _saturation(esym, fx, fy, limit):
     """
     u = esym.sqrt(fx * fx + fy * fy) / esym.max(limit, 1.0)
     return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
+
+
+def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie b, carbody, internal coordinate u).
+
+    Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
+    longitudinal displacement of the attachment points; the internal mass
+    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order.
+    """
+    n = 13
+    xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
+    ws = np.zeros(n)
+    ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
+    ws[12] = 1.0
+    wd = np.zeros(n)
+    wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
+    wd[12] = 1.0
+    M = np.zeros((n, n))
+    M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
+    return M, stiffness * np.outer(ws, ws), q["c_yaw"] * np.outer(wd, wd)
+
+
+def track_support_matrices(q: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(8, 8)`` of the track support under one wheelset: coordinates the wheelset's x, y, z,
+    roll, pitch, yaw and the left and right rail displacements (see :meth:`TrainModel._add_track_support`)."""
+    kh = P.hertz_stiffness(q)
+    l0 = q["l0"]
+    M, K, D = np.zeros((8, 8)), np.zeros((8, 8)), np.zeros((8, 8))
+    for r, sign in ((6, 1.0), (7, -1.0)):
+        M[r, r] = q["m_track"]
+        K[r, r] = kh + q["k_track"]
+        D[r, r] = q["c_track"]
+        K[2, r] = K[r, 2] = -kh
+        K[3, r] = K[r, 3] = -sign * kh * l0
+    return M, K, D

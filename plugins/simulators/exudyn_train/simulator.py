@@ -64,8 +64,12 @@ class Options(BaseModel):
     speed_kmh: PositiveFloat = Field(default=320.0, description="speed for `modes` (segments carry their own), km/h")
     sensors: list[SensorOptions] | None = Field(default=None, description="channels (default: 10, see docs)")
     contact: ContactOptions = Field(default_factory=ContactOptions)
-    vehicle: dict[str, float] = Field(default_factory=dict,
-                                      description="nominal values of model parameters, name -> SI value")
+    vehicle: dict[str, float | str] = Field(
+        default_factory=dict, description="vehicle preset and nominal values of model parameters: a preset name "
+        f"({', '.join(P.PRESETS)}; default {P.DEFAULT_PRESET}), or a mapping {{preset: <name>, <parameter>: "
+        "<SI value>, ...}}")
+    gravity_roll: bool = Field(default=True, description="lateral accelerometers are fixed to their body and also "
+                               "measure g times its roll angle (false: kinematic lateral acceleration only)")
     taper_m: float = Field(default=20.0, ge=0.0, description="fade-in/out length of each segment's track, m")
     settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: least zero padding for the decay "
                                     "of the impulse response, s")
@@ -78,13 +82,35 @@ class Options(BaseModel):
     def _effects(cls, value: list[dict[str, Any]]) -> list[dict[str, Any]]:
         return validate_effects(value)
 
+    @field_validator("vehicle", mode="before")
+    @classmethod
+    def _preset_name(cls, value: Any) -> Any:
+        return {"preset": value} if isinstance(value, str) else value
+
     @field_validator("vehicle")
     @classmethod
-    def _known(cls, value: dict[str, float]) -> dict[str, float]:
-        problems = P.check_values(value)
+    def _known(cls, value: dict[str, float | str]) -> dict[str, float | str]:
+        preset = value.get("preset", P.DEFAULT_PRESET)
+        if preset not in P.PRESETS:
+            raise ValueError(f"unknown vehicle preset {preset!r} (known: {', '.join(P.PRESETS)})")
+        numbers = {k: v for k, v in value.items() if k != "preset"}
+        problems = P.check_values(numbers)
         if problems:
-            raise ValueError(problems[0] + f" (known: {', '.join(sorted(P.BY_NAME))})")
+            raise ValueError(problems[0] + f" (known: preset, {', '.join(sorted(P.BY_NAME))})")
         return value
+
+    @property
+    def preset(self) -> str:
+        """The selected vehicle preset."""
+        return str(self.vehicle.get("preset", P.DEFAULT_PRESET))
+
+    def vehicle_values(self) -> dict[str, float]:
+        """The nominal parameter values: the preset's, then the ``vehicle`` overrides and ``contact.conicity``."""
+        values = P.nominal_values(self.preset)
+        values.update({k: float(v) for k, v in self.vehicle.items() if k != "preset"})
+        if self.contact.conicity is not None:
+            values["conicity"] = float(self.contact.conicity)
+        return values
 
     @field_validator("sensors")
     @classmethod
@@ -104,7 +130,7 @@ class Options(BaseModel):
             raise ValueError("conicity is given twice (contact.conicity and vehicle.conicity); keep one")
         if self.solver == "frequency" and (self.contact.creep_saturation or self.contact.bump_stops):
             raise ValueError("creep_saturation and bump_stops are nonlinear: they need solver: time")
-        sensors = (default_sensors(P.nominal_values()) if self.sensors is None else
+        sensors = (default_sensors(self.vehicle_values()) if self.sensors is None else
                    [Sensor(s.name, s.body, s.direction, tuple(s.position)) for s in self.sensors])
         for i, spec in enumerate(self.effects):
             try:
@@ -192,11 +218,7 @@ class ExudynTrain(Simulator):
         return self._opts
 
     def _nominal(self) -> dict[str, float]:
-        values = P.nominal_values()
-        values.update(self.opts.vehicle)
-        if self.opts.contact.conicity is not None:
-            values["conicity"] = float(self.opts.contact.conicity)
-        return values
+        return self.opts.vehicle_values()
 
     def effects(self) -> list[E.ExudynEffect]:
         """The implementations of the enabled effects (``options.effects``), in order."""
@@ -226,7 +248,7 @@ class ExudynTrain(Simulator):
     def parameters(self) -> list[Parameter]:
         nominal = self._nominal()
         out = []
-        for p in P.PARAMETERS:
+        for p in P.parameter_table(self.opts.preset):
             v = nominal[p.name]
             out.append(Parameter(p.name, p.unit, v, min(p.lower, v), max(p.upper, v),
                                  f"{p.description}; source: {p.source}"))
@@ -274,7 +296,7 @@ class ExudynTrain(Simulator):
         model = self._models.get(key)
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
-                model = TrainModel(values, sensors, speed, features, self.effects())
+                model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
