@@ -12,6 +12,17 @@ Dominant body and motion: the mode's kinetic energy is split over the free
 coordinates (m_kk |phi_k|^2 with the diagonal mass of each coordinate, kg or
 kg m^2); the body with the largest share is the dominant body and its
 coordinate with the largest share the dominant motion.
+
+Groups (the order of the listing): ``carbody`` and ``bogie`` (rigid-body
+suspension modes), ``wheelset`` (wheelset modes below
+:data:`CONTACT_HZ`: kinematic and creep-damped modes), ``track/contact``
+(wheelsets on the contact and the track support, at or above
+:data:`CONTACT_HZ`, and track modes), ``internal`` (internal coordinates:
+Maxwell yaw dampers, effects). Within a group, by frequency.
+
+Stability (:class:`SpeedDependentSystem`, :func:`critical_speed`,
+:func:`stability_sweep`): the linear critical speed is the lowest speed at
+which an eigenvalue crosses into the right half-plane.
 """
 
 from __future__ import annotations
@@ -22,6 +33,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .model import LinearSystem
+
+GROUPS = ("carbody", "bogie", "wheelset", "track/contact", "internal")
+"""Mode groups in the order of the listing."""
+
+CONTACT_HZ = 30.0
+"""Wheelset-dominated modes at or above this frequency count as track/contact modes."""
 
 STABILITY_TOLERANCE = 1e-9
 """Real parts above -tolerance * |lambda| count as not damped (rigid-body or unstable)."""
@@ -47,6 +64,7 @@ class Mode:
     share: float
     participation: dict[str, float]
     eigenvalue: tuple[float, float]
+    group: str = "internal"
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -63,8 +81,21 @@ def state_matrix(linear: LinearSystem) -> np.ndarray:
     return A
 
 
+def mode_group(body: str, frequency_hz: float) -> str:
+    """The group (:data:`GROUPS`) of a mode from its dominant body and frequency."""
+    if body == "carbody":
+        return "carbody"
+    if body.startswith("bogie"):
+        return "bogie"
+    if body.startswith("wheelset"):
+        return "wheelset" if frequency_hz < CONTACT_HZ else "track/contact"
+    if body == "track" or body == "track-flexibility":
+        return "track/contact"
+    return "internal"
+
+
 def compute_modes(linear: LinearSystem) -> list[Mode]:
-    """All modes, sorted by natural frequency."""
+    """All modes, by group (:data:`GROUPS`: carbody and bogie first) and within a group by frequency."""
     n = linear.M.shape[0]
     lam, V = np.linalg.eig(state_matrix(linear))
     mass = np.abs(np.diag(linear.M))
@@ -94,7 +125,9 @@ def compute_modes(linear: LinearSystem) -> list[Mode]:
             body=body, motion=motion, share=float(per_body[body]),
             participation={b: round(e, 4) for b, e in sorted(per_body.items(), key=lambda kv: -kv[1]) if e >= 0.05},
             eigenvalue=(float(l.real), float(l.imag))))
-    modes.sort(key=lambda m: m.frequency_hz)
+    for m in modes:
+        m.group = mode_group(m.body, m.frequency_hz)
+    modes.sort(key=lambda m: (GROUPS.index(m.group), m.frequency_hz))
     return modes
 
 
