@@ -165,7 +165,11 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
              f"({report['speed_mps']:.2f} m/s): {'stable' if report['stable'] else 'UNSTABLE'}",
              f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<10} share"]
     shown = [m for m in report["modes"] if max_hz is None or m["frequency_hz"] <= max_hz]
+    group = None
     for m in shown:
+        if m.get("group") is not None and m["group"] != group:   # simulators that group their modes
+            group = m["group"]
+            lines.append(f"-- {group} modes")
         lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<10} "
                      f"{m['share']:.2f}")
     for label, pool in (("least damped of these", shown), ("least damped of all", report["modes"])):

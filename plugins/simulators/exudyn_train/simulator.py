@@ -16,7 +16,7 @@ from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 from . import effects as E
 from . import parameters as P
 from .model import BODIES, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
-from .modes import modes_summary
+from .modes import critical_speed, modes_summary, stability_sweep
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
 
@@ -390,6 +390,21 @@ class ExudynTrain(Simulator):
         :returns: ``{"speed_mps", "speed_kmh", "stable", "least_damped", "modes": [...]}``.
         """
         return modes_summary(self.linear_system(w, speed))
+
+    def critical_speed(self, w: Mapping[str, float] | None = None) -> float:
+        """Linear critical speed in m/s at parameters ``w`` (``inf``: stable up to 1500 km/h); see
+        :func:`.modes.critical_speed`."""
+        return critical_speed(self, dict(w or {}))
+
+    def stability(self, parameters: Sequence[str] | None = None,
+                  conicities: Sequence[float] = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4), n_points: int = 3) -> dict:
+        """Linear critical speed (km/h) at the nominal parameters, against the equivalent conicity and
+        against each of ``parameters`` (default: the default identified ones) over its bounds.
+
+        :returns: ``{"nominal_kmh", "conicity": [(lambda, km/h)], "parameters": {name: [(value, km/h)]}}``
+            (see :func:`.modes.stability_sweep`).
+        """
+        return stability_sweep(self, parameters, conicities, n_points)
 
     # ------------------------------------------------------------------ identity, pickling
     def identity(self) -> dict[str, Any]:
