@@ -22,9 +22,9 @@ is the same):
   values no public source gives are marked as assumptions.
 - ``manchester-coach``: the Manchester Benchmark Vehicle 1 (passenger coach;
   Iwnicki, *Vehicle System Dynamics* 30 (1998) 295-313, values as cited by
-  public code; the paper itself was not read), with the yaw damper, lateral
-  damper and conicity of the earlier versions of this model. A benchmark, not
-  a high-speed car: its linear critical speed is lower.
+  public code; the paper itself was not read), with the Maxwell yaw damper of
+  the high-speed car above (the benchmark gives none) and the same contact
+  and track. A benchmark, not a high-speed car.
 
 Wheel-rail contact: the linear creep coefficients are Kalker's
 (:func:`creep_coefficients`): f11 = G a b C11, f22 = G a b C22 with the
@@ -65,7 +65,6 @@ TRACK = ("lumped ballasted-track support per wheel, chosen so that the P2 resona
          "support) is about 65 Hz with damping ratio about 0.35: the 50-80 Hz, well-damped range of "
          "Jenkins et al., The effect of track and vehicle parameters on wheel/rail vertical dynamic forces, "
          "Railway Engineering Journal 3 (1974) 2-16 (assumption for the split mass / stiffness / damping)")
-OLD = "value of the earlier versions of this model (chosen for stability of the benchmark coach)"
 
 
 @dataclass(frozen=True)
@@ -198,7 +197,7 @@ MANCHESTER_COACH: tuple[VehicleParameter, ...] = _override(CONVENTIONAL_HS, {
     "k_sec_z": (430e3, 215e3, 645e3, MANCHESTER),
     "c_sec_z": (20e3, 8e3, 40e3, MANCHESTER),
     "c_sec_y": (32e3, 16e3, 48e3, MANCHESTER),
-    "c_yaw": (800e3, 400e3, 1.2e6, OLD),
+    "c_yaw": (300e3, 150e3, 450e3, HMPE + " (the benchmark coach has no yaw damper data)"),
     "k_arb": (940e3, 400e3, 1.5e6, MANCHESTER),
     "conicity": (0.15, 0.05, 0.40, "equivalent conicity used with the benchmark (0.05-0.3 in the literature)"),
 })
@@ -312,8 +311,10 @@ def creep_coefficients(p: dict[str, float]) -> tuple[float, float]:
     modulus, (a, b) the Hertzian ellipse of the static wheel load
     (:func:`hertz_ellipse`, wheel rolling radius r0, rail crown radius
     r_rail, conical tread) and Kalker's C11, C22 (:func:`kalker_c11_c22`).
-    About 9.2 and 8.3 MN for the default car (wheel load 76 kN: (N / 54.5 kN)^(2/3) times 9.7 and
-    8.8 MN at 54.5 kN). Spin creep (f23, f33) is left out.
+    About 12.2 and 11.0 MN for the conventional-hs car (wheel load 76 kN);
+    9.7 and 8.8 MN at 54.5 kN (the Manchester coach), inside the 9.4-10.4 and
+    8.3-9.2 MN published for that load and a 300 mm rail crown. Spin creep
+    (f23, f33) is left out.
     """
     n = static_loads(p)["wheel"]
     a, b = hertz_ellipse(n, 0.5 / p["r0"], 0.5 / p["r_rail"])
