@@ -11,13 +11,17 @@ solver, the frequency solver takes exudyn's linearisation
 Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
 x, y, z, roll, pitch, yaw relative to the reference position, small angles
 about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
-frame, wheelsets 1-4 (1 leads). Degrees of freedom: lateral, vertical, roll,
-pitch and yaw of carbody and bogies, lateral, vertical, roll and yaw of the
-wheelsets (31). The longitudinal coordinate of every body and the pitch
-(spin perturbation) of the wheelsets are held by stiff restraint springs to
-ground (natural frequency :data:`RESTRAINT_HZ`) in the time solver; the
-linear analysis treats them as fixed (rows and columns removed), a
-difference of order suspension stiffness / restraint stiffness, below 1e-4.
+frame, wheelsets 1-4 (1 leads). Degrees of freedom: all six motions of
+carbody and bogie frames (the longitudinal ones held only by the traction
+rods, the yaw dampers and the primary and secondary longitudinal springs),
+lateral, vertical, roll and yaw of the wheelsets (34 rigid-body coordinates),
+plus one internal coordinate per yaw damper (4) and the two rail masses under
+each wheelset (8): 46 free coordinates. The longitudinal coordinate and the
+pitch (spin perturbation) of the wheelsets are held by stiff restraint
+springs to ground (natural frequency :data:`RESTRAINT_HZ`, :data:`RESTRAINED`;
+the car runs at constant speed in a train) in the time solver; the linear
+analysis treats them as fixed (rows and columns removed), a difference of
+order suspension stiffness / restraint stiffness, below 1e-4.
 
 Ground element: gravity (-m g on each body's vertical coordinate) and the
 restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
@@ -27,13 +31,18 @@ time step dominates a model this small).
 Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
 attachment points):
 
-- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs and a
-  vertical damper, between wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
+- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs, a
+  longitudinal damper (bush hysteresis) and a vertical damper, between
+  wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
 - secondary, per side (4): ``CartesianSpringDamper`` x, y, z springs, the
   vertical damper and the lateral damper, between bogie and carbody at
   (+-a_bogie, +-b_sec, h_sec);
-- yaw dampers, one per side of each bogie (4): ``CartesianSpringDamper`` with
-  a longitudinal damper only, at (+-a_bogie, +-b_yaw, h_yaw);
+- traction rods, one per bogie (2): ``CartesianSpringDamper`` with a
+  longitudinal spring k_trac, bogie centre to carbody at height h_trac;
+- yaw dampers, one per side of each bogie (4): Maxwell elements (damper c_yaw
+  in series with the stiffness k_yaw_s of its bushes and oil column), a linear
+  ``ObjectGenericODE2`` on (bogie, carbody, internal coordinate) each, at
+  (+-a_bogie, +-b_yaw, h_yaw) (:func:`maxwell_yaw_damper`);
 - anti-roll bars, one per bogie (2): ``CoordinateSpringDamper`` on the relative
   roll angle of carbody and bogie frame;
 - lateral bump stops (option of the time solver), one per bogie:
@@ -46,13 +55,25 @@ checks it with exudyn's own right-hand side).
 Wheel-rail contact, per wheelset: an ``ObjectGenericODE2`` force element on
 the wheelset's coordinates and its odometer (below), with
 
-- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping):
-  vertical force 2 k_H (V - z) and roll moment k_H l0 (C - 2 l0 roll);
+- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping),
+  between the wheel and the rail mass under it (track support element below):
+  the wheel's side here, vertical force 2 k_H (V - z) and roll moment
+  k_H l0 (C - 2 l0 roll);
 - linearised Kalker creep with equivalent conicity lambda (creepages from the
   wheelset's lateral velocity, yaw angle, yaw rate and rolling-radius
   difference 2 lambda (y - Y)): F_y = -2 f22 (dy/dt / v - yaw),
-  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0);
+  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0), with Kalker's
+  f11, f22 for the static wheel load (:func:`.parameters.creep_coefficients`);
 - gravitational stiffness W lambda / l0 on (y - Y).
+
+Track support, per wheelset: the left and right rail masses (m_track each) on
+the pad and ballast (k_track, c_track each), coupled to the wheel by the
+Hertzian spring; one linear ``ObjectGenericODE2`` on (wheelset, rails)
+(:func:`track_support_matrices`); the track input -k_H (V ± C/2) acts on the
+rails (:meth:`TrainModel.input_matrix_track`). P2 resonance about 63 Hz
+(wheelset bounce) and 60 Hz (wheelset roll), damping ratio about 0.3; the
+wheel-on-rail modes near 400 Hz are damped too. The ``track-flexibility``
+effect replaces it (vertical only, its own frequency and damping).
 
 V, Y and C are the track's vertical level, alignment and cross-level under
 the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does
@@ -81,7 +102,10 @@ symbolic vectors of 8 or more entries crash when indexed (hence one contact
 element per wheelset, 7 coordinates) and a symbolic index into a table is
 not available (hence the trees).
 
-Sensors: exudyn records the accelerations of the nodes that carry sensors
+Sensors: lateral accelerometers are fixed to their body and measure g × roll
+of the body besides the lateral acceleration (``gravity_roll``, on by
+default; C_disp holds g in the body's roll column). Exudyn records the
+accelerations of the nodes that carry sensors
 (``SensorNode``, ``Coordinates_tt``); a sensor's acceleration is J q''_node
 with J read back from exudyn's kinematics (:meth:`TrainModel._sensor_jacobians`),
 the same J that gives the frequency solver's output matrix. Both solvers
@@ -282,8 +306,8 @@ class TrainModel:
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
                         lambda q, k=kind: (q[f"I_{k}_x"], q[f"I_{k}_y"], q[f"I_{k}_z"], 0.0, 0.0, 0.0))
 
-        # gravity, and restraints of the coordinates that are not degrees of freedom (longitudinal
-        # motion of every body, wheelset pitch: stiff springs to ground), gathered in one exudyn
+        # gravity, and restraints of the coordinates that are not degrees of freedom (wheelset
+        # longitudinal motion and pitch, RESTRAINED: stiff springs to ground), gathered in one exudyn
         # GenericODE2 "ground" element: gravity -m g on each body's vertical coordinate (the nodes sit at
         # the centres of mass) and a sparse diagonal stiffness. One item instead of 7 loads and 11
         # connectors: exudyn's cost per item and step dominates this small model.
@@ -926,8 +950,8 @@ class TrainModel:
     def sensor_accelerations(self) -> np.ndarray:
         """``(n_sensors, n_records)`` accelerations from the node records of the last run: C q'' + C_disp q.
 
-        The free coordinates only, like the frequency solver (the restrained
-        longitudinal coordinates move by less than 1e-4 of the suspension motions).
+        The free coordinates only, like the frequency solver (the restrained wheelset
+        longitudinal and pitch coordinates move by less than 1e-4 of the suspension motions).
         """
         C, C_disp = self.sensor_matrices()
         out = None
