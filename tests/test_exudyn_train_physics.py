@@ -186,3 +186,28 @@ def test_creep_saturation_at_friction_0_4_is_close_to_linear():
         if name.startswith("carbody"):
             rel = np.std(sat.accelerations[i]) / np.std(lin.accelerations[i])
             assert abs(rel - 1) < 0.10, (name, rel)
+
+
+# ------------------------------------------------------------------------------------------ presets and options
+def test_vehicle_presets_and_overrides():
+    from suspid.errors import ConfigError
+
+    default = {p.name: p for p in ExudynTrain().parameters()}
+    coach = {p.name: p for p in ExudynTrain(vehicle="manchester-coach").parameters()}
+    both = {p.name: p for p in ExudynTrain(vehicle={"preset": "manchester-coach", "c_yaw": 2e5}).parameters()}
+    assert default["m_car"].nominal == 47800 and coach["m_car"].nominal == 32000
+    assert set(default) == set(coach)                              # one model, the same names
+    assert both["c_yaw"].nominal == 2e5 and both["m_car"].nominal == 32000
+    assert "source:" in coach["m_car"].description and "Iwnicki" in coach["m_car"].description
+    for preset in P.PRESETS.values():
+        for p in preset:
+            assert p.lower <= p.nominal <= p.upper and p.source.strip(), p
+    with pytest.raises(ConfigError, match="unknown vehicle preset 'tgv'.*conventional-hs"):
+        ExudynTrain(vehicle="tgv").parameters()
+    with pytest.raises(ConfigError, match="unknown parameter 'nope'"):
+        ExudynTrain(vehicle={"preset": "manchester-coach", "nope": 1.0}).parameters()
+
+
+def test_manchester_coach_is_stable_at_its_speeds():
+    sim = ExudynTrain(vehicle="manchester-coach")
+    assert sim.modes(speed=200 * KMH)["stable"] and sim.modes(speed=300 * KMH)["stable"]
