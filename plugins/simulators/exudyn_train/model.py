@@ -25,7 +25,7 @@ order suspension stiffness / restraint stiffness, below 1e-4.
 
 Ground element: gravity (-m g on each body's vertical coordinate) and the
 restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
-exudyn item instead of 7 loads and 11 connectors (exudyn's cost per item and
+exudyn item instead of 7 loads and 8 connectors (exudyn's cost per item and
 time step dominates a model this small).
 
 Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
@@ -130,7 +130,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
-from .effects import point_jacobian
+from .effects import maxwell_yaw_damper
 from suspid.threads import single_blas_thread
 
 TABLE_PAD = 2
@@ -143,9 +143,6 @@ RESTRAINED = {"wheelset": (0, 4)}
 """Body kind -> coordinates held by restraint springs (not degrees of freedom): the wheelset's
 longitudinal motion (held by the longitudinal creep forces and the train) and its spin perturbation."""
 
-MAXWELL_FAST_HZ = 2000.0
-"""The internal node of a Maxwell (yaw damper) element has mass c / (2π × this): its fast pole sits at
-this frequency, and its inertia changes the element's force by about f / 2000 Hz (1.5 % at 30 Hz)."""
 
 BODIES = ("carbody", "bogie_front", "bogie_rear", "wheelset_1", "wheelset_2", "wheelset_3", "wheelset_4")
 """Body names; wheelset 1 leads, wheelsets 1-2 are in the front bogie."""
@@ -434,7 +431,7 @@ class TrainModel:
 
         One internal coordinate u per damper (longitudinal, m, labelled
         ("yaw_damper", "<bogie>_<side>")) with a small mass c_yaw / (2π
-        :data:`MAXWELL_FAST_HZ`); a linear element on (bogie, carbody, u):
+        :data:`.effects.MAXWELL_FAST_HZ`); a linear element on (bogie, carbody, u):
         energy ½ k_yaw_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)²,
         d the longitudinal displacement of the attachment points at
         (±a_bogie, ±b_yaw, h_yaw).
@@ -1062,27 +1059,6 @@ def _saturation(esym, fx, fy, limit):
     """
     u = esym.sqrt(fx * fx + fy * fy) / esym.max(limit, 1.0)
     return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
-
-
-def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie b, carbody, internal coordinate u).
-
-    Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
-    longitudinal displacement of the attachment points; the internal mass
-    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order.
-    """
-    n = 13
-    xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
-    ws = np.zeros(n)
-    ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
-    ws[12] = 1.0
-    wd = np.zeros(n)
-    wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
-    wd[12] = 1.0
-    M = np.zeros((n, n))
-    M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
-    return M, stiffness * np.outer(ws, ws), q["c_yaw"] * np.outer(wd, wd)
 
 
 def track_support_matrices(q: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
