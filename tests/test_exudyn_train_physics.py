@@ -211,3 +211,26 @@ def test_vehicle_presets_and_overrides():
 def test_manchester_coach_is_stable_at_its_speeds():
     sim = ExudynTrain(vehicle="manchester-coach")
     assert sim.modes(speed=200 * KMH)["stable"] and sim.modes(speed=300 * KMH)["stable"]
+
+
+# ------------------------------------------------------------------------------------------ yaw damper blow-off
+def test_blow_off_far_above_the_strokes_is_the_linear_maxwell_damper():
+    """With a blow-off velocity far above the damper strokes the symbolic damper law is c_yaw v: the time
+    solver then reproduces the linear Maxwell element (independent implementations: symbolic force law
+    against exudyn's linear element)."""
+    seg = track(n=1, length_m=400.0, seed=3)
+    lin = ExudynTrain(solver="time").simulate({}, seg)[0]
+    far = ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": 100.0}).simulate({}, seg)[0]
+    assert np.max(np.abs(far.accelerations - lin.accelerations)) < 1e-3 * np.max(np.abs(lin.accelerations))
+
+
+def test_blow_off_options_are_checked():
+    from suspid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="blow_off is nonlinear: it needs solver: time"):
+        ExudynTrain(yaw_damper={"blow_off": True}).channels()
+    with pytest.raises(ConfigError, match="replaces them"):
+        ExudynTrain(solver="time", yaw_damper={"blow_off": True},
+                    effects=[{"name": "yaw-damper-series-stiffness"}]).channels()
+    with pytest.raises(ConfigError, match="blow_off_velocity_mps"):
+        ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": -1}).channels()

@@ -36,9 +36,9 @@ above the rear bogie; bogie frame vertical and lateral at the frame centre.
 
 from suspid import hookimpl
 
-from .simulator import ContactOptions, ExudynTrain, Options, SensorOptions
+from .simulator import ContactOptions, ExudynTrain, Options, SensorOptions, YawDamperOptions
 
-__all__ = ["ContactOptions", "ExudynTrain", "Options", "SensorOptions"]
+__all__ = ["ContactOptions", "ExudynTrain", "Options", "SensorOptions", "YawDamperOptions"]
 
 
 @hookimpl

@@ -128,13 +128,14 @@ class ExudynEffect:
         return []
 
 
-def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float
+def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float, damped: bool = True
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie b, carbody, internal coordinate u).
 
     Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
     longitudinal displacement of the attachment points; the internal mass
-    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order.
+    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order. ``damped=False`` leaves the
+    damper out (the time solver's blow-off law then supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
     """
     n = 13
     xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
@@ -146,7 +147,8 @@ def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: floa
     wd[12] = 1.0
     M = np.zeros((n, n))
     M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
-    return M, stiffness * np.outer(ws, ws), q["c_yaw"] * np.outer(wd, wd)
+    D = q["c_yaw"] * np.outer(wd, wd) if damped else np.zeros((n, n))
+    return M, stiffness * np.outer(ws, ws), D
 
 
 def _symmetric_outer(u: np.ndarray, e: np.ndarray) -> np.ndarray:

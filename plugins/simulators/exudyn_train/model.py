@@ -130,7 +130,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
-from .effects import maxwell_yaw_damper
+from .effects import maxwell_yaw_damper, point_jacobian
 from suspid.threads import single_blas_thread
 
 TABLE_PAD = 2
@@ -209,6 +209,8 @@ class TimeFeatures:
     :ivar speed_capacity: number of samples of the speed table.
     :ivar saturation: nonlinear creep saturation with friction coefficient ``friction``.
     :ivar bump_stops: lateral bump stops with ``bump_gap`` (m) and ``bump_stiffness`` (N/m).
+    :ivar yaw_blow_off: yaw dampers with blow-off: the damper force c_yaw v up to the stroke velocity
+        ``blow_off_velocity`` (m/s), then growing at ``blow_off_rate`` (N s/m).
     """
 
     track_capacity: int = 0
@@ -219,10 +221,14 @@ class TimeFeatures:
     bump_stops: bool = False
     bump_gap: float = 0.025
     bump_stiffness: float = 2.0e6
+    yaw_blow_off: bool = False
+    blow_off_velocity: float = 0.01
+    blow_off_rate: float = 20e3
 
     def key(self) -> tuple:
         return (self.track_capacity, self.variable_speed, self.speed_capacity, self.saturation,
-                self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness)
+                self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness, self.yaw_blow_off,
+                self.blow_off_velocity, self.blow_off_rate)
 
     @property
     def creep_in_user_function(self) -> bool:
@@ -436,11 +442,14 @@ class TrainModel:
         d the longitudinal displacement of the attachment points at
         (±a_bogie, ±b_yaw, h_yaw).
         """
+        damped = not self.features.yaw_blow_off
+        self.yaw_nodes: list[tuple[int, float, object]] = []
         for b, bogie in enumerate(("bogie_front", "bogie_rear")):
             for side, side_name in ((1.0, "left"), (-1.0, "right")):
                 node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
+                self.yaw_nodes.append((b, side, node))
                 self.add_linear_element([self.nodes[bogie], self.nodes["carbody"], node], 13,
-                                        lambda q, b=b, s=side: maxwell_yaw_damper(q, b, s, q["k_yaw_s"]))
+                                        lambda q, b=b, s=side: maxwell_yaw_damper(q, b, s, q["k_yaw_s"], damped))
 
     def _add_track_support(self) -> None:
         """A rail mass under each wheel on the track support (pad and ballast), vertical.
@@ -628,6 +637,8 @@ class TrainModel:
             self.mbs.SetObjectParameter(contact, "forceUserFunction", uf)
             self._keep.append(uf)
         self._track_support_forces()
+        if feat.yaw_blow_off:
+            self._yaw_blow_off()
         for e in self.effects:
             e.build_time(self)
         if feat.variable_speed:
@@ -670,6 +681,39 @@ class TrainModel:
                                             element)
             self.mbs.SetObjectParameter(element, "forceUserFunction", uf)
             self._keep.append(uf)
+
+    def _yaw_blow_off(self) -> None:
+        """The dampers of the Maxwell yaw dampers with blow-off (time solver; symbolic force law).
+
+        Per damper an element on (carbody, internal coordinate u), 7 coordinates:
+        stroke velocity v = u' - d'_carbody (d the longitudinal displacement of the
+        carbody attachment point), force F = c2 v + (c_yaw - c2) v_b tanh(v / v_b):
+        c_yaw v at small strokes, c2 v + (c_yaw - c2) v_b well above the blow-off
+        velocity v_b (a smooth version of the bilinear law, which stalls the
+        Newton iterations at the kink); generalised forces -F on u and
+        +F ∂d/∂q on the carbody coordinates.
+        """
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        p = self.values
+        c = esym.Real("yaw_c", 0.0)
+        self._track(lambda v, r=c: r.SetValue(float(v)), lambda q: q["c_yaw"])
+        c2 = float(self.features.blow_off_rate)
+        vb = float(self.features.blow_off_velocity)
+        zeros = np.zeros((7, 7))
+        for b, side, node in self.yaw_nodes:
+            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+            w = point_jacobian((xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))[0]
+            element = self.mbs.AddObject(ii.ObjectGenericODE2(
+                nodeNumbers=[self.nodes["carbody"], node], massMatrix=zeros, stiffnessMatrix=zeros,
+                dampingMatrix=zeros, forceVector=[0.0] * 7))
+            uf = CreateSymbolicUserFunction(self.mbs, _blow_off_force(esym, w, c, c2, vb), "forceUserFunction",
+                                            element)
+            self.mbs.SetObjectParameter(element, "forceUserFunction", uf)
+            self._keep.append(uf)
+        self._keep.append(c)
 
     def _rail_force_function(self, j: int, kh, n: int):
         """Symbolic force on (left rail, right rail, odometer) under wheelset ``j``: -k_H (V ± C/2)."""
@@ -744,8 +788,7 @@ class TrainModel:
             fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
             if feat.saturation:
                 # friction limit mu N with the static wheel load N (the dynamic wheel load needs the rail
-                # deflection, which this element does not see; on the damped track support it varies by
-                # about 10 % rms at 300 km/h)
+                # deflection, which this element does not see)
                 eps = _saturation(esym, fx_left, fy_wheel, c["mu"] * c["n0"])
                 fy = fy + 2.0 * eps * fy_wheel
                 mz = -2.0 * c["l0"] * eps * fx_left
@@ -1050,6 +1093,24 @@ def _lookup(esym, leaves, tau, n: int):
     constant there (no range test needed).
     """
     return _tree(esym, leaves, tau, 0, n)
+
+
+def _blow_off_force(esym, w: np.ndarray, c, c2: float, vb: float):
+    """Symbolic force function of one yaw damper with blow-off (see :meth:`TrainModel._yaw_blow_off`).
+
+    :param w: ``(6,)`` longitudinal displacement of the carbody attachment point per carbody coordinate.
+    """
+    def force(mbs, t, itemNumber, q, q_t):
+        q.SetVector([0.0] * 7)
+        q_t.SetVector([0.0] * 7)
+        v = q_t[6]
+        for k in range(6):
+            if w[k] != 0.0:
+                v = v - float(w[k]) * q_t[k]
+        f = c2 * v + (c - c2) * vb * esym.tanh(v / vb)
+        return [float(w[k]) * f if w[k] != 0.0 else 0.0 for k in range(6)] + [-f]
+
+    return force
 
 
 def _saturation(esym, fx, fy, limit):

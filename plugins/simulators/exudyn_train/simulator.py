@@ -48,6 +48,20 @@ class ContactOptions(BaseModel):
     bump_stiffness: PositiveFloat = Field(default=2.0e6, description="bump stop stiffness, N/m (assumption)")
 
 
+class YawDamperOptions(BaseModel):
+    """Yaw damper options (the dampers are Maxwell elements: ``c_yaw`` in series with ``k_yaw_s``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    blow_off: bool = Field(default=False, description="blow-off (time solver only): the damper force is "
+                           "c_yaw v up to the blow-off velocity, then grows at rate_after_blow_off")
+    blow_off_velocity_mps: PositiveFloat = Field(
+        default=0.01, description="damper stroke velocity at blow-off, m/s (Mathematical Problems in "
+        "Engineering 2019, article 7163732: 3 kN at 0.01 m/s)")
+    rate_after_blow_off: PositiveFloat = Field(
+        default=20e3, description="damping rate above the blow-off velocity, N s/m (same source: 20 kN s/m)")
+
+
 class Options(BaseModel):
     """The ``simulator.options`` of ``exudyn-train``."""
 
@@ -64,6 +78,7 @@ class Options(BaseModel):
     speed_kmh: PositiveFloat = Field(default=320.0, description="speed for `modes` (segments carry their own), km/h")
     sensors: list[SensorOptions] | None = Field(default=None, description="channels (default: 10, see docs)")
     contact: ContactOptions = Field(default_factory=ContactOptions)
+    yaw_damper: YawDamperOptions = Field(default_factory=YawDamperOptions)
     vehicle: dict[str, float | str] = Field(
         default_factory=dict, description="vehicle preset and nominal values of model parameters: a preset name "
         f"({', '.join(P.PRESETS)}; default {P.DEFAULT_PRESET}), or a mapping {{preset: <name>, <parameter>: "
@@ -130,6 +145,11 @@ class Options(BaseModel):
             raise ValueError("conicity is given twice (contact.conicity and vehicle.conicity); keep one")
         if self.solver == "frequency" and (self.contact.creep_saturation or self.contact.bump_stops):
             raise ValueError("creep_saturation and bump_stops are nonlinear: they need solver: time")
+        if self.solver == "frequency" and self.yaw_damper.blow_off:
+            raise ValueError("yaw_damper.blow_off is nonlinear: it needs solver: time")
+        if self.yaw_damper.blow_off and any(e["name"] == "yaw-damper-series-stiffness" for e in self.effects):
+            raise ValueError("yaw_damper.blow_off acts on the model's own yaw dampers; the effect "
+                             "'yaw-damper-series-stiffness' replaces them: use one or the other")
         sensors = (default_sensors(self.vehicle_values()) if self.sensors is None else
                    [Sensor(s.name, s.body, s.direction, tuple(s.position)) for s in self.sensors])
         for i, spec in enumerate(self.effects):
@@ -308,6 +328,7 @@ class ExudynTrain(Simulator):
 
     def _features(self, segments: Sequence[TrackSegment]) -> TimeFeatures:
         c = self.opts.contact
+        o = self.opts
         n = max(len(s.distance) for s in segments) + 2 * TABLE_PAD
         cap = 1 << max(4, int(math.ceil(math.log2(n))))
         variable = not all(is_constant_speed(s) for s in segments)
@@ -317,7 +338,9 @@ class ExudynTrain(Simulator):
         speed_cap = (1 << max(6, int(math.ceil(math.log2(longest / 0.02 + 60))))) if variable else 0
         return TimeFeatures(track_capacity=cap, variable_speed=variable, speed_capacity=speed_cap,
                             saturation=c.creep_saturation, friction=c.friction, bump_stops=c.bump_stops,
-                            bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness)
+                            bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness,
+                            yaw_blow_off=o.yaw_damper.blow_off, blow_off_velocity=o.yaw_damper.blow_off_velocity_mps,
+                            blow_off_rate=o.yaw_damper.rate_after_blow_off)
 
     # ------------------------------------------------------------------ simulate
     def simulate(self, w: Mapping[str, float], segments: Sequence[TrackSegment]) -> list[Response]:
@@ -340,7 +363,7 @@ class ExudynTrain(Simulator):
         o = self.opts
         features = self._features(segments)
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
-                                newton=features.saturation or features.bump_stops)
+                                newton=features.saturation or features.bump_stops or features.yaw_blow_off)
         out = []
         for seg in segments:
             speed = float(seg.mean_speed)
