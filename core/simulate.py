@@ -182,6 +182,42 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
     return "\n".join(lines)
 
 
+def stability_report(simulator: Simulator, out_dir: str | Path | None = None, **kwargs: Any) -> dict:
+    """The simulator's linear critical speed and its sweep over conicity and parameters.
+
+    Needs a simulator with a ``stability(**kwargs)`` method (``exudyn-train`` has one: keyword
+    arguments ``parameters``, ``conicities``, ``n_points``). Writes ``out_dir/stability.json`` when
+    ``out_dir`` is given.
+
+    :returns: ``{"simulator", "nominal_kmh", "conicity": [(lambda, km/h)], "parameters": {name: [(value,
+        km/h)]}}`` (``inf``: stable over the whole speed range searched).
+    :raises SimulatorError: the simulator has no stability analysis.
+    """
+    stability = getattr(simulator, "stability", None)
+    if not callable(stability):
+        raise SimulatorError(f"simulator '{simulator.name}' does not provide a stability analysis")
+    report = {"simulator": simulator.name, **stability(**kwargs)}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        text = json.dumps(_jsonable(report), indent=2, allow_nan=True) + "\n"
+        tmp = out / "stability.json.tmp"
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(out / "stability.json")
+    return report
+
+
+def format_stability(report: Mapping[str, Any]) -> str:
+    """A text table of a stability report: critical speed against conicity and against each parameter."""
+    kmh = lambda v: "stable" if math.isinf(v) else f"{v:.0f}"  # noqa: E731
+    lines = [f"linear critical speed of {report.get('simulator', 'the model')}: {kmh(report['nominal_kmh'])} km/h "
+             f"at the nominal parameters",
+             "conicity   " + "  ".join(f"{c:g}: {kmh(v)}" for c, v in report["conicity"])]
+    for name, row in report["parameters"].items():
+        lines.append(f"{name:<10} " + "  ".join(f"{x:.4g}: {kmh(v)}" for x, v in row))
+    return "\n".join(lines)
+
+
 def _parameter_values(simulator: Simulator, w: Mapping[str, float]) -> dict[str, float]:
     try:
         values = {p.name: float(p.nominal) for p in simulator.parameters()}

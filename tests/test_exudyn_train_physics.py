@@ -234,3 +234,18 @@ def test_blow_off_options_are_checked():
                     effects=[{"name": "yaw-damper-series-stiffness"}]).channels()
     with pytest.raises(ConfigError, match="blow_off_velocity_mps"):
         ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": -1}).channels()
+
+
+def test_stability_report(tmp_path):
+    import json
+
+    from suspid.simulate import format_stability, stability_report
+
+    report = stability_report(ExudynTrain(), tmp_path, parameters=["c_yaw"], conicities=(0.1, 0.3), n_points=2)
+    saved = json.loads((tmp_path / "stability.json").read_text())
+    assert saved["simulator"] == "exudyn-train" and 450 <= saved["nominal_kmh"] <= 650
+    assert [c for c, _ in saved["conicity"]] == [0.1, 0.3] and saved["conicity"][0][1] > saved["conicity"][1][1]
+    lo, hi = report["parameters"]["c_yaw"]
+    assert lo[0] == P.BY_NAME["c_yaw"].lower and lo[1] < hi[1]
+    text = format_stability(report)
+    assert "critical speed" in text and "c_yaw" in text
