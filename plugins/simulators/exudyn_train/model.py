@@ -72,8 +72,9 @@ Hertzian spring; one linear ``ObjectGenericODE2`` on (wheelset, rails)
 (:func:`track_support_matrices`); the track input -k_H (V ± C/2) acts on the
 rails (:meth:`TrainModel.input_matrix_track`). P2 resonance about 63 Hz
 (wheelset bounce) and 60 Hz (wheelset roll), damping ratio about 0.3; the
-wheel-on-rail modes near 400 Hz are damped too. The ``track-flexibility``
-effect replaces it (vertical only, its own frequency and damping).
+wheel-on-rail modes near 490 Hz are damped too (damping ratio 0.2). The
+``track-flexibility`` effect replaces it (vertical only, its own frequency
+and damping).
 
 V, Y and C are the track's vertical level, alignment and cross-level under
 the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does

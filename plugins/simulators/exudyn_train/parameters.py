@@ -330,8 +330,9 @@ def hertz_stiffness(p: dict[str, float]) -> float:
     Hertz: deflection d = G N^(2/3), so k = dN/dd = 1.5 N^(1/3) / G, with the
     wheel-rail constant G = 3.86e-8 r0^-0.115 m/N^(2/3) (r0 in m) as commonly
     cited from Garg & Dukkipati, Dynamics of Railway Vehicle Systems (1984).
-    About 1.5e9 N/m for the default car: the wheel on the track mass
-    (:data:`m_track`) then vibrates near 400 Hz, damped by the track support.
+    About 1.5e9 N/m for the default car: the wheel on the rail mass
+    (m_track) then vibrates near 490 Hz, damped by the track support
+    (damping ratio 0.2).
     """
     n = static_loads(p)["wheel"]
     g_const = 3.86e-8 * p["r0"] ** -0.115
