@@ -1,4 +1,4 @@
-"""Speed of the exudyn-train simulator's two solvers (issue 5).
+"""Speed of the exudyn-train simulator's two solvers, and (--physics) the figures of docs/model.md.
 
 Case: 2 km segments of synthetic track (German low disturbance, dx 0.25 m)
 at 300 km/h, i.e. 24 s simulated per segment, 10 channels at fs = 100 Hz.

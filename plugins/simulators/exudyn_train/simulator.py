@@ -44,7 +44,7 @@ class ContactOptions(BaseModel):
     friction: PositiveFloat = Field(default=0.3, le=1.0, description="wheel-rail friction coefficient for saturation")
     bump_stops: bool = Field(default=False, description="lateral bump stops carbody-bogie (time solver only)")
     bump_gap_m: PositiveFloat = Field(default=0.025, description="free lateral play before the bump stop, m "
-                                      "(Manchester benchmark, railway-data.md §1)")
+                                      "(Manchester Benchmark Vehicle 1, Iwnicki 1998)")
     bump_stiffness: PositiveFloat = Field(default=2.0e6, description="bump stop stiffness, N/m (assumption)")
 
 
