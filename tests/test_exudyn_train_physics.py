@@ -249,3 +249,23 @@ def test_stability_report(tmp_path):
     assert lo[0] == P.BY_NAME["c_yaw"].lower and lo[1] < hi[1]
     text = format_stability(report)
     assert "critical speed" in text and "c_yaw" in text
+
+
+def test_free_rigid_bogie_runs_at_the_kinematic_frequency():
+    """A rigid bogie (primary suspension made stiff) freed from the carbody (secondary, yaw damper and
+    traction rod nearly zero) at low speed oscillates at the kinematic (Klingel) frequency of a rigid
+    two-axle bogie, f = v / (2 pi) sqrt(lambda / (r0 l0) f11 l0^2 / (f11 l0^2 + f22 a^2)) (Wickens; Garg &
+    Dukkipati, Dynamics of railway vehicle systems, 1984, the kinematic solution without inertia), and
+    almost undamped."""
+    free = {"k_prim_x": 1e10, "k_prim_y": 1e10, "c_yaw": 1.0, "c_sec_y": 1.0, "k_sec_y": 1.0, "k_sec_x": 1.0,
+            "k_trac": 1.0}
+    sim = ExudynTrain(vehicle=free)
+    p = {q.name: q.nominal for q in sim.parameters()}
+    f11, f22 = P.creep_coefficients(p)
+    lam, r0, l0, a = p["conicity"], p["r0"], p["l0"], p["a_ws"]
+    v = 20 * KMH
+    expected = v / (2 * np.pi) * np.sqrt(lam / (r0 * l0) * f11 * l0 ** 2 / (f11 * l0 ** 2 + f22 * a ** 2))
+    bogie = [m for m in sim.modes(speed=v)["modes"] if m["body"].startswith("bogie") and m["motion"] == "lateral"]
+    nearest = min(bogie, key=lambda m: abs(m["damped_frequency_hz"] - expected))
+    assert nearest["damped_frequency_hz"] == pytest.approx(expected, rel=0.01)
+    assert abs(nearest["damping_ratio"]) < 0.01
