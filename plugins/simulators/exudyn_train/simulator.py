@@ -21,6 +21,12 @@ from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segme
                       simulate_frequency, simulate_time)
 
 
+MODEL_VERSION = 2
+"""Version of the model's physics, part of :meth:`ExudynTrain.identity`: cached evaluations of an
+earlier model are not reused. 2: Maxwell yaw dampers, free longitudinal carbody and bogie motion with
+traction rods, Kalker creep coefficients, track support, g × roll in lateral sensors, vehicle presets."""
+
+
 class SensorOptions(BaseModel):
     """One accelerometer channel."""
 
@@ -431,7 +437,7 @@ class ExudynTrain(Simulator):
 
     # ------------------------------------------------------------------ identity, pickling
     def identity(self) -> dict[str, Any]:
-        return {"plugin": self.name, "options": self.opts.model_dump(mode="json")}
+        return {"plugin": self.name, "model": MODEL_VERSION, "options": self.opts.model_dump(mode="json")}
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
