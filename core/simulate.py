@@ -163,14 +163,14 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
     """A text table of a modes report (frequency, damping, dominant body and motion)."""
     lines = [f"modes of {report.get('simulator', 'the model')} at {report['speed_kmh']:.1f} km/h "
              f"({report['speed_mps']:.2f} m/s): {'stable' if report['stable'] else 'UNSTABLE'}",
-             f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<10} share"]
+             f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<12} share"]
     shown = [m for m in report["modes"] if max_hz is None or m["frequency_hz"] <= max_hz]
     group = None
     for m in shown:
         if m.get("group") is not None and m["group"] != group:   # simulators that group their modes
             group = m["group"]
             lines.append(f"-- {group} modes")
-        lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<10} "
+        lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<12} "
                      f"{m['share']:.2f}")
     for label, pool in (("least damped of these", shown), ("least damped of all", report["modes"])):
         if pool:
