@@ -121,6 +121,38 @@ def main() -> None:
           f"{100 * worst:.2f} %")
 
 
+def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]:
+    """rms of the dynamic wheel load / static wheel load, wheelset 1 left wheel, per segment.
+
+    The wheel-rail force is the force on the rail mass under the wheel:
+    (k_track + i w c_track - w^2 m_track) z_rail, from the linear model solved at each frequency line
+    (M, K, D and the track inputs of exudyn's linearisation); 2 s at each end left out.
+    """
+    from suspid.plugins.simulators.exudyn_train import parameters as P
+    from suspid.plugins.simulators.exudyn_train.solvers import InputSpectra, fft_length, output_samples
+
+    sim = ExudynTrain(vehicle=vehicle, fs_hz=fs)
+    p = {q.name: q.nominal for q in sim.parameters()}
+    spectra = InputSpectra()
+    out = []
+    for seg in segments:
+        v = float(np.asarray(seg.speed, dtype=float).flat[0])
+        lin = sim.linear_system({}, v)
+        rail = lin.labels.index(("track", "wheelset_1_left"))
+        n_t = output_samples(seg, fs)
+        n_fft = fft_length(n_t, fs, float(np.max(np.abs(lin.wheelset_x))) / v, 8.0)
+        U = spectra.get(seg, fs, n_fft, 20.0)
+        w = 2 * np.pi * np.arange(n_fft // 2 + 1) * fs / n_fft
+        Z = np.zeros(w.size, dtype=complex)
+        for k, wk in enumerate(w):
+            rhs = sum(lin.G[j] @ U[:, k] * np.exp(1j * wk * lin.wheelset_x[j] / v) for j in range(lin.G.shape[0]))
+            z = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[rail]
+            Z[k] = (p["k_track"] + 1j * wk * p["c_track"] - wk ** 2 * p["m_track"]) * z
+        force = np.fft.irfft(Z, n=n_fft)[:n_t][int(2 * fs):-int(2 * fs)]
+        out.append(float(np.std(force)) / P.static_loads(p)["wheel"])
+    return out
+
+
 def physics(vehicle: str) -> None:
     """The figures of docs/model.md for one vehicle preset (see the module docstring)."""
     from suspid.simulate import format_modes, modes_report
@@ -154,6 +186,10 @@ def physics(vehicle: str) -> None:
         d = np.abs(np.mean(y1 - y0, axis=0))
         print(f"c_yaw x {factor}: spectrum shift (dB, mean / max over 0.4-20 Hz): " + "  ".join(
             f"{c}: {d[i].mean():.2f}/{d[i].max():.2f}" for i, c in enumerate(ch) if c.startswith("carbody")))
+
+    load = dynamic_wheel_load(vehicle, segs)
+    print(f"dynamic wheel load (wheelset 1, left wheel, fs 400 Hz), rms / static: "
+          + "  ".join(f"{100 * x:.1f} %" for x in load))
 
     tsim = ExudynTrain(vehicle=vehicle, solver="time", fs_hz=FS_HZ)
     (rt,) = tsim.simulate({}, segs[:1])
