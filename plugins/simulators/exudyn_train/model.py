@@ -165,8 +165,10 @@ FLOOR_HEIGHT = 1.2
 class Sensor:
     """An accelerometer: body, direction and position relative to the body's centre of mass.
 
-    Accelerations are kinematic (no gravity component, no tilt), in the axes
-    of the frame that moves with the train (x forward, y left, z up), m/s^2.
+    Accelerations in the axes of the frame that moves with the train (x
+    forward, y left, z up), m/s^2: kinematic, plus g × roll of the body for
+    lateral sensors when the model's ``gravity_roll`` is on (the default);
+    tilt is an effect (``sensor-tilt``).
     """
 
     name: str
