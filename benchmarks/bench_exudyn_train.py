@@ -1,4 +1,4 @@
-"""Speed of the exudyn-train simulator's two solvers (issue 5).
+"""Speed of the exudyn-train simulator's two solvers, and (--physics) the figures of docs/model.md.
 
 Case: 2 km segments of synthetic track (German low disturbance, dx 0.25 m)
 at 300 km/h, i.e. 24 s simulated per segment, 10 channels at fs = 100 Hz.
@@ -18,6 +18,14 @@ before numpy loads (the frequency solver also does this itself for its small
 products).
 
     python benchmarks/bench_exudyn_train.py [--repeat 5] [--vectors 20] [--segments 50]
+
+``--physics`` prints instead the figures of ``docs/model.md`` for a vehicle
+preset (``--vehicle``, default conventional-hs): modes at 300 km/h, linear
+critical speed against conicity and yaw damping, ride rms on German
+low-disturbance track at 300 km/h, the influence of a 30 % change of c_yaw on
+the carbody vertical spectra, time vs frequency solver, creep saturation.
+
+    python benchmarks/bench_exudyn_train.py --physics [--vehicle manchester-coach]
 """
 
 from __future__ import annotations
@@ -46,7 +54,12 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="timed runs of the time solver")
     ap.add_argument("--vectors", type=int, default=20, help="parameter vectors for the frequency solver")
     ap.add_argument("--segments", type=int, default=50, help="segments per frequency-solver run")
+    ap.add_argument("--physics", action="store_true", help="print the physics figures of docs/model.md instead")
+    ap.add_argument("--vehicle", default="conventional-hs", help="vehicle preset for --physics")
     args = ap.parse_args()
+    if args.physics:
+        physics(args.vehicle)
+        return
 
     import exudyn
 
@@ -106,6 +119,92 @@ def main() -> None:
     print(f"ratio per segment (median wall): time solver / frequency solver = {ratio:.0f}")
     print(f"time vs frequency solver, nominal parameters, rms of the 10 channels: worst difference "
           f"{100 * worst:.2f} %")
+
+
+def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]:
+    """rms of the dynamic wheel load / static wheel load, wheelset 1 left wheel, per segment.
+
+    The wheel-rail force is the force on the rail mass under the wheel:
+    (k_track + i w c_track - w^2 m_track) z_rail, from the linear model solved at each frequency line
+    (M, K, D and the track inputs of exudyn's linearisation); 2 s at each end left out.
+    """
+    from suspid.plugins.simulators.exudyn_train import parameters as P
+    from suspid.plugins.simulators.exudyn_train.solvers import InputSpectra, fft_length, output_samples
+
+    sim = ExudynTrain(vehicle=vehicle, fs_hz=fs)
+    p = {q.name: q.nominal for q in sim.parameters()}
+    spectra = InputSpectra()
+    out = []
+    for seg in segments:
+        v = float(np.asarray(seg.speed, dtype=float).flat[0])
+        lin = sim.linear_system({}, v)
+        rail = lin.labels.index(("track", "wheelset_1_left"))
+        n_t = output_samples(seg, fs)
+        n_fft = fft_length(n_t, fs, float(np.max(np.abs(lin.wheelset_x))) / v, 8.0)
+        U = spectra.get(seg, fs, n_fft, 20.0)
+        w = 2 * np.pi * np.arange(n_fft // 2 + 1) * fs / n_fft
+        Z = np.zeros(w.size, dtype=complex)
+        for k, wk in enumerate(w):
+            rhs = sum(lin.G[j] @ U[:, k] * np.exp(1j * wk * lin.wheelset_x[j] / v) for j in range(lin.G.shape[0]))
+            z = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[rail]
+            Z[k] = (p["k_track"] + 1j * wk * p["c_track"] - wk ** 2 * p["m_track"]) * z
+        force = np.fft.irfft(Z, n=n_fft)[:n_t][int(2 * fs):-int(2 * fs)]
+        out.append(float(np.std(force)) / P.static_loads(p)["wheel"])
+    return out
+
+
+def physics(vehicle: str) -> None:
+    """The figures of docs/model.md for one vehicle preset (see the module docstring)."""
+    from suspid.workflows.simulate import format_modes, modes_report
+    from suspid.method.spectra import compute_spectra
+
+    kmh = 1 / 3.6
+    sim = ExudynTrain(vehicle=vehicle, fs_hz=FS_HZ)
+    print(f"# vehicle preset: {vehicle}")
+    print(format_modes(modes_report(sim, 300 * kmh), max_hz=80.0))
+    sweep = sim.stability(conicities=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4))
+    print(f"\nlinear critical speed, nominal parameters: {sweep['nominal_kmh']:.0f} km/h")
+    print("conicity:  " + "  ".join(f"{c:g}: {v:.0f}" for c, v in sweep["conicity"]))
+    for name, row in sweep["parameters"].items():
+        print(f"{name:<9} " + "  ".join(f"{x:.4g}: {v:.0f}" for x, v in row))
+    yaw = {c: 3.6 * sim.critical_speed({"c_yaw": c}) for c in (150e3, 225e3, 300e3, 450e3)}
+    print("c_yaw (N s/m): " + "  ".join(f"{c:.3g}: {v:.0f}" for c, v in yaw.items()))
+    ks = {k: 3.6 * sim.critical_speed({"k_yaw_s": k}) for k in (5e6, 10e6, 20e6, 1e9)}
+    print("k_yaw_s (N/m): " + "  ".join(f"{k:.3g}: {v:.0f}" for k, v in ks.items()))
+
+    segs = synthetic_segments({"spectrum": "german-low", "n_segments": 3, "length_m": 1500.0,
+                               "speed_kmh": 300.0, "seed": 2})
+    ch = sim.channels()
+    base = sim.simulate({}, segs)
+    rms = np.sqrt(np.mean([np.mean(r.accelerations ** 2, axis=1) for r in base], axis=0))
+    print("\nride rms at 300 km/h, German low disturbance, 3 x 1.5 km, fs 100 Hz (m/s^2):")
+    print("  " + "  ".join(f"{c}: {v:.3f}" for c, v in zip(ch, rms)))
+    y0, _ = compute_spectra(base)
+    c_yaw = {p.name: p.nominal for p in sim.parameters()}["c_yaw"]
+    for factor in (0.7, 1.3):
+        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * c_yaw}, segs))
+        d = np.abs(np.mean(y1 - y0, axis=0))
+        print(f"c_yaw x {factor}: spectrum shift (dB, mean / max over 0.4-20 Hz): " + "  ".join(
+            f"{c}: {d[i].mean():.2f}/{d[i].max():.2f}" for i, c in enumerate(ch) if c.startswith("carbody")))
+
+    load = dynamic_wheel_load(vehicle, segs)
+    print("dynamic wheel load (wheelset 1, left wheel, fs 400 Hz), rms / static: "
+          + "  ".join(f"{100 * x:.1f} %" for x in load))
+
+    tsim = ExudynTrain(vehicle=vehicle, solver="time", fs_hz=FS_HZ)
+    (rt,) = tsim.simulate({}, segs[:1])
+    yt, _ = compute_spectra([rt])
+    rel = np.sqrt(np.mean(rt.accelerations ** 2, axis=1)) / np.sqrt(np.mean(base[0].accelerations ** 2, axis=1)) - 1
+    db = np.median(np.abs(yt[0] - y0[0]), axis=1)
+    print(f"\ntime vs frequency solver (1.5 km): rms difference max {100 * np.max(np.abs(rel)):.2f} %, "
+          f"median |dB| max {np.max(db):.2f} dB")
+    for mu in (0.4, 0.3):
+        ssim = ExudynTrain(vehicle=vehicle, solver="time", fs_hz=FS_HZ,
+                           contact={"creep_saturation": True, "friction": mu})
+        (rs,) = ssim.simulate({}, segs[:1])
+        r = np.std(rs.accelerations, axis=1) / np.std(rt.accelerations, axis=1) - 1
+        print(f"creep saturation, friction {mu}: rms change vs linear (time solver): " + "  ".join(
+            f"{c}: {100 * v:+.1f} %" for c, v in zip(ch, r)))
 
 
 if __name__ == "__main__":

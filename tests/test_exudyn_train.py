@@ -117,7 +117,7 @@ def test_mode_frequencies_in_plausible_ranges():
     """Carbody bounce, pitch, lateral and roll about 0.5-2 Hz; bogie frame modes higher (> 4 Hz).
 
     The bogie's kinematic (hunting) mode is not a suspension mode: its
-    frequency grows with speed (about 3 Hz at 300 km/h) and it is checked for
+    frequency grows with speed (about 4.7 Hz at 300 km/h) and it is checked for
     damping, not for a range.
     """
     modes = ExudynTrain().modes(speed=300 * KMH)["modes"]

@@ -159,10 +159,14 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
     """A text table of a modes report (frequency, damping, dominant body and motion)."""
     lines = [f"modes of {report.get('simulator', 'the model')} at {report['speed_kmh']:.1f} km/h "
              f"({report['speed_mps']:.2f} m/s): {'stable' if report['stable'] else 'UNSTABLE'}",
-             f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<10} share"]
+             f"{'f (Hz)':>9}  {'damping':>8}  {'body':<12} {'motion':<12} share"]
     shown = [m for m in report["modes"] if max_hz is None or m["frequency_hz"] <= max_hz]
+    group = None
     for m in shown:
-        lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<10} "
+        if m.get("group") is not None and m["group"] != group:   # simulators that group their modes
+            group = m["group"]
+            lines.append(f"-- {group} modes")
+        lines.append(f"{m['frequency_hz']:9.3f}  {m['damping_ratio']:8.3f}  {m['body']:<12} {m['motion']:<12} "
                      f"{m['share']:.2f}")
     for label, pool in (("least damped of these", shown), ("least damped of all", report["modes"])):
         if pool:
@@ -171,6 +175,39 @@ def format_modes(report: Mapping[str, Any], max_hz: float | None = None) -> str:
                          f"({least['body']} {least['motion']})")
         if len(shown) == len(report["modes"]):
             break
+    return "\n".join(lines)
+
+
+def stability_report(simulator: Simulator, out_dir: str | Path | None = None, **kwargs: Any) -> dict:
+    """The simulator's linear critical speed and its sweep over conicity and parameters.
+
+    Needs a simulator with a ``stability(**kwargs)`` method (``exudyn-train`` has one: keyword
+    arguments ``parameters``, ``conicities``, ``n_points``). Writes ``out_dir/stability.json`` when
+    ``out_dir`` is given.
+
+    :returns: ``{"simulator", "nominal_kmh", "conicity": [(lambda, km/h)], "parameters": {name: [(value,
+        km/h)]}}`` (``inf``: stable over the whole speed range searched).
+    :raises SimulatorError: the simulator has no stability analysis.
+    """
+    stability = getattr(simulator, "stability", None)
+    if not callable(stability):
+        raise SimulatorError(f"simulator '{simulator.name}' does not provide a stability analysis")
+    report = {"simulator": simulator.name, **stability(**kwargs)}
+    if out_dir is not None:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        write_text(out / "stability.json", json.dumps(canonical(report), indent=2, allow_nan=True) + "\n")
+    return report
+
+
+def format_stability(report: Mapping[str, Any]) -> str:
+    """A text table of a stability report: critical speed against conicity and against each parameter."""
+    kmh = lambda v: "stable" if math.isinf(v) else f"{v:.0f}"  # noqa: E731
+    lines = [f"linear critical speed of {report.get('simulator', 'the model')}: {kmh(report['nominal_kmh'])} km/h "
+             f"at the nominal parameters",
+             "conicity   " + "  ".join(f"{c:g}: {kmh(v)}" for c, v in report["conicity"])]
+    for name, row in report["parameters"].items():
+        lines.append(f"{name:<10} " + "  ".join(f"{x:.4g}: {kmh(v)}" for x, v in row))
     return "\n".join(lines)
 
 

@@ -14,7 +14,8 @@ Hooks of :class:`ExudynEffect` (each optional), in the order the model calls the
 
 1. :meth:`~ExudynEffect.adjust_values`: change parameter values (conicity);
 2. :attr:`~ExudynEffect.replaces`: built-in elements the effect takes over
-   (``"yaw_damper"``: the model then builds its yaw dampers without damping);
+   (``"yaw_damper"``: the model then builds no yaw dampers of its own;
+   ``"track_support"``: no rail masses of its own);
 3. :meth:`~ExudynEffect.build`: add nodes and linear elements (before ``Assemble``);
 4. :meth:`~ExudynEffect.build_time`: add symbolic force functions that need the
    track tables (time solver only);
@@ -127,6 +128,29 @@ class ExudynEffect:
         return []
 
 
+def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float, damped: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie b, carbody, internal coordinate u).
+
+    Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
+    longitudinal displacement of the attachment points; the internal mass
+    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order. ``damped=False`` leaves the
+    damper out (the time solver's blow-off law then supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
+    """
+    n = 13
+    xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
+    ws = np.zeros(n)
+    ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
+    ws[12] = 1.0
+    wd = np.zeros(n)
+    wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
+    wd[12] = 1.0
+    M = np.zeros((n, n))
+    M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
+    D = q["c_yaw"] * np.outer(wd, wd) if damped else np.zeros((n, n))
+    return M, stiffness * np.outer(ws, ws), D
+
+
 def _symmetric_outer(u: np.ndarray, e: np.ndarray) -> np.ndarray:
     return np.outer(u, e) + np.outer(e, u)
 
@@ -200,8 +224,9 @@ class YawDamperSeriesStiffness(ExudynEffect):
     One internal coordinate u per damper (longitudinal, m) with a small mass
     c_yaw / (2π :data:`MAXWELL_FAST_HZ`); element on (bogie, carbody, u):
     energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², with
-    d the longitudinal displacement of the attachment points. The model builds
-    its own yaw dampers without damping (``replaces``).
+    d the longitudinal displacement of the attachment points. It replaces the
+    model's own Maxwell yaw dampers (series stiffness ``k_yaw_s``): the effect's
+    stiffness is then the one identified.
     """
 
     name = "yaw-damper-series-stiffness"
@@ -216,17 +241,7 @@ class YawDamperSeriesStiffness(ExudynEffect):
                 model.add_linear_element(nodes, 13, lambda q, b=b, s=side: self.matrices(q, b, s))
 
     def matrices(self, q: Mapping[str, float], b: int, side: float):
-        n = 13
-        xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
-        ws = np.zeros(n)
-        ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
-        ws[12] = 1.0
-        wd = np.zeros(n)
-        wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
-        wd[12] = 1.0
-        M = np.zeros((n, n))
-        M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
-        return M, self.get(q, "stiffness_n_per_m") * np.outer(ws, ws), q["c_yaw"] * np.outer(wd, wd)
+        return maxwell_yaw_damper(q, b, side, self.get(q, "stiffness_n_per_m"))
 
 
 # ------------------------------------------------------------------------------------------ sensor tilt
@@ -261,7 +276,8 @@ class SensorTilt(ExudynEffect):
         alpha = math.radians(self.get(values, "angle_deg"))
         for i in self.tilted(model.sensors):
             C[i] = math.cos(alpha) * R[i, 1] + math.sin(alpha) * R[i, 2]
-            if self.params["gravity_roll"]:
+            if self.params["gravity_roll"] and i not in model._gravity_roll_sensors():
+                # (the model adds g × roll to every lateral channel unless its gravity_roll option is off)
                 C_disp[i, model.free_position[(model.sensors[i].body, "roll")]] += P.GRAVITY
 
 
@@ -315,11 +331,13 @@ class TrackFlexibility(ExudynEffect):
     The force -2 k_H V on z_t is an input row (frequency solver) or a symbolic
     force reading the track table at the wheelset's odometer (time solver).
     The cross-level (roll) contact stays on rigid track. Static loads balance
-    (the support carries the wheel load): no preload is needed.
+    (the support carries the wheel load): no preload is needed. It replaces the
+    model's own track support (two rail masses per wheelset, vertical and roll).
     """
 
     name = "track-flexibility"
     fitted = ("frequency_hz", "damping")
+    replaces = frozenset({"track_support"})
 
     def support(self, q: Mapping[str, float]) -> tuple[float, float, float]:
         m_t = float(self.params["track_mass_kg"])

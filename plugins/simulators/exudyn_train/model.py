@@ -11,29 +11,38 @@ solver, the frequency solver takes exudyn's linearisation
 Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
 x, y, z, roll, pitch, yaw relative to the reference position, small angles
 about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
-frame, wheelsets 1-4 (1 leads). Degrees of freedom: lateral, vertical, roll,
-pitch and yaw of carbody and bogies, lateral, vertical, roll and yaw of the
-wheelsets (31). The longitudinal coordinate of every body and the pitch
-(spin perturbation) of the wheelsets are held by stiff restraint springs to
-ground (natural frequency :data:`RESTRAINT_HZ`) in the time solver; the
-linear analysis treats them as fixed (rows and columns removed), a
-difference of order suspension stiffness / restraint stiffness, below 1e-4.
+frame, wheelsets 1-4 (1 leads). Degrees of freedom: all six motions of
+carbody and bogie frames (the longitudinal ones held only by the traction
+rods, the yaw dampers and the primary and secondary longitudinal springs),
+lateral, vertical, roll and yaw of the wheelsets (34 rigid-body coordinates),
+plus one internal coordinate per yaw damper (4) and the two rail masses under
+each wheelset (8): 46 free coordinates. The longitudinal coordinate and the
+pitch (spin perturbation) of the wheelsets are held by stiff restraint
+springs to ground (natural frequency :data:`RESTRAINT_HZ`, :data:`RESTRAINED`;
+the car runs at constant speed in a train) in the time solver; the linear
+analysis treats them as fixed (rows and columns removed), a difference of
+order suspension stiffness / restraint stiffness, below 1e-4.
 
 Ground element: gravity (-m g on each body's vertical coordinate) and the
 restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
-exudyn item instead of 7 loads and 11 connectors (exudyn's cost per item and
+exudyn item instead of 7 loads and 8 connectors (exudyn's cost per item and
 time step dominates a model this small).
 
 Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
 attachment points):
 
-- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs and a
-  vertical damper, between wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
+- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs, a
+  longitudinal damper (bush hysteresis) and a vertical damper, between
+  wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
 - secondary, per side (4): ``CartesianSpringDamper`` x, y, z springs, the
   vertical damper and the lateral damper, between bogie and carbody at
   (+-a_bogie, +-b_sec, h_sec);
-- yaw dampers, one per side of each bogie (4): ``CartesianSpringDamper`` with
-  a longitudinal damper only, at (+-a_bogie, +-b_yaw, h_yaw);
+- traction rods, one per bogie (2): ``CartesianSpringDamper`` with a
+  longitudinal spring k_trac, bogie centre to carbody at height h_trac;
+- yaw dampers, one per side of each bogie (4): Maxwell elements (damper c_yaw
+  in series with the stiffness k_yaw_s of its bushes and oil column), a linear
+  ``ObjectGenericODE2`` on (bogie, carbody, internal coordinate) each, at
+  (+-a_bogie, +-b_yaw, h_yaw) (:func:`maxwell_yaw_damper`);
 - anti-roll bars, one per bogie (2): ``CoordinateSpringDamper`` on the relative
   roll angle of carbody and bogie frame;
 - lateral bump stops (option of the time solver), one per bogie:
@@ -46,13 +55,26 @@ checks it with exudyn's own right-hand side).
 Wheel-rail contact, per wheelset: an ``ObjectGenericODE2`` force element on
 the wheelset's coordinates and its odometer (below), with
 
-- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping):
-  vertical force 2 k_H (V - z) and roll moment k_H l0 (C - 2 l0 roll);
+- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping),
+  between the wheel and the rail mass under it (track support element below):
+  the wheel's side here, vertical force 2 k_H (V - z) and roll moment
+  k_H l0 (C - 2 l0 roll);
 - linearised Kalker creep with equivalent conicity lambda (creepages from the
   wheelset's lateral velocity, yaw angle, yaw rate and rolling-radius
   difference 2 lambda (y - Y)): F_y = -2 f22 (dy/dt / v - yaw),
-  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0);
+  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0), with Kalker's
+  f11, f22 for the static wheel load (:func:`.parameters.creep_coefficients`);
 - gravitational stiffness W lambda / l0 on (y - Y).
+
+Track support, per wheelset: the left and right rail masses (m_track each) on
+the pad and ballast (k_track, c_track each), coupled to the wheel by the
+Hertzian spring; one linear ``ObjectGenericODE2`` on (wheelset, rails)
+(:func:`track_support_matrices`); the track input -k_H (V ± C/2) acts on the
+rails (:meth:`TrainModel.input_matrix_track`). P2 resonance about 63 Hz
+(wheelset bounce) and 60 Hz (wheelset roll), damping ratio about 0.3; the
+wheel-on-rail modes near 490 Hz are damped too (damping ratio 0.2). The
+``track-flexibility`` effect replaces it (vertical only, its own frequency
+and damping).
 
 V, Y and C are the track's vertical level, alignment and cross-level under
 the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does
@@ -81,7 +103,10 @@ symbolic vectors of 8 or more entries crash when indexed (hence one contact
 element per wheelset, 7 coordinates) and a symbolic index into a table is
 not available (hence the trees).
 
-Sensors: exudyn records the accelerations of the nodes that carry sensors
+Sensors: lateral accelerometers are fixed to their body and measure g × roll
+of the body besides the lateral acceleration (``gravity_roll``, on by
+default; C_disp holds g in the body's roll column). Exudyn records the
+accelerations of the nodes that carry sensors
 (``SensorNode``, ``Coordinates_tt``); a sensor's acceleration is J q''_node
 with J read back from exudyn's kinematics (:meth:`TrainModel._sensor_jacobians`),
 the same J that gives the frequency solver's output matrix. Both solvers
@@ -106,13 +131,19 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
+from .effects import maxwell_yaw_damper, point_jacobian
 from suspid.infra.threads import single_blas_thread
 
 TABLE_PAD = 2
 """Zero leaves before the first track sample (and at least as many after the last one)."""
 
 RESTRAINT_HZ = 300.0
-"""Natural frequency (Hz) of the stiff springs that hold the longitudinal and wheelset pitch coordinates."""
+"""Natural frequency (Hz) of the stiff springs that hold the wheelsets' longitudinal and pitch coordinates."""
+
+RESTRAINED = {"wheelset": (0, 4)}
+"""Body kind -> coordinates held by restraint springs (not degrees of freedom): the wheelset's
+longitudinal motion (held by the longitudinal creep forces and the train) and its spin perturbation."""
+
 
 BODIES = ("carbody", "bogie_front", "bogie_rear", "wheelset_1", "wheelset_2", "wheelset_3", "wheelset_4")
 """Body names; wheelset 1 leads, wheelsets 1-2 are in the front bogie."""
@@ -134,8 +165,10 @@ FLOOR_HEIGHT = 1.2
 class Sensor:
     """An accelerometer: body, direction and position relative to the body's centre of mass.
 
-    Accelerations are kinematic (no gravity component, no tilt), in the axes
-    of the frame that moves with the train (x forward, y left, z up), m/s^2.
+    Accelerations in the axes of the frame that moves with the train (x
+    forward, y left, z up), m/s^2: kinematic, plus g × roll of the body for
+    lateral sensors when the model's ``gravity_roll`` is on (the default);
+    tilt is an effect (``sensor-tilt``).
     """
 
     name: str
@@ -179,6 +212,8 @@ class TimeFeatures:
     :ivar speed_capacity: number of samples of the speed table.
     :ivar saturation: nonlinear creep saturation with friction coefficient ``friction``.
     :ivar bump_stops: lateral bump stops with ``bump_gap`` (m) and ``bump_stiffness`` (N/m).
+    :ivar yaw_blow_off: yaw dampers with blow-off: the damper force c_yaw v up to the stroke velocity
+        ``blow_off_velocity`` (m/s), then growing at ``blow_off_rate`` (N s/m).
     """
 
     track_capacity: int = 0
@@ -189,10 +224,14 @@ class TimeFeatures:
     bump_stops: bool = False
     bump_gap: float = 0.025
     bump_stiffness: float = 2.0e6
+    yaw_blow_off: bool = False
+    blow_off_velocity: float = 0.01
+    blow_off_rate: float = 20e3
 
     def key(self) -> tuple:
         return (self.track_capacity, self.variable_speed, self.speed_capacity, self.saturation,
-                self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness)
+                self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness, self.yaw_blow_off,
+                self.blow_off_velocity, self.blow_off_rate)
 
     @property
     def creep_in_user_function(self) -> bool:
@@ -233,8 +272,9 @@ class TrainModel:
     """The exudyn system of the car for given parameter values, sensors and time-solver features."""
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
-                 features: TimeFeatures | None = None, effects: Sequence = ()) -> None:
+                 features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True) -> None:
         self.features = features or TimeFeatures()
+        self.gravity_roll = bool(gravity_roll)
         self.sensors = list(sensors)
         self.values = dict(values)
         self.speed = float(speed)
@@ -272,14 +312,14 @@ class TrainModel:
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
                         lambda q, k=kind: (q[f"I_{k}_x"], q[f"I_{k}_y"], q[f"I_{k}_z"], 0.0, 0.0, 0.0))
 
-        # gravity, and restraints of the coordinates that are not degrees of freedom (longitudinal
-        # motion of every body, wheelset pitch: stiff springs to ground), gathered in one exudyn
+        # gravity, and restraints of the coordinates that are not degrees of freedom (wheelset
+        # longitudinal motion and pitch, RESTRAINED: stiff springs to ground), gathered in one exudyn
         # GenericODE2 "ground" element: gravity -m g on each body's vertical coordinate (the nodes sit at
         # the centres of mass) and a sparse diagonal stiffness. One item instead of 7 loads and 11
         # connectors: exudyn's cost per item and step dominates this small model.
         n_r = 6 * len(BODIES)
         restrained = [(6 * i + k, name, k) for i, name in enumerate(BODIES)
-                      for k in ([0, 4] if name.startswith("wheelset") else [0])]
+                      for k in RESTRAINED.get(name.split("_")[0], ())]
         self.restraint = mbs.AddObject(ii.ObjectGenericODE2(
             nodeNumbers=[self.nodes[b] for b in BODIES], massMatrix=_sparse(n_r, []),
             stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i, _, _ in restrained]), dampingMatrix=_sparse(n_r, []),
@@ -304,6 +344,7 @@ class TrainModel:
 
         car = self.objects["carbody"]
         xw = wheelset_positions(p)
+        self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
         # --- primary suspension, per axlebox
         for b, bogie in enumerate(("bogie_front", "bogie_rear")):
             xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
@@ -315,7 +356,7 @@ class TrainModel:
                     m1 = self._marker(self.objects[bogie], (xw[j] - xb, side * p["b_prim"], p["r0"] - p["h_bogie"]))
                     self._cartesian(m0, m1,
                                     lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
-                                    lambda q: (0.0, 0.0, q["c_prim_z"]),
+                                    lambda q: (q["c_prim_x"], 0.0, q["c_prim_z"]),
                                     lambda q: (0.0, 0.0, P.static_loads(q)["axlebox"] / q["k_prim_z"]))
             # --- secondary suspension, per side (springs, vertical and lateral dampers)
             for side in (1.0, -1.0):
@@ -325,13 +366,11 @@ class TrainModel:
                                 lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
                                 lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
                                 lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
-            # --- yaw dampers, one per side
-            for side in (1.0, -1.0):
-                m0 = self._marker(self.objects[bogie], (0.0, side * p["b_yaw"], p["h_yaw"] - p["h_bogie"]))
-                m1 = self._marker(car, (xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))
-                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0),
-                                lambda q: (0.0 if "yaw_damper" in self.replaced else q["c_yaw"], 0.0, 0.0),
-                                lambda q: (0.0, 0.0, 0.0))
+            # --- traction rod: longitudinal link bogie frame - carbody at the bogie centre
+            m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_trac"] - p["h_bogie"]))
+            m1 = self._marker(car, (xb, 0.0, p["h_trac"] - p["h_car"]))
+            self._cartesian(m0, m1, lambda q: (q["k_trac"], 0.0, 0.0), lambda q: (0.0, 0.0, 0.0),
+                            lambda q: (0.0, 0.0, 0.0))
             # --- anti-roll bar: relative roll of carbody and bogie frame
             mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
             mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes["carbody"], coordinate=3))
@@ -367,8 +406,13 @@ class TrainModel:
                 raise ValueError(f"sensor '{s.name}': unknown body '{s.body}'")
             if s.direction not in DIRECTIONS:
                 raise ValueError(f"sensor '{s.name}': unknown direction '{s.direction}'")
+        # --- yaw dampers (Maxwell elements) and track support, unless an effect replaces them
+        if "yaw_damper" not in self.replaced:
+            self._add_yaw_dampers()
+        self.track_nodes: list[object] = []
+        if "track_support" not in self.replaced:
+            self._add_track_support()
         # --- effects: extra nodes and linear elements
-        self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
         for e in self.effects:
             e.check(self.sensors, 4)
             e.build(self)
@@ -378,7 +422,7 @@ class TrainModel:
         self.sensor_items = [(node, "acceleration", mbs.AddSensor(ii.SensorNode(
             nodeNumber=node, storeInternal=True, writeToFile=False,
             outputVariableType=exu.OutputVariableType.Coordinates_tt))) for node in recorded]
-        if any(e.needs_coordinates for e in self.effects):
+        if any(e.needs_coordinates for e in self.effects) or self._gravity_roll_sensors():
             self.sensor_items += [(node, "displacement", mbs.AddSensor(ii.SensorNode(
                 nodeNumber=node, storeInternal=True, writeToFile=False,
                 outputVariableType=exu.OutputVariableType.Coordinates))) for node in recorded]
@@ -390,6 +434,50 @@ class TrainModel:
         self.point_jacobians_xyz = self._sensor_jacobians()
         self.point_jacobians = np.array([self.point_jacobians_xyz[i, DIRECTIONS[s.direction]]
                                          for i, s in enumerate(self.sensors)]).reshape(len(self.sensors), 6)
+
+    def _add_yaw_dampers(self) -> None:
+        """Yaw dampers, one per side of each bogie: Maxwell elements (spring k_yaw_s in series with c_yaw).
+
+        One internal coordinate u per damper (longitudinal, m, labelled
+        ("yaw_damper", "<bogie>_<side>")) with a small mass c_yaw / (2π
+        :data:`.effects.MAXWELL_FAST_HZ`); a linear element on (bogie, carbody, u):
+        energy ½ k_yaw_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)²,
+        d the longitudinal displacement of the attachment points at
+        (±a_bogie, ±b_yaw, h_yaw).
+        """
+        damped = not self.features.yaw_blow_off
+        self.yaw_nodes: list[tuple[int, float, object]] = []
+        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
+            for side, side_name in ((1.0, "left"), (-1.0, "right")):
+                node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
+                self.yaw_nodes.append((b, side, node))
+                self.add_linear_element([self.nodes[bogie], self.nodes["carbody"], node], 13,
+                                        lambda q, b=b, s=side: maxwell_yaw_damper(q, b, s, q["k_yaw_s"], damped))
+
+    def _add_track_support(self) -> None:
+        """A rail mass under each wheel on the track support (pad and ballast), vertical.
+
+        Per wheelset a node with the vertical displacements (m) of the left
+        and right rail under it, labelled ("track", "wheelset_<j>_left|right");
+        linear element on (wheelset, rails): the Hertzian spring k_H of each
+        wheel now acts between the wheel and its rail, energy
+        ½ k_H (z ± l0 roll - z_rail - V ∓ C/2)², and each rail mass m_track
+        sits on k_track and c_track. The contact element keeps the wheel's
+        side of the Hertzian springs; this element adds the coupling and rail
+        terms (:func:`track_support_matrices`). Track inputs: -k_H (V ± C/2) on
+        each rail (:meth:`input_matrix_track`). The static wheel load passes
+        through the rail to the support (no preload: the rail's weight is left out).
+        """
+        for j in range(4):
+            node = self.add_effect_node("track", (f"wheelset_{j + 1}_left", f"wheelset_{j + 1}_right"))
+            self.track_nodes.append(node)
+            self.add_linear_element([self.nodes[f"wheelset_{j + 1}"], node], 8, track_support_matrices)
+
+    def _gravity_roll_sensors(self) -> list[int]:
+        """Indices of the lateral sensors that see g × roll (all lateral ones when ``gravity_roll``)."""
+        if not self.gravity_roll:
+            return []
+        return [i for i, s in enumerate(self.sensors) if s.direction == "lateral"]
 
     def _track(self, setter: Callable[[object], None], getter: Callable[[dict], object]) -> None:
         """Register an item field that depends on parameter values."""
@@ -479,7 +567,7 @@ class TrainModel:
         speed) only the Hertzian and gravitational terms stay here.
         """
         kh = P.hertz_stiffness(p)
-        f = P.creep_coefficient(p)
+        f11, f22 = P.creep_coefficients(p)
         lam, l0, r0 = p["conicity"], p["l0"], p["r0"]
         K = np.zeros((6, 6))
         D = np.zeros((6, 6))
@@ -487,10 +575,10 @@ class TrainModel:
         K[3, 3] = 2.0 * kh * l0 ** 2
         K[1, 1] = P.gravitational_stiffness(p)
         if not self.features.creep_in_user_function:
-            K[1, 5] = -2.0 * f
-            K[5, 1] = 2.0 * f * l0 * lam / r0
-            D[1, 1] = 2.0 * f / speed
-            D[5, 5] = 2.0 * f * l0 ** 2 / speed
+            K[1, 5] = -2.0 * f22
+            K[5, 1] = 2.0 * f11 * l0 * lam / r0
+            D[1, 1] = 2.0 * f22 / speed
+            D[5, 5] = 2.0 * f11 * l0 ** 2 / speed
         return K, D
 
     def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
@@ -511,13 +599,20 @@ class TrainModel:
         gravitational stiffness and the conicity term act on y - Y.
         """
         kh = P.hertz_stiffness(p)
-        f = P.creep_coefficient(p)
+        f11 = P.creep_coefficients(p)[0]
         G = np.zeros((6, 3))
         G[2, 0] = 2.0 * kh
         G[3, 2] = kh * p["l0"]
         G[1, 1] = P.gravitational_stiffness(p)
-        G[5, 1] = 2.0 * f * p["l0"] * p["conicity"] / p["r0"]
+        G[5, 1] = 2.0 * f11 * p["l0"] * p["conicity"] / p["r0"]
         return G
+
+    @staticmethod
+    def input_matrix_track(p: dict[str, float]) -> np.ndarray:
+        """G (2 x 3): force on the left and right rail mass under a wheelset per unit track input
+        (columns :data:`TRACK_INPUTS`): -k_H (V ± C/2)."""
+        kh = P.hertz_stiffness(p)
+        return np.array([[-kh, 0.0, -0.5 * kh], [-kh, 0.0, 0.5 * kh]])
 
     # ------------------------------------------------------------------ time-solver extras
     def _time_extras(self) -> None:
@@ -544,6 +639,9 @@ class TrainModel:
             uf = CreateSymbolicUserFunction(self.mbs, self._contact_force_function(j), "forceUserFunction", contact)
             self.mbs.SetObjectParameter(contact, "forceUserFunction", uf)
             self._keep.append(uf)
+        self._track_support_forces()
+        if feat.yaw_blow_off:
+            self._yaw_blow_off()
         for e in self.effects:
             e.build_time(self)
         if feat.variable_speed:
@@ -565,6 +663,72 @@ class TrainModel:
             self.mbs.SetObjectParameter(con, "offsetUserFunction_t", uf)
             self._keep.append(uf)
             self.speed_constraint = con
+
+    def _track_support_forces(self) -> None:
+        """Symbolic track input on the rail masses: -k_H (V ± C/2) at each wheelset's odometer."""
+        if not self.track_nodes:
+            return
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        kh = self.uf_values["kh"]
+        n = self.features.track_capacity
+        zeros = np.zeros((3, 3))
+        for j, node in enumerate(self.track_nodes):
+            element = self.mbs.AddObject(ii.ObjectGenericODE2(
+                nodeNumbers=[node, self.odometers[j]], massMatrix=zeros, stiffnessMatrix=zeros,
+                dampingMatrix=zeros, forceVector=[0.0, 0.0, 0.0]))
+
+            uf = CreateSymbolicUserFunction(self.mbs, self._rail_force_function(j, kh, n), "forceUserFunction",
+                                            element)
+            self.mbs.SetObjectParameter(element, "forceUserFunction", uf)
+            self._keep.append(uf)
+
+    def _yaw_blow_off(self) -> None:
+        """The dampers of the Maxwell yaw dampers with blow-off (time solver; symbolic force law).
+
+        Per damper an element on (carbody, internal coordinate u), 7 coordinates:
+        stroke velocity v = u' - d'_carbody (d the longitudinal displacement of the
+        carbody attachment point), force F = c2 v + (c_yaw - c2) v_b tanh(v / v_b):
+        c_yaw v at small strokes, c2 v + (c_yaw - c2) v_b well above the blow-off
+        velocity v_b (a smooth version of the bilinear law, which stalls the
+        Newton iterations at the kink); generalised forces -F on u and
+        +F ∂d/∂q on the carbody coordinates.
+        """
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        esym = self.exu.symbolic
+        p = self.values
+        c = esym.Real("yaw_c", 0.0)
+        self._track(lambda v, r=c: r.SetValue(float(v)), lambda q: q["c_yaw"])
+        c2 = float(self.features.blow_off_rate)
+        vb = float(self.features.blow_off_velocity)
+        zeros = np.zeros((7, 7))
+        for b, side, node in self.yaw_nodes:
+            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+            w = point_jacobian((xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))[0]
+            element = self.mbs.AddObject(ii.ObjectGenericODE2(
+                nodeNumbers=[self.nodes["carbody"], node], massMatrix=zeros, stiffnessMatrix=zeros,
+                dampingMatrix=zeros, forceVector=[0.0] * 7))
+            uf = CreateSymbolicUserFunction(self.mbs, _blow_off_force(esym, w, c, c2, vb), "forceUserFunction",
+                                            element)
+            self.mbs.SetObjectParameter(element, "forceUserFunction", uf)
+            self._keep.append(uf)
+        self._keep.append(c)
+
+    def _rail_force_function(self, j: int, kh, n: int):
+        """Symbolic force on (left rail, right rail, odometer) under wheelset ``j``: -k_H (V ± C/2)."""
+        esym = self.exu.symbolic
+
+        def force(mbs, t, itemNumber, q, q_t):
+            q.SetVector([0.0, 0.0, 0.0])
+            q_t.SetVector([0.0, 0.0, 0.0])
+            V = self.vertical_input(j, q[2])
+            C = _lookup(esym, self.track_leaves[2], q[2], n)
+            return [-kh * (V + 0.5 * C), -kh * (V - 0.5 * C), 0.0]
+
+        return force
 
     def _periodic_leaves(self) -> None:
         """Symbolic amplitude, wavenumber and phase of each periodic wheel input, following the values."""
@@ -622,15 +786,14 @@ class TrainModel:
             v = q_t[6] * c["dx"]
             nu_y = q_t[1] / v - q[5]                                  # lateral creepage
             a_long = c["l0"] * q_t[5] / v + c["lam_r0"] * (q[1] - Y)  # minus the left wheel's long. creepage
-            fy_wheel = -c["f"] * nu_y                                 # lateral creep force per wheel
-            fx_left = c["f"] * a_long                                 # longitudinal, left wheel; right: -fx_left
+            fy_wheel = -c["f22"] * nu_y                               # lateral creep force per wheel
+            fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
             if feat.saturation:
-                n_left = esym.max(0.0, c["n0"] - c["kh"] * (q[2] + c["l0"] * q[3] - V - 0.5 * C))
-                n_right = esym.max(0.0, c["n0"] - c["kh"] * (q[2] - c["l0"] * q[3] - V + 0.5 * C))
-                eps_l = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_left)
-                eps_r = _saturation(esym, fx_left, fy_wheel, c["mu"] * n_right)
-                fy = fy + (eps_l + eps_r) * fy_wheel
-                mz = -c["l0"] * (eps_l + eps_r) * fx_left
+                # friction limit mu N with the static wheel load N (the dynamic wheel load needs the rail
+                # deflection, which this element does not see)
+                eps = _saturation(esym, fx_left, fy_wheel, c["mu"] * c["n0"])
+                fy = fy + 2.0 * eps * fy_wheel
+                mz = -2.0 * c["l0"] * eps * fx_left
             else:
                 fy = fy + 2.0 * fy_wheel
                 mz = -2.0 * c["l0"] * fx_left
@@ -646,8 +809,9 @@ class TrainModel:
             "kh": lambda q: P.hertz_stiffness(q),
             "kh_l0": lambda q: P.hertz_stiffness(q) * q["l0"],
             "kg": lambda q: P.gravitational_stiffness(q),
-            "f": lambda q: P.creep_coefficient(q),
-            "yaw_y": lambda q: 2.0 * P.creep_coefficient(q) * q["l0"] * q["conicity"] / q["r0"],
+            "f11": lambda q: P.creep_coefficients(q)[0],
+            "f22": lambda q: P.creep_coefficients(q)[1],
+            "yaw_y": lambda q: 2.0 * P.creep_coefficients(q)[0] * q["l0"] * q["conicity"] / q["r0"],
             "l0": lambda q: q["l0"],
             "lam_r0": lambda q: q["conicity"] / q["r0"],
             "n0": lambda q: P.static_loads(q)["wheel"],
@@ -695,7 +859,7 @@ class TrainModel:
             start = mbs.GetNodeODE2Index(self.nodes[name])
             self.node_index[name] = start
             for k, motion in enumerate(COORDINATES):
-                if k == 0 or (k == 4 and name.startswith("wheelset")):
+                if k in RESTRAINED.get(name.split("_")[0], ()):
                     continue
                 free.append(start + k)
                 labels.append((name, motion))
@@ -736,6 +900,11 @@ class TrainModel:
             for k, row in enumerate(self.contact_rows[j]):
                 if row >= 0:
                     G[j, row] = G6[k]
+        if self.track_nodes:
+            Gt = self.input_matrix_track(self.values)
+            for j in range(4):
+                for k, side in enumerate(("left", "right")):
+                    G[j, self.free_position[("track", f"wheelset_{j + 1}_{side}")]] = Gt[k]
         for e in self.effects:
             e.input_rows(self, G, self.values)
         C, C_disp = self.sensor_matrices()
@@ -781,6 +950,9 @@ class TrainModel:
             e.kinematic_rows(self, R, values)
         C = np.array([R[i, DIRECTIONS[s.direction]] for i, s in enumerate(self.sensors)]).reshape(n_s, n)
         C_disp = np.zeros((n_s, n))
+        for i in self._gravity_roll_sensors():
+            # body-fixed accelerometer: the lateral axis tilts with the body's roll and picks up g sin(roll)
+            C_disp[i, self.free_position[(self.sensors[i].body, "roll")]] += P.GRAVITY
         for e in self.effects:
             e.outputs(self, R, C, C_disp, values)
         return C, C_disp
@@ -820,8 +992,8 @@ class TrainModel:
     def sensor_accelerations(self) -> np.ndarray:
         """``(n_sensors, n_records)`` accelerations from the node records of the last run: C q'' + C_disp q.
 
-        The free coordinates only, like the frequency solver (the restrained
-        longitudinal coordinates move by less than 1e-4 of the suspension motions).
+        The free coordinates only, like the frequency solver (the restrained wheelset
+        longitudinal and pitch coordinates move by less than 1e-4 of the suspension motions).
         """
         C, C_disp = self.sensor_matrices()
         out = None
@@ -925,6 +1097,24 @@ def _lookup(esym, leaves, tau, n: int):
     return _tree(esym, leaves, tau, 0, n)
 
 
+def _blow_off_force(esym, w: np.ndarray, c, c2: float, vb: float):
+    """Symbolic force function of one yaw damper with blow-off (see :meth:`TrainModel._yaw_blow_off`).
+
+    :param w: ``(6,)`` longitudinal displacement of the carbody attachment point per carbody coordinate.
+    """
+    def force(mbs, t, itemNumber, q, q_t):
+        q.SetVector([0.0] * 7)
+        q_t.SetVector([0.0] * 7)
+        v = q_t[6]
+        for k in range(6):
+            if w[k] != 0.0:
+                v = v - float(w[k]) * q_t[k]
+        f = c2 * v + (c - c2) * vb * esym.tanh(v / vb)
+        return [float(w[k]) * f if w[k] != 0.0 else 0.0 for k in range(6)] + [-f]
+
+    return force
+
+
 def _saturation(esym, fx, fy, limit):
     """Shen-Hedrick-Elkins factor eps on linear creep forces (fx, fy) for the limit mu N.
 
@@ -932,3 +1122,18 @@ def _saturation(esym, fx, fy, limit):
     """
     u = esym.sqrt(fx * fx + fy * fy) / esym.max(limit, 1.0)
     return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
+
+
+def track_support_matrices(q: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(8, 8)`` of the track support under one wheelset: coordinates the wheelset's x, y, z,
+    roll, pitch, yaw and the left and right rail displacements (see :meth:`TrainModel._add_track_support`)."""
+    kh = P.hertz_stiffness(q)
+    l0 = q["l0"]
+    M, K, D = np.zeros((8, 8)), np.zeros((8, 8)), np.zeros((8, 8))
+    for r, sign in ((6, 1.0), (7, -1.0)):
+        M[r, r] = q["m_track"]
+        K[r, r] = kh + q["k_track"]
+        D[r, r] = q["c_track"]
+        K[2, r] = K[r, 2] = -kh
+        K[3, r] = K[r, 3] = -sign * kh * l0
+    return M, K, D

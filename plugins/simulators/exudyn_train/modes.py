@@ -12,6 +12,17 @@ Dominant body and motion: the mode's kinetic energy is split over the free
 coordinates (m_kk |phi_k|^2 with the diagonal mass of each coordinate, kg or
 kg m^2); the body with the largest share is the dominant body and its
 coordinate with the largest share the dominant motion.
+
+Groups (the order of the listing): ``carbody`` and ``bogie`` (rigid-body
+suspension modes), ``wheelset`` (wheelset modes below
+:data:`CONTACT_HZ`: kinematic and creep-damped modes), ``track/contact``
+(wheelsets on the contact and the track support, at or above
+:data:`CONTACT_HZ`, and track modes), ``internal`` (internal coordinates:
+Maxwell yaw dampers, effects). Within a group, by frequency.
+
+Stability (:class:`SpeedDependentSystem`, :func:`critical_speed`,
+:func:`stability_sweep`): the linear critical speed is the lowest speed at
+which an eigenvalue crosses into the right half-plane.
 """
 
 from __future__ import annotations
@@ -22,6 +33,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from .model import LinearSystem
+
+GROUPS = ("carbody", "bogie", "wheelset", "track/contact", "internal")
+"""Mode groups in the order of the listing."""
+
+CONTACT_HZ = 30.0
+"""Wheelset-dominated modes at or above this frequency count as track/contact modes."""
 
 STABILITY_TOLERANCE = 1e-9
 """Real parts above -tolerance * |lambda| count as not damped (rigid-body or unstable)."""
@@ -47,6 +64,7 @@ class Mode:
     share: float
     participation: dict[str, float]
     eigenvalue: tuple[float, float]
+    group: str = "internal"
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -63,8 +81,21 @@ def state_matrix(linear: LinearSystem) -> np.ndarray:
     return A
 
 
+def mode_group(body: str, frequency_hz: float) -> str:
+    """The group (:data:`GROUPS`) of a mode from its dominant body and frequency."""
+    if body == "carbody":
+        return "carbody"
+    if body.startswith("bogie"):
+        return "bogie"
+    if body.startswith("wheelset"):
+        return "wheelset" if frequency_hz < CONTACT_HZ else "track/contact"
+    if body == "track" or body == "track-flexibility":
+        return "track/contact"
+    return "internal"
+
+
 def compute_modes(linear: LinearSystem) -> list[Mode]:
-    """All modes, sorted by natural frequency."""
+    """All modes, by group (:data:`GROUPS`: carbody and bogie first) and within a group by frequency."""
     n = linear.M.shape[0]
     lam, V = np.linalg.eig(state_matrix(linear))
     mass = np.abs(np.diag(linear.M))
@@ -94,7 +125,9 @@ def compute_modes(linear: LinearSystem) -> list[Mode]:
             body=body, motion=motion, share=float(per_body[body]),
             participation={b: round(e, 4) for b, e in sorted(per_body.items(), key=lambda kv: -kv[1]) if e >= 0.05},
             eigenvalue=(float(l.real), float(l.imag))))
-    modes.sort(key=lambda m: m.frequency_hz)
+    for m in modes:
+        m.group = mode_group(m.body, m.frequency_hz)
+    modes.sort(key=lambda m: (GROUPS.index(m.group), m.frequency_hz))
     return modes
 
 
@@ -110,3 +143,93 @@ def modes_summary(linear: LinearSystem) -> dict:
     return {"speed_mps": float(linear.speed), "speed_kmh": float(linear.speed * 3.6),
             "stable": is_stable(modes), "least_damped": least.as_dict(),
             "modes": [m.as_dict() for m in modes]}
+
+
+# ------------------------------------------------------------------------------------------ stability
+@dataclass
+class SpeedDependentSystem:
+    """The linear model as a function of speed: M q'' + (D_inf + D_creep / v) q' + K q = 0.
+
+    Only the creep damping of the contact depends on the speed (f / v); it is
+    separated from two linearisations (``from_simulator``), so that the
+    eigenvalues at any speed cost one eigen-decomposition, no new linearisation.
+
+    :ivar M, K, D_inf, D_creep: ``(n, n)``, SI units (D_creep in N s/m times m/s).
+    :ivar labels: ``(n,)`` (body, motion) of each free coordinate.
+    """
+
+    M: np.ndarray
+    K: np.ndarray
+    D_inf: np.ndarray
+    D_creep: np.ndarray
+    labels: list[tuple[str, str]]
+
+    @classmethod
+    def from_simulator(cls, simulator, w=None) -> "SpeedDependentSystem":
+        """From a simulator with ``linear_system(w, speed)`` (e.g. ``exudyn-train``), at parameters ``w``."""
+        a = simulator.linear_system(w, 50.0)
+        b = simulator.linear_system(w, 100.0)
+        d_creep = (a.D - b.D) * 100.0        # D(50) - D(100) = D_creep (1/50 - 1/100)
+        return cls(b.M, b.K, b.D - d_creep / 100.0, d_creep, list(b.labels))
+
+    def max_growth(self, speed: float) -> float:
+        """Largest real part / |eigenvalue| at ``speed`` (m/s): > 0 unstable, the least damping ratio negated."""
+        n = self.M.shape[0]
+        Minv = np.linalg.inv(self.M)
+        A = np.zeros((2 * n, 2 * n))
+        A[:n, n:] = np.eye(n)
+        A[n:, :n] = -Minv @ self.K
+        A[n:, n:] = -Minv @ (self.D_inf + self.D_creep / speed)
+        lam = np.linalg.eigvals(A)
+        return float(np.max(lam.real / np.maximum(np.abs(lam), 1e-12)))
+
+    def critical_speed(self, v_min: float = 10.0, v_max: float = 1500 / 3.6, step: float = 5.0,
+                       tol: float = 0.05) -> float:
+        """Lowest speed (m/s) in [v_min, v_max] at which a mode grows (linear critical speed); ``inf`` when
+        the model is stable over the whole range. A scan every ``step`` m/s, then bisection to ``tol`` m/s."""
+        lo = v_min
+        if self.max_growth(lo) > 0.0:
+            return float(lo)
+        v = lo
+        while v < v_max:
+            hi = min(v + step, v_max)
+            if self.max_growth(hi) > 0.0:
+                lo = v
+                while hi - lo > tol:
+                    mid = 0.5 * (lo + hi)
+                    if self.max_growth(mid) > 0.0:
+                        hi = mid
+                    else:
+                        lo = mid
+                return float(0.5 * (lo + hi))
+            v = hi
+        return math.inf
+
+
+def critical_speed(simulator, w=None, **kwargs) -> float:
+    """Linear critical speed (m/s) of a simulator with ``linear_system(w, speed)`` at parameters ``w``
+    (``inf``: stable up to ``v_max``, default 1500 km/h). See :meth:`SpeedDependentSystem.critical_speed`."""
+    return SpeedDependentSystem.from_simulator(simulator, w).critical_speed(**kwargs)
+
+
+def stability_sweep(simulator, parameters=None, conicities=(0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4),
+                    n_points: int = 3) -> dict:
+    """Linear critical speed at the nominal parameters, against conicity, and against each parameter.
+
+    :param simulator: e.g. ``ExudynTrain(...)``; it must list ``parameters()`` with bounds.
+    :param parameters: names to sweep over their bounds (default: the simulator's
+        ``default_parameters()``).
+    :param conicities: equivalent conicities to sweep (the other parameters nominal).
+    :param n_points: values per parameter, evenly spaced from its lower to its upper bound.
+    :returns: ``{"nominal_kmh": float, "conicity": [(lambda, v_kmh)], "parameters": {name: [(value, v_kmh)]}}``
+        speeds in km/h (``inf``: stable up to 1500 km/h).
+    """
+    names = list(parameters or simulator.default_parameters())
+    bounds = {p.name: (p.lower, p.upper) for p in simulator.parameters()}
+    kmh = lambda w: 3.6 * critical_speed(simulator, w)  # noqa: E731
+    out = {"nominal_kmh": kmh({}), "conicity": [(float(c), kmh({"conicity": float(c)})) for c in conicities],
+           "parameters": {}}
+    for name in names:
+        lo, hi = bounds[name]
+        out["parameters"][name] = [(float(v), kmh({name: float(v)})) for v in np.linspace(lo, hi, n_points)]
+    return out

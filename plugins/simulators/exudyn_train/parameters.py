@@ -1,49 +1,70 @@
-"""Parameter table of the built-in high-speed car, each value with its source.
+"""Parameter tables of the built-in cars (vehicle presets), each value with its source.
 
 Every physical quantity the model uses is a :class:`VehicleParameter`: name,
 SI unit, nominal value, admissible bounds (used when the parameter is
 identified), description and **source**. Any of them can be identified by
 naming it under ``parameters:`` in a config, or given another nominal value
-through the simulator option ``vehicle: {name: value}``.
+through the simulator option ``vehicle: {name: value}``; ``vehicle: <preset>``
+or ``vehicle: {preset: <preset>, name: value}`` selects a preset.
 
-The car ("TGV-class"): no public TGV parameter set exists
-(``shared/reference/railway-data.md`` §1). The default car is a 320 km/h
-passenger car on two conventional bogies with 0.92 m wheels, built from
+Presets (:data:`PRESETS`; every preset has the same parameter names, the model
+is the same):
 
-- the masses, inertias, geometry, primary suspension and secondary springs
-  of the **Manchester Benchmark Vehicle 1** (Iwnicki, Vehicle System
-  Dynamics 30 (1998) 295-313, values as cited by public code, see
-  railway-data.md §1; the paper itself was not read);
-- **assumptions** where that source is silent (heights of the secondary
-  suspension and of the yaw dampers, yaw damper spacing), marked below;
-- the primary longitudinal stiffness of the **CRH380A-like** high-speed set
-  (railway-data.md §1): the Manchester coach's 31 MN/m makes this car hunt;
-- **stability tuning** for 320 km/h (the Manchester coach with linear creep
-  hunts at 83 m/s for conicity 0.15, railway-data.md §1): the equivalent
-  conicity (0.25), the yaw damper rate (800 kN s/m) and the lateral damper
-  rate (16 kN s/m per side) were chosen with the eigenvalues of this model so
-  that every mode is damped from 20 to 400 km/h (least damping ratio 0.125 at
-  320 km/h, the carbody's lateral mode), at every corner of the default
-  identification box, and with creep coefficients down to half of Kalker's
-  (creep saturation lowers them in the time solver). See
-  ``tests/test_exudyn_train.py``.
+- ``conventional-hs`` (default): a high-speed trailer car on two conventional
+  bogies, ICE3/CRH class, 15.5 t axle load. Masses, pitch inertias, geometry,
+  vertical primary and secondary suspension of the AVE S103 (ICE3 Velaro E)
+  intermediate coach after J. Goicolea, *Simplified mechanical description of
+  AVE S-103 (ICE3 Velaro E) high speed train* (UPM, 2014); longitudinal and
+  lateral suspension stiffnesses of a CRH380A-class set (public parameter file
+  of a CRH-class car, origin not confirmed); lateral damper and Maxwell yaw
+  damper (300 kN s/m in series with 10 MN/m) of the high-speed car of Hindawi
+  *Mathematical Problems in Engineering* 2019, article 7163732, Table 2;
+  values no public source gives are marked as assumptions.
+- ``manchester-coach``: the Manchester Benchmark Vehicle 1 (passenger coach;
+  Iwnicki, *Vehicle System Dynamics* 30 (1998) 295-313, values as cited by
+  public code; the paper itself was not read), with the Maxwell yaw damper of
+  the high-speed car above (the benchmark gives none) and the same contact
+  and track. A benchmark, not a high-speed car.
+
+Wheel-rail contact: the linear creep coefficients are Kalker's
+(:func:`creep_coefficients`): f11 = G a b C11, f22 = G a b C22 with the
+Hertzian contact ellipse (a, b) of the wheel load, the wheel rolling radius
+and the rail crown radius, and Kalker's coefficient tables; ``kalker_scale``
+multiplies both (1 = Kalker's linear theory).
 
 Conventions: x forward, y to the left, z up (right-handed); "per axlebox",
-"per side" and "per damper" say how many elements share a value.
+"per side", "per damper", "per wheel" say how many elements share a value.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 GRAVITY = 9.81
 """Gravitational acceleration, m/s^2."""
 
-MANCHESTER = "Manchester Benchmark Vehicle 1 (Iwnicki 1998), as cited in railway-data.md §1"
+YOUNG = 210e9
+"""Young's modulus of wheel and rail steel, Pa."""
+POISSON = 0.28
+"""Poisson's ratio of wheel and rail steel."""
+
+# --- sources ------------------------------------------------------------------------------------------
+ICE3 = ("AVE S103 / ICE3 Velaro E intermediate coach: Goicolea, Simplified mechanical description of "
+        "AVE S-103 (ICE3 Velaro E) high speed train, UPM 2014")
+CRH = "CRH380A-class high-speed car (public parameter file; origin not confirmed)"
+HMPE = ("high-speed car with Maxwell yaw dampers: Mathematical Problems in Engineering 2019, "
+        "article 7163732, Table 2")
+MANCHESTER = "Manchester Benchmark Vehicle 1 (Iwnicki, Vehicle System Dynamics 30 (1998) 295-313)"
 ASSUMED = "assumption (typical value; not in the cited sources)"
-CRH = "CRH380A-like high-speed set (railway-data.md §1; origin not confirmed)"
-TUNED = "chosen for stability at 320 km/h with this model's eigenvalues (railway-data.md §1 warns)"
+EN13674 = "60E1 rail head crown radius 300 mm (EN 13674-1)"
+KLINGEL = "half distance between the contact points of a standard-gauge wheelset (1.5 m apart)"
+TRACK = ("lumped ballasted-track support per wheel, chosen so that the P2 resonance (wheelset on the track "
+         "support) is about 65 Hz with damping ratio about 0.35: the 50-80 Hz, well-damped range of "
+         "Jenkins et al., The effect of track and vehicle parameters on wheel/rail vertical dynamic forces, "
+         "Railway Engineering Journal 3 (1974) 2-16 (assumption for the split mass / stiffness / damping)")
 
 
 @dataclass(frozen=True)
@@ -64,63 +85,134 @@ def _p(name: str, unit: str, nominal: float, lower: float, upper: float, descrip
     return VehicleParameter(name, unit, float(nominal), float(lower), float(upper), description, source)
 
 
-PARAMETERS: tuple[VehicleParameter, ...] = (
+CONVENTIONAL_HS: tuple[VehicleParameter, ...] = (
     # --- carbody -----------------------------------------------------------------------------------
-    _p("m_car", "kg", 32000, 24000, 48000, "carbody mass", MANCHESTER),
-    _p("I_car_x", "kg m^2", 56.8e3, 40e3, 90e3, "carbody roll inertia about its centre of mass", MANCHESTER),
-    _p("I_car_y", "kg m^2", 1.97e6, 1.4e6, 2.8e6, "carbody pitch inertia", MANCHESTER),
-    _p("I_car_z", "kg m^2", 1.97e6, 1.4e6, 2.8e6, "carbody yaw inertia", MANCHESTER),
+    _p("m_car", "kg", 47800, 36000, 56000, "carbody mass", ICE3),
+    _p("I_car_x", "kg m^2", 85e3, 60e3, 130e3, "carbody roll inertia about its centre of mass",
+       ASSUMED + ": the Manchester coach's 56.8e3 kg m^2 scaled by the mass ratio"),
+    _p("I_car_y", "kg m^2", 1.958e6, 1.4e6, 2.8e6, "carbody pitch inertia", ICE3),
+    _p("I_car_z", "kg m^2", 1.958e6, 1.4e6, 2.8e6, "carbody yaw inertia",
+       ASSUMED + ": equal to the pitch inertia, as for the Manchester coach"),
     _p("h_car", "m", 1.8, 1.5, 2.1, "carbody centre of mass above rail level", MANCHESTER),
     # --- bogie frames ------------------------------------------------------------------------------
-    _p("m_bogie", "kg", 2615, 2000, 3500, "bogie frame mass", MANCHESTER),
-    _p("I_bogie_x", "kg m^2", 1722, 1200, 2500, "bogie frame roll inertia", MANCHESTER),
-    _p("I_bogie_y", "kg m^2", 1476, 1000, 2200, "bogie frame pitch inertia", MANCHESTER),
-    _p("I_bogie_z", "kg m^2", 3067, 2200, 4500, "bogie frame yaw inertia", MANCHESTER),
+    _p("m_bogie", "kg", 3500, 2400, 4200, "bogie frame mass", ICE3),
+    _p("I_bogie_x", "kg m^2", 2300, 1600, 3200, "bogie frame roll inertia",
+       ASSUMED + ": the Manchester bogie's 1722 kg m^2 scaled by the mass ratio"),
+    _p("I_bogie_y", "kg m^2", 1715, 1200, 2500, "bogie frame pitch inertia", ICE3),
+    _p("I_bogie_z", "kg m^2", 4100, 2800, 5600, "bogie frame yaw inertia",
+       ASSUMED + ": the Manchester bogie's 3067 kg m^2 scaled by the mass ratio"),
     _p("h_bogie", "m", 0.6, 0.5, 0.7, "bogie frame centre of mass above rail level", MANCHESTER),
     # --- wheelsets ---------------------------------------------------------------------------------
-    _p("m_ws", "kg", 1813, 1400, 2200, "wheelset mass", MANCHESTER),
+    _p("m_ws", "kg", 1800, 1400, 2200, "wheelset mass", ICE3),
     _p("I_ws_x", "kg m^2", 1120, 800, 1500, "wheelset roll inertia", MANCHESTER),
     _p("I_ws_y", "kg m^2", 112, 80, 150, "wheelset spin (pitch) inertia", MANCHESTER),
     _p("I_ws_z", "kg m^2", 1120, 800, 1500, "wheelset yaw inertia", MANCHESTER),
-    _p("r0", "m", 0.46, 0.42, 0.46, "nominal rolling radius (0.92 m wheel, EN 15302 reference)", MANCHESTER),
+    _p("r0", "m", 0.46, 0.42, 0.46, "nominal rolling radius (920 mm wheel, EN 15302 reference wheel)",
+       "EN 15302 reference wheel diameter 920 mm (ICE3 and TGV wheels are 920 mm new)"),
     # --- geometry ----------------------------------------------------------------------------------
-    _p("a_bogie", "m", 9.5, 8.5, 10.5, "half distance between bogie centres", MANCHESTER),
-    _p("a_ws", "m", 1.28, 1.1, 1.5, "half wheelbase of a bogie", MANCHESTER),
+    _p("a_bogie", "m", 8.6875, 8.0, 9.5, "half distance between bogie centres", ICE3),
+    _p("a_ws", "m", 1.25, 1.1, 1.5, "half wheelbase of a bogie", ICE3),
     _p("b_prim", "m", 1.0, 0.9, 1.1, "half lateral spacing of the primary suspension", MANCHESTER),
     _p("b_sec", "m", 1.0, 0.9, 1.3, "half lateral spacing of the secondary suspension", MANCHESTER),
-    _p("l0", "m", 0.75, 0.7, 0.8, "half distance between the wheel-rail contact points",
-       "railway-data.md §1 (l0 about 0.75 m)"),
+    _p("l0", "m", 0.75, 0.7, 0.8, "half distance between the wheel-rail contact points", KLINGEL),
     _p("h_sec", "m", 1.0, 0.8, 1.2, "height of the secondary suspension above rail level", ASSUMED),
-    _p("b_yaw", "m", 1.35, 1.2, 1.5, "half lateral spacing of the yaw dampers", ASSUMED),
+    _p("b_yaw", "m", 1.35, 1.2, 1.5, "half lateral spacing of the yaw dampers", HMPE),
     _p("h_yaw", "m", 0.65, 0.5, 0.8, "height of the yaw dampers above rail level", ASSUMED),
+    _p("h_trac", "m", 0.65, 0.5, 0.8, "height of the traction rod above rail level",
+       ASSUMED + ": at the yaw dampers' height, as in bogies with a low traction link"),
     # --- primary suspension, per axlebox -----------------------------------------------------------
-    _p("k_prim_x", "N/m", 14.68e6, 8e6, 20e6, "primary longitudinal stiffness per axlebox",
-       CRH + " (the Manchester coach's 31.4 MN/m makes this car hunt at 320 km/h)"),
-    _p("k_prim_y", "N/m", 3.884e6, 2.0e6, 6.0e6, "primary lateral stiffness per axlebox", MANCHESTER),
-    _p("k_prim_z", "N/m", 1.22e6, 0.6e6, 1.8e6, "primary vertical stiffness per axlebox", MANCHESTER),
-    _p("c_prim_z", "N s/m", 4e3, 1e3, 12e3, "primary vertical damping per axlebox", MANCHESTER),
+    _p("k_prim_x", "N/m", 14.68e6, 8e6, 20e6, "primary longitudinal stiffness per axlebox", CRH),
+    _p("c_prim_x", "N s/m", 20e3, 5e3, 50e3,
+       "primary longitudinal damping per axlebox (hysteresis of the rubber guide bushes, as a dashpot)",
+       ASSUMED + ": loss factor about 0.2 of the bushes at the 25 Hz bogie longitudinal mode"),
+    _p("k_prim_y", "N/m", 6.47e6, 3.0e6, 9.0e6, "primary lateral stiffness per axlebox", CRH),
+    _p("k_prim_z", "N/m", 1.2e6, 0.8e6, 1.6e6, "primary vertical stiffness per axlebox", ICE3),
+    _p("c_prim_z", "N s/m", 10e3, 4e3, 20e3, "primary vertical damping per axlebox", ICE3),
     # --- secondary suspension, per side (two sides per bogie) --------------------------------------
-    _p("k_sec_x", "N/m", 160e3, 80e3, 320e3, "secondary longitudinal stiffness per side", MANCHESTER),
-    _p("k_sec_y", "N/m", 160e3, 80e3, 240e3, "secondary lateral stiffness per side", MANCHESTER),
-    _p("k_sec_z", "N/m", 430e3, 215e3, 645e3, "secondary vertical stiffness per side", MANCHESTER),
-    _p("c_sec_z", "N s/m", 20e3, 8e3, 40e3, "secondary vertical damping per side", MANCHESTER),
-    _p("c_sec_y", "N s/m", 16e3, 8e3, 32e3,
-       "secondary lateral damping per side (the lateral dampers, one per side, in parallel with the "
-       "secondary lateral spring)", TUNED + "; half the Manchester coach's 32 kN s/m, which lets the "
-       "car hunt at 320 km/h when the creep coefficients drop by 30 %"),
-    _p("c_yaw", "N s/m", 800e3, 400e3, 1.2e6,
-       "yaw damper rate per damper (one longitudinal damper per side of each bogie; linear, no series "
-       "stiffness, no blow-off)", TUNED + "; railway-data.md §3 cites 300 kN s/m for a yaw damper"),
-    _p("k_arb", "N m/rad", 940e3, 400e3, 1.5e6, "anti-roll bar stiffness per bogie (carbody-bogie roll)",
-       MANCHESTER),
+    _p("k_sec_x", "N/m", 160e3, 80e3, 320e3, "secondary longitudinal stiffness per side", CRH),
+    _p("k_sec_y", "N/m", 160e3, 100e3, 240e3, "secondary lateral stiffness per side", CRH),
+    _p("k_sec_z", "N/m", 350e3, 230e3, 500e3, "secondary vertical stiffness per side", ICE3),
+    _p("c_sec_z", "N s/m", 20e3, 10e3, 35e3, "secondary vertical damping per side", ICE3),
+    _p("c_sec_y", "N s/m", 30e3, 15e3, 60e3,
+       "secondary lateral damping per side (one lateral damper per side, in parallel with the secondary "
+       "lateral spring)", HMPE),
+    _p("c_yaw", "N s/m", 300e3, 150e3, 450e3,
+       "yaw damper rate per damper (one longitudinal damper per side of each bogie; the damper of a Maxwell "
+       "element with the series stiffness k_yaw_s)", HMPE),
+    _p("k_yaw_s", "N/m", 10e6, 5e6, 20e6,
+       "series stiffness of each yaw damper (rubber bushes and oil column of the Maxwell element)", HMPE),
+    _p("k_trac", "N/m", 5e6, 2e6, 10e6,
+       "longitudinal stiffness of the traction rod between bogie frame and carbody, per bogie", ASSUMED),
+    _p("k_arb", "N m/rad", 2.0e6, 1.0e6, 3.0e6, "anti-roll bar stiffness per bogie (carbody-bogie roll)",
+       ASSUMED),
     # --- wheel-rail contact --------------------------------------------------------------------------
-    _p("conicity", "1", 0.25, 0.15, 0.40, "equivalent conicity lambda",
-       TUNED + "; railway-data.md §1 gives 0.05-0.3"),
+    _p("conicity", "1", 0.15, 0.05, 0.40, "equivalent conicity lambda",
+       "new high-speed wheel/rail profile pairs: about 0.05-0.15 (in-service limit above 230 km/h: 0.25 "
+       "mean over 100 m, EN 14363 / UIC 518)"),
     _p("kalker_scale", "1", 1.0, 0.5, 1.2,
-       "factor on the Kalker creep coefficients f11 = f22 (7 MN at 55 kN wheel load, scaled with "
-       "load^(2/3), railway-data.md §1)", "1 = Kalker's linear theory (railway-data.md §1)"),
+       "factor on Kalker's linear creep coefficients f11, f22 (computed from the wheel load and the "
+       "Hertzian contact ellipse)", "1 = Kalker's linear theory (Kalker, Three-dimensional elastic "
+       "bodies in rolling contact, 1990)"),
+    _p("r_rail", "m", 0.30, 0.2, 0.5, "transverse (crown) radius of the rail head at the contact point",
+       EN13674),
+    # --- track support, per wheel ------------------------------------------------------------------
+    _p("m_track", "kg", 200.0, 100.0, 400.0, "equivalent rail and sleeper mass under each wheel", TRACK),
+    _p("k_track", "N/m", 180e6, 80e6, 300e6, "vertical stiffness of rail pad and ballast under each wheel",
+       TRACK),
+    _p("c_track", "N s/m", 300e3, 100e3, 600e3, "vertical damping of rail pad and ballast under each wheel",
+       TRACK),
 )
-"""Every model parameter, in the order of :func:`parameter_table`."""
+"""The ``conventional-hs`` preset (default)."""
+
+
+def _override(base: tuple[VehicleParameter, ...], changes: dict[str, tuple]) -> tuple[VehicleParameter, ...]:
+    """``base`` with ``changes``: name -> (nominal, lower, upper, source)."""
+    out = []
+    for p in base:
+        if p.name in changes:
+            nominal, lower, upper, source = changes[p.name]
+            p = replace(p, nominal=float(nominal), lower=float(lower), upper=float(upper), source=source)
+        out.append(p)
+    return tuple(out)
+
+
+MANCHESTER_COACH: tuple[VehicleParameter, ...] = _override(CONVENTIONAL_HS, {
+    "m_car": (32000, 24000, 48000, MANCHESTER),
+    "I_car_x": (56.8e3, 40e3, 90e3, MANCHESTER),
+    "I_car_y": (1.97e6, 1.4e6, 2.8e6, MANCHESTER),
+    "I_car_z": (1.97e6, 1.4e6, 2.8e6, MANCHESTER),
+    "m_bogie": (2615, 2000, 3500, MANCHESTER),
+    "I_bogie_x": (1722, 1200, 2500, MANCHESTER),
+    "I_bogie_y": (1476, 1000, 2200, MANCHESTER),
+    "I_bogie_z": (3067, 2200, 4500, MANCHESTER),
+    "m_ws": (1813, 1400, 2200, MANCHESTER),
+    "a_bogie": (9.5, 8.5, 10.5, MANCHESTER),
+    "a_ws": (1.28, 1.1, 1.5, MANCHESTER),
+    "k_prim_x": (31.391e6, 15e6, 40e6, MANCHESTER),
+    "k_prim_y": (3.884e6, 2.0e6, 6.0e6, MANCHESTER),
+    "k_prim_z": (1.22e6, 0.6e6, 1.8e6, MANCHESTER),
+    "c_prim_z": (4e3, 1e3, 12e3, MANCHESTER),
+    "k_sec_x": (160e3, 80e3, 320e3, MANCHESTER),
+    "k_sec_y": (160e3, 80e3, 240e3, MANCHESTER),
+    "k_sec_z": (430e3, 215e3, 645e3, MANCHESTER),
+    "c_sec_z": (20e3, 8e3, 40e3, MANCHESTER),
+    "c_sec_y": (32e3, 16e3, 48e3, MANCHESTER),
+    "c_yaw": (300e3, 150e3, 450e3, HMPE + " (the benchmark coach has no yaw damper data)"),
+    "k_arb": (940e3, 400e3, 1.5e6, MANCHESTER),
+    "conicity": (0.15, 0.05, 0.40, "equivalent conicity used with the benchmark (0.05-0.3 in the literature)"),
+})
+"""The ``manchester-coach`` preset (benchmark)."""
+
+PRESETS: dict[str, tuple[VehicleParameter, ...]] = {
+    "conventional-hs": CONVENTIONAL_HS,
+    "manchester-coach": MANCHESTER_COACH,
+}
+"""Preset name -> parameter table (same names and order in every preset)."""
+
+DEFAULT_PRESET = "conventional-hs"
+
+PARAMETERS: tuple[VehicleParameter, ...] = PRESETS[DEFAULT_PRESET]
+"""Every model parameter of the default preset, in the order of :func:`parameter_table`."""
 
 DEFAULT_IDENTIFIED: tuple[str, ...] = (
     "k_sec_z", "k_prim_z", "c_sec_z", "k_sec_y", "c_sec_y", "c_yaw", "k_prim_y")
@@ -129,20 +221,18 @@ set the carbody's vertical stiffness, the secondary one closest to the carbody s
 
 BY_NAME: dict[str, VehicleParameter] = {p.name: p for p in PARAMETERS}
 
-KALKER_F_REF = 7.0e6
-"""Kalker creep coefficient f11 = f22 per wheel, N, at the reference wheel load (railway-data.md §1)."""
-KALKER_LOAD_REF = 55.0e3
-"""Reference wheel load of :data:`KALKER_F_REF`, N."""
+
+def parameter_table(preset: str = DEFAULT_PRESET) -> tuple[VehicleParameter, ...]:
+    """All model parameters of a preset with nominal values, bounds and sources.
+
+    :raises KeyError: unknown preset.
+    """
+    return PRESETS[preset]
 
 
-def parameter_table() -> tuple[VehicleParameter, ...]:
-    """All model parameters with nominal values, bounds and sources."""
-    return PARAMETERS
-
-
-def nominal_values() -> dict[str, float]:
-    """Name -> nominal SI value of every parameter."""
-    return {p.name: p.nominal for p in PARAMETERS}
+def nominal_values(preset: str = DEFAULT_PRESET) -> dict[str, float]:
+    """Name -> nominal SI value of every parameter of a preset."""
+    return {p.name: p.nominal for p in PRESETS[preset]}
 
 
 def static_loads(p: dict[str, float]) -> dict[str, float]:
@@ -154,14 +244,84 @@ def static_loads(p: dict[str, float]) -> dict[str, float]:
     return {"secondary_side": sec, "axlebox": axlebox, "wheel": wheel, "axle": 2.0 * wheel}
 
 
-def creep_coefficient(p: dict[str, float]) -> float:
-    """Kalker creep coefficient f11 = f22 per wheel in N.
+# --- Kalker's creep coefficients -------------------------------------------------------------------------
+# Kalker's linear-theory coefficients C11 (longitudinal) and C22 (lateral) for an elliptical contact with
+# semi-axis a in the rolling direction and b across it, for Poisson's ratio 0.25 and 0.5 (J.J. Kalker,
+# On the rolling contact of two elastic bodies in the presence of dry friction, thesis, Delft 1967; the
+# table as reproduced in Kalker, Three-dimensional elastic bodies in rolling contact, Kluwer 1990, and in
+# Garg & Dukkipati, Dynamics of railway vehicle systems, 1984). Rows: g, C11(0.25), C11(0.5), C22(0.25),
+# C22(0.5). First block g = a/b <= 1, second block g = b/a <= 1.
+_KALKER_A_OVER_B = np.array([
+    (0.1, 3.31, 4.85, 2.52, 2.53), (0.2, 3.37, 4.81, 2.63, 2.66), (0.3, 3.44, 4.80, 2.75, 2.81),
+    (0.4, 3.53, 4.82, 2.88, 2.98), (0.5, 3.62, 4.83, 3.01, 3.14), (0.6, 3.72, 4.91, 3.14, 3.31),
+    (0.7, 3.81, 4.97, 3.28, 3.48), (0.8, 3.91, 5.05, 3.41, 3.65), (0.9, 4.01, 5.12, 3.54, 3.82),
+    (1.0, 4.12, 5.20, 3.67, 3.98)])
+_KALKER_B_OVER_A = np.array([
+    (0.1, 11.7, 12.9, 12.8, 16.0), (0.2, 7.78, 8.82, 8.14, 9.79), (0.3, 6.34, 7.34, 6.40, 7.51),
+    (0.4, 5.57, 6.57, 5.48, 6.31), (0.5, 5.10, 6.11, 4.90, 5.56), (0.6, 4.78, 5.80, 4.50, 5.04),
+    (0.7, 4.54, 5.58, 4.21, 4.67), (0.8, 4.36, 5.42, 3.99, 4.39), (0.9, 4.22, 5.30, 3.81, 4.16),
+    (1.0, 4.12, 5.20, 3.67, 3.98)])
 
-    f = 7 MN x (N / 55 kN)^(2/3) x kalker_scale with N the static wheel load
-    (railway-data.md §1: "an assumption, scale with load^(2/3)").
+
+def kalker_c11_c22(a_over_b: float, nu: float = POISSON) -> tuple[float, float]:
+    """Kalker's C11, C22 for the semi-axis ratio a/b (a: rolling direction), linear in nu between 0.25
+    and 0.5 and in the axis ratio between the table rows (clamped to 0.1-10)."""
+    w = (nu - 0.25) / 0.25
+    if a_over_b <= 1.0:
+        tab, g = _KALKER_A_OVER_B, max(a_over_b, 0.1)
+    else:
+        tab, g = _KALKER_B_OVER_A, max(1.0 / a_over_b, 0.1)
+    c11 = np.interp(g, tab[:, 0], tab[:, 1] + w * (tab[:, 2] - tab[:, 1]))
+    c22 = np.interp(g, tab[:, 0], tab[:, 3] + w * (tab[:, 4] - tab[:, 3]))
+    return float(c11), float(c22)
+
+
+def hertz_ellipse(load: float, curvature_x: float, curvature_y: float, young: float = YOUNG,
+                  nu: float = POISSON) -> tuple[float, float]:
+    """Semi-axes (a, b) in m of the Hertzian contact ellipse: a along x (rolling), b along y.
+
+    :param load: normal force, N.
+    :param curvature_x, curvature_y: relative curvature half-sums A = (1/R_wheel,x + 1/R_rail,x) / 2 and
+        B = (1/R_wheel,y + 1/R_rail,y) / 2, 1/m (A: the wheel's rolling radius; B: the rail crown, a
+        conical wheel tread).
+    Hertz's solution (Johnson, Contact mechanics, 1985, §4.2): with e^2 = 1 - (b/a)^2 for a >= b,
+    B/A = (E(e)/(1 - e^2) - K(e)) / (K(e) - E(e)) and a^3 = 3 P (K - E) / (2 pi A E* e^2),
+    E* = E / (2 (1 - nu^2)) (identical materials); K, E complete elliptic integrals of parameter e^2.
+    """
+    from scipy.optimize import brentq
+    from scipy.special import ellipe, ellipk
+
+    e_star = young / (2.0 * (1.0 - nu ** 2))
+    small, large = min(curvature_x, curvature_y), max(curvature_x, curvature_y)
+    ratio = large / small
+    if ratio < 1.0 + 1e-9:   # circular contact of radius (3 P R / 4 E*)^(1/3), R = 1 / (2 A)
+        r = (3.0 * load / (4.0 * e_star * 2.0 * small)) ** (1.0 / 3.0)
+        return r, r
+    m = brentq(lambda m: (ellipe(m) / (1.0 - m) - ellipk(m)) / (ellipk(m) - ellipe(m)) - ratio, 1e-12, 1 - 1e-12)
+    k, e = ellipk(m), ellipe(m)
+    longer = (3.0 * load * (k - e) / (2.0 * math.pi * small * e_star * m)) ** (1.0 / 3.0)
+    shorter = longer * math.sqrt(1.0 - m)
+    return (longer, shorter) if curvature_x <= curvature_y else (shorter, longer)
+
+
+def creep_coefficients(p: dict[str, float]) -> tuple[float, float]:
+    """Kalker's linear creep coefficients (f11, f22) per wheel in N, times ``kalker_scale``.
+
+    f11 = G a b C11, f22 = G a b C22 with G = E / (2 (1 + nu)) the shear
+    modulus, (a, b) the Hertzian ellipse of the static wheel load
+    (:func:`hertz_ellipse`, wheel rolling radius r0, rail crown radius
+    r_rail, conical tread) and Kalker's C11, C22 (:func:`kalker_c11_c22`).
+    About 12.2 and 11.0 MN for the conventional-hs car (wheel load 76 kN);
+    9.7 and 8.8 MN at 54.5 kN (the Manchester coach), inside the 9.4-10.4 and
+    8.3-9.2 MN published for that load and a 300 mm rail crown. Spin creep
+    (f23, f33) is left out.
     """
     n = static_loads(p)["wheel"]
-    return KALKER_F_REF * (n / KALKER_LOAD_REF) ** (2.0 / 3.0) * p["kalker_scale"]
+    a, b = hertz_ellipse(n, 0.5 / p["r0"], 0.5 / p["r_rail"])
+    c11, c22 = kalker_c11_c22(a / b)
+    shear = YOUNG / (2.0 * (1.0 + POISSON))
+    s = p["kalker_scale"]
+    return s * shear * a * b * c11, s * shear * a * b * c22
 
 
 def hertz_stiffness(p: dict[str, float]) -> float:
@@ -169,9 +329,10 @@ def hertz_stiffness(p: dict[str, float]) -> float:
 
     Hertz: deflection d = G N^(2/3), so k = dN/dd = 1.5 N^(1/3) / G, with the
     wheel-rail constant G = 3.86e-8 r0^-0.115 m/N^(2/3) (r0 in m) as commonly
-    cited from Garg & Dukkipati, Dynamics of Railway Vehicle Systems (1984);
-    not checked against the book. About 1.35e9 N/m for the default car, which
-    puts the wheelset bounce on the rail near 190 Hz, far above the band.
+    cited from Garg & Dukkipati, Dynamics of Railway Vehicle Systems (1984).
+    About 1.5e9 N/m for the default car: the wheel on the rail mass
+    (m_track) then vibrates near 490 Hz, damped by the track support
+    (damping ratio 0.2).
     """
     n = static_loads(p)["wheel"]
     g_const = 3.86e-8 * p["r0"] ** -0.115
@@ -187,13 +348,14 @@ def gravitational_stiffness(p: dict[str, float]) -> float:
     return static_loads(p)["axle"] * p["conicity"] / p["l0"]
 
 
-def check_values(values: dict[str, float]) -> list[str]:
-    """Problems with a full parameter dict (unknown names, non-finite or non-positive values)."""
+def check_values(values: dict[str, float], known: dict | None = None) -> list[str]:
+    """Problems with a parameter dict (unknown names, non-finite or non-positive values)."""
+    known = BY_NAME if known is None else known
     problems = []
     for name, value in values.items():
-        if name not in BY_NAME:
+        if name not in known:
             problems.append(f"unknown parameter '{name}'")
-        elif not math.isfinite(value) or value <= 0.0:
+        elif not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0.0:
             problems.append(f"parameter '{name}' = {value!r} must be a positive finite number "
-                            f"({BY_NAME[name].unit})")
+                            f"({known[name].unit})")
     return problems

@@ -16,9 +16,15 @@ from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 from . import effects as E
 from . import parameters as P
 from .model import BODIES, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
-from .modes import modes_summary
+from .modes import critical_speed, modes_summary, stability_sweep
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
+
+
+MODEL_VERSION = 2
+"""Version of the model's physics, part of :meth:`ExudynTrain.identity`: cached evaluations of an
+earlier model are not reused. 2: Maxwell yaw dampers, free longitudinal carbody and bogie motion with
+traction rods, Kalker creep coefficients, track support, g × roll in lateral sensors, vehicle presets."""
 
 
 class SensorOptions(BaseModel):
@@ -44,8 +50,22 @@ class ContactOptions(BaseModel):
     friction: PositiveFloat = Field(default=0.3, le=1.0, description="wheel-rail friction coefficient for saturation")
     bump_stops: bool = Field(default=False, description="lateral bump stops carbody-bogie (time solver only)")
     bump_gap_m: PositiveFloat = Field(default=0.025, description="free lateral play before the bump stop, m "
-                                      "(Manchester benchmark, railway-data.md §1)")
+                                      "(Manchester Benchmark Vehicle 1, Iwnicki 1998)")
     bump_stiffness: PositiveFloat = Field(default=2.0e6, description="bump stop stiffness, N/m (assumption)")
+
+
+class YawDamperOptions(BaseModel):
+    """Yaw damper options (the dampers are Maxwell elements: ``c_yaw`` in series with ``k_yaw_s``)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    blow_off: bool = Field(default=False, description="blow-off (time solver only): the damper force is "
+                           "c_yaw v up to the blow-off velocity, then grows at rate_after_blow_off")
+    blow_off_velocity_mps: PositiveFloat = Field(
+        default=0.01, description="damper stroke velocity at blow-off, m/s (Mathematical Problems in "
+        "Engineering 2019, article 7163732: 3 kN at 0.01 m/s)")
+    rate_after_blow_off: PositiveFloat = Field(
+        default=20e3, description="damping rate above the blow-off velocity, N s/m (same source: 20 kN s/m)")
 
 
 class Options(BaseModel):
@@ -64,8 +84,13 @@ class Options(BaseModel):
     speed_kmh: PositiveFloat = Field(default=320.0, description="speed for `modes` (segments carry their own), km/h")
     sensors: list[SensorOptions] | None = Field(default=None, description="channels (default: 10, see docs)")
     contact: ContactOptions = Field(default_factory=ContactOptions)
-    vehicle: dict[str, float] = Field(default_factory=dict,
-                                      description="nominal values of model parameters, name -> SI value")
+    yaw_damper: YawDamperOptions = Field(default_factory=YawDamperOptions)
+    vehicle: dict[str, float | str] = Field(
+        default_factory=dict, description="vehicle preset and nominal values of model parameters: a preset name "
+        f"({', '.join(P.PRESETS)}; default {P.DEFAULT_PRESET}), or a mapping {{preset: <name>, <parameter>: "
+        "<SI value>, ...}}")
+    gravity_roll: bool = Field(default=True, description="lateral accelerometers are fixed to their body and also "
+                               "measure g times its roll angle (false: kinematic lateral acceleration only)")
     taper_m: float = Field(default=20.0, ge=0.0, description="fade-in/out length of each segment's track, m")
     settle_s: PositiveFloat = Field(default=8.0, description="frequency solver: least zero padding for the decay "
                                     "of the impulse response, s")
@@ -78,13 +103,35 @@ class Options(BaseModel):
     def _effects(cls, value: list[dict[str, Any]]) -> list[dict[str, Any]]:
         return validate_effects(value)
 
+    @field_validator("vehicle", mode="before")
+    @classmethod
+    def _preset_name(cls, value: Any) -> Any:
+        return {"preset": value} if isinstance(value, str) else value
+
     @field_validator("vehicle")
     @classmethod
-    def _known(cls, value: dict[str, float]) -> dict[str, float]:
-        problems = P.check_values(value)
+    def _known(cls, value: dict[str, float | str]) -> dict[str, float | str]:
+        preset = value.get("preset", P.DEFAULT_PRESET)
+        if preset not in P.PRESETS:
+            raise ValueError(f"unknown vehicle preset {preset!r} (known: {', '.join(P.PRESETS)})")
+        numbers = {k: v for k, v in value.items() if k != "preset"}
+        problems = P.check_values(numbers)
         if problems:
-            raise ValueError(problems[0] + f" (known: {', '.join(sorted(P.BY_NAME))})")
+            raise ValueError(problems[0] + f" (known: preset, {', '.join(sorted(P.BY_NAME))})")
         return value
+
+    @property
+    def preset(self) -> str:
+        """The selected vehicle preset."""
+        return str(self.vehicle.get("preset", P.DEFAULT_PRESET))
+
+    def vehicle_values(self) -> dict[str, float]:
+        """The nominal parameter values: the preset's, then the ``vehicle`` overrides and ``contact.conicity``."""
+        values = P.nominal_values(self.preset)
+        values.update({k: float(v) for k, v in self.vehicle.items() if k != "preset"})
+        if self.contact.conicity is not None:
+            values["conicity"] = float(self.contact.conicity)
+        return values
 
     @field_validator("sensors")
     @classmethod
@@ -104,7 +151,12 @@ class Options(BaseModel):
             raise ValueError("conicity is given twice (contact.conicity and vehicle.conicity); keep one")
         if self.solver == "frequency" and (self.contact.creep_saturation or self.contact.bump_stops):
             raise ValueError("creep_saturation and bump_stops are nonlinear: they need solver: time")
-        sensors = (default_sensors(P.nominal_values()) if self.sensors is None else
+        if self.solver == "frequency" and self.yaw_damper.blow_off:
+            raise ValueError("yaw_damper.blow_off is nonlinear: it needs solver: time")
+        if self.yaw_damper.blow_off and any(e["name"] == "yaw-damper-series-stiffness" for e in self.effects):
+            raise ValueError("yaw_damper.blow_off acts on the model's own yaw dampers; the effect "
+                             "'yaw-damper-series-stiffness' replaces them: use one or the other")
+        sensors = (default_sensors(self.vehicle_values()) if self.sensors is None else
                    [Sensor(s.name, s.body, s.direction, tuple(s.position)) for s in self.sensors])
         for i, spec in enumerate(self.effects):
             try:
@@ -196,11 +248,7 @@ class ExudynTrain(Simulator):
         return float(self.opts.fs_hz)
 
     def _nominal(self) -> dict[str, float]:
-        values = P.nominal_values()
-        values.update(self.opts.vehicle)
-        if self.opts.contact.conicity is not None:
-            values["conicity"] = float(self.opts.contact.conicity)
-        return values
+        return self.opts.vehicle_values()
 
     def effects(self) -> list[E.ExudynEffect]:
         """The implementations of the enabled effects (``options.effects``), in order."""
@@ -230,7 +278,7 @@ class ExudynTrain(Simulator):
     def parameters(self) -> list[Parameter]:
         nominal = self._nominal()
         out = []
-        for p in P.PARAMETERS:
+        for p in P.parameter_table(self.opts.preset):
             v = nominal[p.name]
             out.append(Parameter(p.name, p.unit, v, min(p.lower, v), max(p.upper, v),
                                  f"{p.description}; source: {p.source}", domain=(0.0, math.inf)))
@@ -278,7 +326,7 @@ class ExudynTrain(Simulator):
         model = self._models.get(key)
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
-                model = TrainModel(values, sensors, speed, features, self.effects())
+                model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
@@ -290,6 +338,7 @@ class ExudynTrain(Simulator):
 
     def _features(self, segments: Sequence[TrackSegment]) -> TimeFeatures:
         c = self.opts.contact
+        o = self.opts
         n = max(len(s.distance) for s in segments) + 2 * TABLE_PAD
         cap = 1 << max(4, int(math.ceil(math.log2(n))))
         variable = not all(is_constant_speed(s) for s in segments)
@@ -299,7 +348,9 @@ class ExudynTrain(Simulator):
         speed_cap = (1 << max(6, int(math.ceil(math.log2(longest / 0.02 + 60))))) if variable else 0
         return TimeFeatures(track_capacity=cap, variable_speed=variable, speed_capacity=speed_cap,
                             saturation=c.creep_saturation, friction=c.friction, bump_stops=c.bump_stops,
-                            bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness)
+                            bump_gap=c.bump_gap_m, bump_stiffness=c.bump_stiffness,
+                            yaw_blow_off=o.yaw_damper.blow_off, blow_off_velocity=o.yaw_damper.blow_off_velocity_mps,
+                            blow_off_rate=o.yaw_damper.rate_after_blow_off)
 
     # ------------------------------------------------------------------ simulate
     def simulate(self, w: Mapping[str, float], segments: Sequence[TrackSegment]) -> list[Response]:
@@ -322,7 +373,7 @@ class ExudynTrain(Simulator):
         o = self.opts
         features = self._features(segments)
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
-                                newton=features.saturation or features.bump_stops)
+                                newton=features.saturation or features.bump_stops or features.yaw_blow_off)
         out = []
         for seg in segments:
             speed = float(seg.mean_speed)
@@ -373,9 +424,24 @@ class ExudynTrain(Simulator):
         """
         return modes_summary(self.linear_system(w, speed))
 
+    def critical_speed(self, w: Mapping[str, float] | None = None) -> float:
+        """Linear critical speed in m/s at parameters ``w`` (``inf``: stable up to 1500 km/h); see
+        :func:`.modes.critical_speed`."""
+        return critical_speed(self, dict(w or {}))
+
+    def stability(self, parameters: Sequence[str] | None = None,
+                  conicities: Sequence[float] = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4), n_points: int = 3) -> dict:
+        """Linear critical speed (km/h) at the nominal parameters, against the equivalent conicity and
+        against each of ``parameters`` (default: the default identified ones) over its bounds.
+
+        :returns: ``{"nominal_kmh", "conicity": [(lambda, km/h)], "parameters": {name: [(value, km/h)]}}``
+            (see :func:`.modes.stability_sweep`).
+        """
+        return stability_sweep(self, parameters, conicities, n_points)
+
     # ------------------------------------------------------------------ identity, pickling
     def identity(self) -> dict[str, Any]:
-        return {"plugin": self.name, "options": self.opts.model_dump(mode="json")}
+        return {"plugin": self.name, "model": MODEL_VERSION, "options": self.opts.model_dump(mode="json")}
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()

@@ -1,0 +1,271 @@
+"""Acceptance checks of the exudyn-train physics against known or published answers.
+
+Each test asserts a physical fact about the default ``conventional-hs`` car
+(ICE3/CRH class), not a value this model happened to produce:
+
+- linear critical speed 450-650 km/h (TGV/ICE-class sets: 430-500 km/h with
+  worn wheels, record runs above 500 km/h on new profiles; acceptance tests
+  at 1.1 x v_max = 352 km/h must be passed with margin), falling as the
+  conicity rises and as the yaw damping drops;
+- stable at 320 km/h over the whole admissible box of the identified
+  parameters (every corner: the optimiser may go anywhere);
+- the yaw dampers act on lateral/yaw motion: a 30 % change of c_yaw barely
+  moves the carbody vertical spectra;
+- carbody bounce, pitch, lower and upper sway 0.5-2 Hz; bogie bounce 5-9 Hz
+  and pitch 8-13 Hz (hand formulas for ICE3 and a CRH-class car: bounce
+  6.3-6.5 Hz, pitch 8.8-10.5 Hz); P2 resonance 50-80 Hz and no lightly
+  damped mode above 30 Hz (track support);
+- ride on German low-disturbance track at 300 km/h: carbody rms 0.05-0.35 m/s^2;
+- creep saturation at friction 0.4 changes the carbody responses by < 10 % rms
+  on good track (creep forces stay far below mu N).
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from suspid.plugins.simulators.exudyn_train import ExudynTrain
+from suspid.plugins.simulators.exudyn_train import parameters as P
+from suspid.plugins.simulators.exudyn_train.modes import SpeedDependentSystem, critical_speed
+from suspid.method.spectra import compute_spectra
+from suspid.data.track import synthetic_segments
+
+KMH = 1 / 3.6
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
+def track(n=3, length_m=1500.0, speed_kmh=300.0, seed=2):
+    return synthetic_segments({"spectrum": "german-low", "n_segments": n, "length_m": length_m,
+                               "speed_kmh": speed_kmh, "seed": seed})
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return ExudynTrain(fs_hz=100.0)
+
+
+# ------------------------------------------------------------------------------------------ contact
+def test_creep_coefficients_are_kalkers():
+    """f11, f22 of Kalker's theory for a 54.5 kN wheel load, 0.46 m wheel, 300 mm rail crown:
+    9.4-10.4 MN and 8.3-9.2 MN (published values for this case)."""
+    p = P.nominal_values()
+    wheel = P.static_loads(p)["wheel"]
+    scale = (54.5e3 / wheel) ** (2 / 3)   # to the reference load (coefficients scale with N^(2/3))
+    f11, f22 = P.creep_coefficients(p)
+    assert 9.4e6 <= f11 * scale <= 10.4e6 and 8.3e6 <= f22 * scale <= 9.2e6
+    a, b = P.hertz_ellipse(wheel, 0.5 / p["r0"], 0.5 / p["r_rail"])
+    assert a > b                            # the rail crown is more curved than the wheel's rolling circle
+    f11_half, _ = P.creep_coefficients({**p, "kalker_scale": 0.5})
+    assert f11_half == pytest.approx(0.5 * f11)
+
+
+def test_hertz_ellipse_reduces_to_the_sphere():
+    """Equal curvature sums A = B = 1 / (2 R): a circle of radius (3 P R / (4 E*))^(1/3) (Johnson 1985, §4.2),
+    and the elliptic branch tends to it."""
+    r = 0.5
+    a, b = P.hertz_ellipse(1000.0, 1 / (2 * r), 1 / (2 * r))
+    e_star = P.YOUNG / (2 * (1 - P.POISSON ** 2))
+    assert a == b == pytest.approx((3 * 1000.0 * r / (4 * e_star)) ** (1 / 3))
+    a2, b2 = P.hertz_ellipse(1000.0, 1 / (2 * r), 1.001 / (2 * r))
+    assert a2 == pytest.approx(a, rel=2e-3) and b2 == pytest.approx(a, rel=2e-3) and a2 > b2
+
+
+# ------------------------------------------------------------------------------------------ stability
+def test_nominal_critical_speed_is_that_of_a_high_speed_car(sim):
+    v = critical_speed(sim) / KMH
+    assert 450.0 <= v <= 650.0, v
+
+
+def test_critical_speed_falls_with_conicity_and_with_yaw_damping(sim):
+    system = {lam: SpeedDependentSystem.from_simulator(sim, {"conicity": lam}) for lam in (0.1, 0.15, 0.2, 0.3, 0.4)}
+    speeds = [system[lam].critical_speed() for lam in sorted(system)]
+    assert all(a > b for a, b in zip(speeds, speeds[1:])), speeds
+    lo = P.BY_NAME["c_yaw"].lower
+    yaw = [critical_speed(sim, {"c_yaw": c}) for c in (P.BY_NAME["c_yaw"].nominal, 0.5 * (P.BY_NAME["c_yaw"].nominal + lo), lo)]
+    assert all(a > b for a, b in zip(yaw, yaw[1:])), yaw
+
+
+def test_speed_dependent_system_matches_a_linearisation(sim):
+    """D(v) = D_inf + D_creep / v reproduces exudyn's linearisation at a third speed."""
+    s = SpeedDependentSystem.from_simulator(sim)
+    lin = sim.linear_system({}, 77.0)
+    assert np.allclose(s.D_inf + s.D_creep / 77.0, lin.D, rtol=1e-8, atol=1e-6 * np.abs(lin.D).max())
+
+
+@pytest.mark.parametrize("config", ["quickstart.yaml", "table1.yaml"])
+def test_stable_at_320_kmh_over_the_identification_box(sim, config):
+    names = list(yaml.safe_load((CONFIGS / config).read_text())["parameters"])
+    bounds = {p.name: (p.lower, p.upper) for p in sim.parameters()}
+    worst = None
+    for corner in itertools.product((0, 1), repeat=len(names)):
+        w = {n: bounds[n][c] for n, c in zip(names, corner)}
+        report = sim.modes(speed=320 * KMH, w=w)
+        assert report["stable"], (w, report["least_damped"])
+        least = report["least_damped"]["damping_ratio"]
+        worst = least if worst is None else min(worst, least)
+    assert worst > 0.02   # a margin, not only the sign
+
+
+# ------------------------------------------------------------------------------------------ modes
+def _modes(sim, body, motion, kmh=300.0):
+    return [m["frequency_hz"] for m in sim.modes(speed=kmh * KMH)["modes"]
+            if m["body"].startswith(body) and m["motion"] == motion]
+
+
+def test_carbody_and_bogie_modes_in_published_ranges(sim):
+    for motion in ("vertical", "pitch", "lateral", "roll"):   # bounce, pitch, lower sway, upper sway
+        found = _modes(sim, "carbody", motion)
+        assert found and all(0.5 <= f <= 2.0 for f in found), (motion, found)
+    assert all(5.0 <= f <= 9.0 for f in _modes(sim, "bogie", "vertical")), _modes(sim, "bogie", "vertical")
+    assert all(8.0 <= f <= 13.0 for f in _modes(sim, "bogie", "pitch")), _modes(sim, "bogie", "pitch")
+
+
+def test_no_lightly_damped_contact_or_track_mode(sim):
+    modes = sim.modes(speed=300 * KMH)["modes"]
+    high = [m for m in modes if m["frequency_hz"] > 30.0]
+    assert high and min(m["damping_ratio"] for m in high) >= 0.05
+    p2 = [m["frequency_hz"] for m in modes if m["body"].startswith("wheelset") and m["motion"] == "vertical"]
+    assert p2 and all(50.0 <= f <= 80.0 for f in p2), p2
+
+
+def test_modes_list_carbody_and_bogie_first(sim):
+    modes = sim.modes(speed=300 * KMH)["modes"]
+    groups = [m["group"] for m in modes]
+    order = ["carbody", "bogie", "wheelset", "track/contact", "internal"]
+    assert groups == sorted(groups, key=order.index)
+    assert groups[0] == "carbody"
+
+
+# ------------------------------------------------------------------------------------------ responses
+def test_ride_on_german_low_disturbance_track_at_300_kmh(sim):
+    responses = sim.simulate({}, track())
+    rms = np.sqrt(np.mean([np.mean(r.accelerations ** 2, axis=1) for r in responses], axis=0))
+    for name, value in zip(sim.channels(), rms):
+        if name.startswith("carbody"):
+            assert 0.05 <= value <= 0.35, (name, value)
+
+
+def test_yaw_damping_barely_moves_the_carbody_vertical_spectra(sim):
+    """A 30 % change of c_yaw moves each carbody vertical spectrum by < 0.3 dB on average over the band
+    (0.4-20 Hz); the lateral channels move more (the yaw dampers' business)."""
+    segs = track()
+    y0, _ = compute_spectra(sim.simulate({}, segs))
+    ch = sim.channels()
+    vertical = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("vertical")]
+    lateral = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("lateral")]
+    for factor in (0.7, 1.3):
+        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * P.BY_NAME["c_yaw"].nominal}, segs))
+        shift = np.abs(np.mean(y1 - y0, axis=0)).mean(axis=1)     # (n_channels,) dB
+        assert np.all(shift[vertical] < 0.3), dict(zip(ch, shift))
+        assert shift[lateral].max() > shift[vertical].max()
+
+
+def test_gravity_roll_is_in_the_lateral_channels_by_default():
+    on, off = ExudynTrain(), ExudynTrain(gravity_roll=False)
+    lin_on, lin_off = on.linear_system({}, 80.0), off.linear_system({}, 80.0)
+    ch = on.channels()
+    roll = lin_on.labels.index(("carbody", "roll"))
+    k = ch.index("carbody_middle_lateral")
+    assert lin_on.C_disp[k, roll] == pytest.approx(P.GRAVITY)
+    assert lin_off.C_disp is None
+    assert lin_on.C_disp[ch.index("carbody_middle_vertical")].any() == False  # noqa: E712
+
+
+@pytest.mark.slow
+def test_creep_saturation_at_friction_0_4_is_close_to_linear():
+    seg = track(n=1, length_m=1000.0, seed=5)
+    lin = ExudynTrain(solver="time").simulate({}, seg)[0]
+    sat = ExudynTrain(solver="time", contact={"creep_saturation": True, "friction": 0.4}).simulate({}, seg)[0]
+    ch = ExudynTrain().channels()
+    for i, name in enumerate(ch):
+        if name.startswith("carbody"):
+            rel = np.std(sat.accelerations[i]) / np.std(lin.accelerations[i])
+            assert abs(rel - 1) < 0.10, (name, rel)
+
+
+# ------------------------------------------------------------------------------------------ presets and options
+def test_vehicle_presets_and_overrides():
+    from suspid.errors import ConfigError
+
+    default = {p.name: p for p in ExudynTrain().parameters()}
+    coach = {p.name: p for p in ExudynTrain(vehicle="manchester-coach").parameters()}
+    both = {p.name: p for p in ExudynTrain(vehicle={"preset": "manchester-coach", "c_yaw": 2e5}).parameters()}
+    assert default["m_car"].nominal == 47800 and coach["m_car"].nominal == 32000
+    assert set(default) == set(coach)                              # one model, the same names
+    assert both["c_yaw"].nominal == 2e5 and both["m_car"].nominal == 32000
+    assert "source:" in coach["m_car"].description and "Iwnicki" in coach["m_car"].description
+    for preset in P.PRESETS.values():
+        for p in preset:
+            assert p.lower <= p.nominal <= p.upper and p.source.strip(), p
+    with pytest.raises(ConfigError, match="unknown vehicle preset 'tgv'.*conventional-hs"):
+        ExudynTrain(vehicle="tgv").parameters()
+    with pytest.raises(ConfigError, match="unknown parameter 'nope'"):
+        ExudynTrain(vehicle={"preset": "manchester-coach", "nope": 1.0}).parameters()
+
+
+def test_manchester_coach_is_stable_at_its_speeds():
+    sim = ExudynTrain(vehicle="manchester-coach")
+    assert sim.modes(speed=200 * KMH)["stable"] and sim.modes(speed=300 * KMH)["stable"]
+
+
+# ------------------------------------------------------------------------------------------ yaw damper blow-off
+def test_blow_off_far_above_the_strokes_is_the_linear_maxwell_damper():
+    """With a blow-off velocity far above the damper strokes the symbolic damper law is c_yaw v: the time
+    solver then reproduces the linear Maxwell element (independent implementations: symbolic force law
+    against exudyn's linear element)."""
+    seg = track(n=1, length_m=400.0, seed=3)
+    lin = ExudynTrain(solver="time").simulate({}, seg)[0]
+    far = ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": 100.0}).simulate({}, seg)[0]
+    assert np.max(np.abs(far.accelerations - lin.accelerations)) < 1e-3 * np.max(np.abs(lin.accelerations))
+
+
+def test_blow_off_options_are_checked():
+    from suspid.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="blow_off is nonlinear: it needs solver: time"):
+        ExudynTrain(yaw_damper={"blow_off": True}).channels()
+    with pytest.raises(ConfigError, match="replaces them"):
+        ExudynTrain(solver="time", yaw_damper={"blow_off": True},
+                    effects=[{"name": "yaw-damper-series-stiffness"}]).channels()
+    with pytest.raises(ConfigError, match="blow_off_velocity_mps"):
+        ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": -1}).channels()
+
+
+def test_stability_report(tmp_path):
+    import json
+
+    from suspid.workflows.simulate import format_stability, stability_report
+
+    report = stability_report(ExudynTrain(), tmp_path, parameters=["c_yaw"], conicities=(0.1, 0.3), n_points=2)
+    saved = json.loads((tmp_path / "stability.json").read_text())
+    assert saved["simulator"] == "exudyn-train" and 450 <= saved["nominal_kmh"] <= 650
+    assert [c for c, _ in saved["conicity"]] == [0.1, 0.3] and saved["conicity"][0][1] > saved["conicity"][1][1]
+    lo, hi = report["parameters"]["c_yaw"]
+    assert lo[0] == P.BY_NAME["c_yaw"].lower and lo[1] < hi[1]
+    text = format_stability(report)
+    assert "critical speed" in text and "c_yaw" in text
+
+
+def test_free_rigid_bogie_runs_at_the_kinematic_frequency():
+    """A rigid bogie (primary suspension made stiff) freed from the carbody (secondary, yaw damper and
+    traction rod nearly zero) at low speed oscillates at the kinematic (Klingel) frequency of a rigid
+    two-axle bogie, f = v / (2 pi) sqrt(lambda / (r0 l0) f11 l0^2 / (f11 l0^2 + f22 a^2)) (Wickens; Garg &
+    Dukkipati, Dynamics of railway vehicle systems, 1984, the kinematic solution without inertia), and
+    almost undamped."""
+    free = {"k_prim_x": 1e10, "k_prim_y": 1e10, "c_yaw": 1.0, "c_sec_y": 1.0, "k_sec_y": 1.0, "k_sec_x": 1.0,
+            "k_trac": 1.0}
+    sim = ExudynTrain(vehicle=free)
+    p = {q.name: q.nominal for q in sim.parameters()}
+    f11, f22 = P.creep_coefficients(p)
+    lam, r0, l0, a = p["conicity"], p["r0"], p["l0"], p["a_ws"]
+    v = 20 * KMH
+    expected = v / (2 * np.pi) * np.sqrt(lam / (r0 * l0) * f11 * l0 ** 2 / (f11 * l0 ** 2 + f22 * a ** 2))
+    bogie = [m for m in sim.modes(speed=v)["modes"] if m["body"].startswith("bogie") and m["motion"] == "lateral"]
+    nearest = min(bogie, key=lambda m: abs(m["damped_frequency_hz"] - expected))
+    assert nearest["damped_frequency_hz"] == pytest.approx(expected, rel=0.01)
+    assert abs(nearest["damping_ratio"]) < 0.01
