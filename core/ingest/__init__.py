@@ -51,7 +51,7 @@ def run(source: str | Path | Mapping[str, Any], overrides: Sequence[str] = (), *
     simulator = build_simulator(cfg)
     out = Path(out_dir) if out_dir is not None else opts.output_dir(base)
     try:
-        return run_ingest(opts, simulator.channels(), cfg.simulator.plugin, out, log)
+        return run_ingest(opts, simulator, out, log)
     except Exception as exc:
         from suspid.errors import ConfigError
         if isinstance(exc, ConfigError) and exc.file is None:   # keys of the ingest file: name it

@@ -152,9 +152,12 @@ class AlignmentSection(Section):
 
     channel: str | None = Field(default=None, description="simulator channel to correlate (default: the first "
                                 "mapped *axlebox*/*bogie* vertical channel)")
-    lever_m: float = Field(default=0.0, description="how far ahead of the odometry reference point (the point "
-                           "segment distances refer to; exudyn-train: the car centre) the channel's sensor "
-                           "meets the track, m; exudyn-train front bogie: a_bogie = 9.5")
+    lever_m: float | Literal["model"] = Field(
+        default="model", description="where the channel's response meets the track, m ahead of the odometry "
+        "reference point (the point segment distances refer to; exudyn-train: the car centre); 'model': "
+        "found by running the same correlation on the configured simulator at the recording's speed, which "
+        "also takes in the response's own delay (the geometric lever of exudyn-train's front bogie is 9.5 m, "
+        "its effective one about 7.7 m at 300 km/h)")
     wavelength_m: tuple[PositiveFloat, PositiveFloat] = Field(default=(8.0, 70.0), description="band of "
                                                               "wavelengths compared, m (short, long)")
     search_m: PositiveFloat = Field(default=500.0, description="offsets searched: guess_m +- search_m")

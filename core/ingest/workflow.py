@@ -24,7 +24,7 @@ from suspid.data.track import (read_accelerations, read_track, write_acceleratio
                                write_track_csv, write_track_h5)
 from suspid.errors import ConfigError, DataError
 from suspid.infra.files import write_text
-from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
+from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackSegment
 
 from . import report as _report
 from .align import Alignment, align
@@ -175,11 +175,10 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
     return track_dir, acc_dir
 
 
-def run_ingest(opts: IngestOptions, sim_channels: Sequence[str], simulator: str, out: Path,
-               log: Log = lambda s: None) -> IngestResult:
-    """The whole ingest (module docstring); ``out`` is the output folder."""
-    check_mapping(opts, sim_channels, simulator)
-    channels = list(sim_channels)
+def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = lambda s: None) -> IngestResult:
+    """The whole ingest (module docstring) for ``simulator``'s channels; ``out`` is the output folder."""
+    channels = list(simulator.channels())
+    check_mapping(opts, channels, simulator.name)
     log(f"reading {opts.recording.path}")
     rec = read_recording(opts, channels)
     warnings = list(rec.warnings)
@@ -202,7 +201,7 @@ def run_ingest(opts: IngestOptions, sim_channels: Sequence[str], simulator: str,
     usable = moving & ~np.logical_or.reduce([np.zeros(g.n, bool), *bad_by.values()])
     log("aligning the track record")
     al = align(rec.distance, rec.speed, rec.accelerations[channels.index(ach)] if ach else np.full(g.n, np.nan),
-               usable, track, opts.alignment, ach, v_min)
+               usable, track, opts.alignment, ach, v_min, simulator)
     if al.method == "correlation":
         if al.rho < 0:
             warnings.append(f"alignment: the correlation peak is negative ({al.rho:.2f}): is the sign of "
