@@ -44,3 +44,6 @@ from suspid.workflows.identify import IdentificationResult  # noqa: E402
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
            "diagnose", "identify", "load_config", "modes", "monitor", "segments", "simulate", "study", "validate"]
+from suspid.api import ingest  # noqa: E402  (suspid ingest: recordings to segments)
+
+__all__ += ["ingest"]

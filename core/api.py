@@ -200,11 +200,11 @@ def ingest(ingest_file: str | Path | Mapping[str, Any], overrides: Overrides = N
         the recording and its channel mapping, the speed or distance channel, the track record, and the
         suspid ``config`` whose simulator's channels the recorded ones map to.
     :param out_dir: default ``output.dir`` of the file, else ``ingested/<recording stem>/`` beside it.
-    :returns: a :class:`suspid.ingest.IngestResult`: the track and accelerations written (the
+    :returns: a :class:`suspid.data.ingest.IngestResult`: the track and accelerations written (the
         ``data.track_file`` and ``data.measurements`` of a measured-data config), the offset and its
         confidence, the segments, the warnings; ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
     :raises suspid.errors.SuspidError: a config or data problem, in one line.
     """
-    from suspid.ingest import run as _run_ingest  # here so that this addition is one block (move up on merge)
+    from suspid.data.ingest import run as _run_ingest  # here so that this addition is one block (move up on merge)
 
     return _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))

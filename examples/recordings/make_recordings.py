@@ -29,6 +29,7 @@ Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat 
 from __future__ import annotations
 
 import argparse
+import functools
 import datetime as dt
 import json
 import math
@@ -56,7 +57,7 @@ CHANNELS = {
 TRACK_CHANNELS = {"vertical": "LL", "lateral": "AL", "cross_level": "XL", "gauge": "GA"}
 
 
-@dataclass
+@dataclass(frozen=True)
 class Profile:
     """Speed profile of the test run (m/s, m, s)."""
 
@@ -84,7 +85,7 @@ class Profile:
 class Artefacts:
     """Faults to put into the recording (for tests of the quality checks)."""
 
-    saturate: dict[str, float] = field(default_factory=dict)     # simulator channel -> clip level, m/s^2
+    saturate: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # channel -> (level m/s^2, t0, t1)
     dropout: dict[str, tuple[float, float]] = field(default_factory=dict)   # channel -> (t0, t1) s of NaN
 
 
@@ -95,6 +96,7 @@ def sensors_options() -> list[dict]:
             for s in sim.sensors() if s.name in CHANNELS]
 
 
+@functools.lru_cache(maxsize=4)
 def simulate(profile: Profile, fs: float, offset_m: float, seed: int, noise_mps2: float = 0.004):
     """Accelerations ``(4, n)`` m/s^2 on the recording's time grid, speed ``(n,)``, odometry ``(n,)``,
     and the fine track (x in track coordinates, irregularities (4, n_x) m)."""
@@ -221,10 +223,11 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     profile = profile or Profile()
-    t, v, d, acc, x_track, irr = simulate(profile, fs, offset_m, seed)
-    for c, level in (artefacts.saturate if artefacts else {}).items():
-        row = list(CHANNELS).index(c)
-        acc[row] = np.clip(acc[row], -level, level)
+    t, v, d, acc, x_track, irr = simulate(profile, fs, offset_m, seed)   # cached: copy what is changed
+    acc = acc.copy()
+    for c, (level, t0, t1) in (artefacts.saturate if artefacts else {}).items():
+        row, sel = list(CHANNELS).index(c), (t >= t0) & (t < t1)
+        acc[row, sel] = np.clip(acc[row, sel], -level, level)
     for c, (t0, t1) in (artefacts.dropout if artefacts else {}).items():
         acc[list(CHANNELS).index(c), (t >= t0) & (t < t1)] = np.nan
     v_kmh = np.round(v * 3.6, 2)

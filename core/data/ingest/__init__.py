@@ -2,7 +2,7 @@
 
 Public entry point: :func:`suspid.ingest` (the API) and ``suspid ingest
 INGEST.yaml`` (the CLI). :func:`load_ingest` reads and validates an ingest
-file; :func:`run` does the work (:mod:`suspid.ingest.workflow`). The method
+file; :func:`run` does the work (:mod:`suspid.data.ingest.workflow`). The method
 and every config key are in ``docs/ingest.md``.
 """
 

@@ -1,10 +1,10 @@
 """``suspid ingest``: from a long recording to segments in the documented measured-data layout.
 
 Steps: read the mapped channels onto one time grid in SI units
-(:mod:`~suspid.ingest.load`), check them (:mod:`~suspid.ingest.quality`),
-align the track record (:mod:`~suspid.ingest.align`), cut segments at
-quasi-constant speed (:mod:`~suspid.ingest.segment`), write the segments with
-their provenance and the quality report (:mod:`~suspid.ingest.report`). The
+(:mod:`~suspid.data.ingest.load`), check them (:mod:`~suspid.data.ingest.quality`),
+align the track record (:mod:`~suspid.data.ingest.align`), cut segments at
+quasi-constant speed (:mod:`~suspid.data.ingest.segment`), write the segments with
+their provenance and the quality report (:mod:`~suspid.data.ingest.report`). The
 output folder is touched only once the inputs have been read and checked.
 """
 
@@ -234,9 +234,12 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         kept.append(w)
     excluded.sort(key=lambda e: e.i0)
     if not segs:
-        top = sorted({e.reason for e in excluded})
+        seconds: dict[str, float] = {}
+        for e in excluded:
+            seconds[e.reason] = seconds.get(e.reason, 0.0) + (e.i1 - e.i0) / g.fs
+        why = "; ".join(f"{r} ({s:.0f} s)" for r, s in sorted(seconds.items(), key=lambda kv: -kv[1]))
         raise DataError(f"{opts.recording.path}: no segment of {opts.segments.length_m:g} m could be cut; "
-                        f"excluded for: {'; '.join(top) or 'nothing usable'}")
+                        f"excluded: {why or 'nothing usable'}")
     if (rec.speed[np.isfinite(rec.speed)] > 150).any():
         warnings.append(f"speed: above 540 km/h somewhere: is the declared unit "
                         f"'{(opts.recording.speed or opts.recording.distance).unit}' right?")

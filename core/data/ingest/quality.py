@@ -1,8 +1,9 @@
 """Quality checks of each channel of a recording (on the common grid, in m/s^2).
 
 - **dropouts**: NaN samples (NaN in the file, or gaps in its time stamps);
-- **clipping**: ``clip_min_run`` or more consecutive samples at the channel's
-  extreme value, or ``|a| >= 0.999 full_scale`` when the sensor range is declared;
+- **clipping**: ``clip_min_run`` or more consecutive identical samples within
+  2 % of the channel's largest magnitude (a saturated sensor holds its
+  extreme), or ``|a| >= 0.999 full_scale`` when the sensor range is declared;
 - **flat lines**: ``flat_s`` or more of identical consecutive values while moving;
 - **spikes**: samples further than ``spike_sigma`` robust standard deviations
   (1.4826 x median absolute deviation, over the moving samples) from the median;
@@ -75,11 +76,15 @@ def check_channel(a: np.ndarray, moving: np.ndarray, fs: float, opts: IngestOpti
     if good.size == 0:
         out.masks = {"dropouts": drop}
         return out
-    hi, lo = float(good.max()), float(good.min())
     if full_scale is not None:
         clip = finite & (np.abs(a) >= 0.999 * full_scale)
-    else:
-        clip = long_runs((a == hi) | (a == lo), q.clip_min_run)
+    else:   # a saturated sensor holds its extreme value: runs of identical samples near max |a|
+        top = 0.98 * float(np.max(np.abs(good)))
+        held = np.zeros(a.size, dtype=bool)
+        held[1:] = np.diff(a) == 0
+        held[:-1] |= held[1:]
+        with np.errstate(invalid="ignore"):
+            clip = long_runs(held & (np.abs(a) >= top), q.clip_min_run)
     out.clipped = int(clip.sum())
     same = np.zeros(a.size, dtype=bool)
     same[1:] = (np.diff(a) == 0) & moving[1:]

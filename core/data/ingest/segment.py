@@ -76,7 +76,7 @@ def cut(distance: np.ndarray, speed: np.ndarray, reasons: dict[str, np.ndarray],
         if opts.max_segments is not None and len(kept) >= opts.max_segments and a >= kept[-1].i1:
             reason = "beyond segments.max_segments"
         elif length < opts.length_m:
-            reason = f"usable stretch shorter than one segment ({length:.0f} m < {opts.length_m:g} m)"
+            reason = "usable stretch shorter than one segment"
         else:
             reason = f"speed not within +-{100 * tol:g} % over {opts.length_m:g} m"
         excluded.append(Excluded(reason, int(a), int(b)))
