@@ -2,7 +2,11 @@
 
 Channels are read one at a time (``MDF.get``), with their own time stamps
 (the master channel of their group) and the unit the file stores; physical
-values (the file's conversion rules applied).
+values (the file's conversion rules applied). MDF stores a data group record
+by record (all its channels interleaved), and asammdf keeps the group's
+record buffer alive behind each channel it returns: a channel is therefore
+read in slices of ``chunk_records`` records copied into its own array, so
+that a one-hour group is never in memory whole.
 """
 
 from __future__ import annotations
@@ -12,6 +16,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from pydantic import Field, PositiveInt
+
 from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
@@ -20,7 +26,9 @@ from ._common import as_float, check_exists, optional_library, unknown_channel
 
 
 class Mdf4Options(Section):
-    """``recording.options`` of the ``mdf4`` reader (none yet: time stamps and units come from the file)."""
+    """``recording.options`` of the ``mdf4`` reader (time stamps and units come from the file)."""
+
+    chunk_records: PositiveInt = Field(default=262_144, description="records read at a time")
 
 
 class Mdf4Reader(Reader):
@@ -32,6 +40,7 @@ class Mdf4Reader(Reader):
 
     def __init__(self, path, **options) -> None:
         super().__init__(Path(path), **options)
+        self.opts = Mdf4Options(**options)
         self._mdf: Any = None
 
     def _file(self) -> Any:
@@ -54,10 +63,18 @@ class Mdf4Reader(Reader):
         mdf = self._file()
         if channel not in mdf.channels_db:
             raise unknown_channel(self.path, channel, self.channels())
-        sig = mdf.get(channel)
-        unit = sig.unit if isinstance(sig.unit, str) else str(sig.unit or "")
-        return Signal(channel, as_float(sig.samples, self.path, channel), unit,
-                      index=np.asarray(sig.timestamps, dtype=np.float64))
+        group, index = mdf.channels_db[channel][0]
+        n = int(mdf.groups[group].channel_group.cycles_nr)
+        step = self.opts.chunk_records
+        values, times, unit = np.empty(n), np.empty(n), ""
+        for start in range(0, max(n, 1), step):
+            sig = mdf.get(channel, group=group, index=index, record_offset=start, record_count=min(step, n - start))
+            m = len(sig.samples)
+            values[start:start + m] = as_float(sig.samples, self.path, channel)
+            times[start:start + m] = sig.timestamps
+            unit = sig.unit if isinstance(sig.unit, str) else str(sig.unit or "")
+            del sig
+        return Signal(channel, values, unit, index=times)
 
     def close(self) -> None:
         if self._mdf is not None:

@@ -161,10 +161,17 @@ def figures(opts: IngestOptions, rec: Recording, al: Alignment, kept: Sequence[W
         a = rec.accelerations[rec.channels.index(c)]
         a = np.where(np.isfinite(a), a, 0.0)
         nper = int(min(4096, max(64, 2 ** np.round(np.log2(2 * g.fs)))))
-        f, tt, s = sps.spectrogram(a, fs=g.fs, nperseg=nper, noverlap=nper // 2)
+        f, tt, s = sps.spectrogram(a, fs=g.fs, nperseg=nper, noverlap=0)
+        del a
+        avg = int(np.ceil(tt.size / 1200))          # at most 1200 columns: average neighbouring ones
+        if avg > 1:
+            n_col = tt.size // avg
+            s = s[:, :n_col * avg].reshape(s.shape[0], n_col, avg).mean(axis=2)
+            tt = tt[:n_col * avg].reshape(n_col, avg).mean(axis=1)
+        db = 10 * np.log10(s + 1e-20)
         fig, ax = plt.subplots(figsize=(10, 3.6))
-        m = ax.pcolormesh(g.t0 + tt, f, 10 * np.log10(s + 1e-20), shading="auto", cmap="viridis",
-                          vmin=np.percentile(10 * np.log10(s + 1e-20), 5))
+        m = ax.imshow(db, origin="lower", aspect="auto", cmap="viridis", vmin=np.percentile(db, 5),
+                      extent=(g.t0 + tt[0], g.t0 + tt[-1], f[0], f[-1]))
         fig.colorbar(m, ax=ax, label="dB (m/s^2)^2/Hz")
         ax.set_ylim(0, min(g.fs / 2, 50.0))
         ax.set_xlabel("time, s")

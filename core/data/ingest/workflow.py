@@ -20,8 +20,8 @@ import h5py
 import numpy as np
 
 import suspid
-from suspid.data.track import (read_accelerations, read_track, write_accelerations_csv, write_accelerations_h5,
-                               write_track_csv, write_track_h5)
+from suspid.data.track import (check_response, read_accelerations, read_track, write_accelerations_csv,
+                               write_accelerations_h5, write_track_csv, write_track_h5)
 from suspid.errors import ConfigError, DataError
 from suspid.infra.files import write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackSegment
@@ -175,6 +175,32 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
     return track_dir, acc_dir
 
 
+def check_written(track_path: Path, acc_path: Path, segs: list[TrackSegment], resps: list[Response],
+                  channels: Sequence[str]) -> None:
+    """Read back what `suspid validate` and `suspid run` will read: every track segment, and the first
+    record of accelerations (HDF5: the segment order), without holding all the records twice."""
+    names = [s.name for s in segs]
+    if acc_path.is_dir():
+        first = read_accelerations(acc_path / f"{names[0]}.csv", channels)[0]
+        order = sorted(p.stem for p in acc_path.glob("*.csv"))
+    else:
+        with h5py.File(acc_path, "r") as f:
+            order = [o.decode() if isinstance(o, bytes) else str(o) for o in f["segments"].attrs["order"]]
+        first = read_accelerations_h5_first(acc_path, names[0], channels)
+    if ([s.name for s in read_track(track_path)] != names or sorted(order) != sorted(names)
+            or first.accelerations.shape != resps[0].accelerations.shape):
+        raise DataError(f"{acc_path}: the segments written could not be read back")
+
+
+def read_accelerations_h5_first(path: Path, name: str, channels: Sequence[str]) -> Response:
+    """One record of an accelerations HDF5 file, checked as the reader checks it."""
+    with h5py.File(path, "r") as f:
+        d = f["segments"][name]["accelerations"]
+        names = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["channels"]]
+        r = Response(tuple(names), float(d.attrs["fs_hz"]), np.asarray(d[()], dtype=float), name)
+    return check_response(r, path, channels)
+
+
 def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = lambda s: None) -> IngestResult:
     """The whole ingest (module docstring) for ``simulator``'s channels; ``out`` is the output folder."""
     channels = list(simulator.channels())
@@ -229,7 +255,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
             excluded.append(Excluded("track record has gaps or ends under this segment", w.i0, w.i1))
             continue
         segs.append(seg)
-        resps.append(Response(tuple(channels), g.fs, rec.accelerations[:, w.i0:w.i1].copy(), name))
+        resps.append(Response(tuple(channels), g.fs, rec.accelerations[:, w.i0:w.i1], name))   # a view
         provs.append(_provenance(rec, w, seg, al))
         kept.append(w)
     excluded.sort(key=lambda e: e.i0)
@@ -245,10 +271,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
                         f"'{(opts.recording.speed or opts.recording.distance).unit}' right?")
     log(f"writing {len(segs)} segments to {out}")
     track_path, acc_path = write_segments(opts, out, segs, resps, provs)
-    # what `suspid validate` and `suspid run` will read: read it back the same way
-    back = read_accelerations(acc_path, channels)
-    if len(back) != len(segs) or len(read_track(track_path)) != len(segs):
-        raise DataError(f"{out}: the segments written could not be read back")
+    check_written(track_path, acc_path, segs, resps, channels)
     rep = _report.build(opts, rec, quality, al, kept, segs, provs, excluded, warnings, track_path, acc_path, out)
     figures = _report.figures(opts, rec, al, kept, excluded, out) if opts.quality.figures else []
     rep["figures"] = [str(p.name) for p in figures]
