@@ -207,3 +207,38 @@ def test_cli_ingest_and_its_one_line_error(recordings, tmp_path):
     p = run_cli("ingest", str(folder / "ingest-mat.yaml"), "--set", "recording.channels.bogie_front_lateral=null")
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0 and p.stderr.startswith("error: ")
+
+
+
+def test_a_lab_can_add_its_own_reader(recordings, tmp_path):
+    from suspid import hookimpl
+    from suspid.interfaces import Reader, Signal
+
+    folder, truth = recordings
+    table = np.loadtxt(folder / "recording.csv", delimiter=",", skiprows=2)
+    names = ["time_s"] + [n for n, _, _ in GEN.CHANNELS.values()] + ["V_TRAIN"]
+    with open(tmp_path / "run.labz", "wb") as fh:
+        np.savez(fh, **{n: table[:, i] for i, n in enumerate(names)})
+
+    class LabReader(Reader):
+        name = "labz"
+        extensions = (".labz",)
+
+        def _data(self):
+            return np.load(self.path)
+
+        def channels(self):
+            return [n for n in self._data().files if n != "time_s"]
+
+        def read(self, channel):
+            d = self._data()
+            return Signal(channel, d[channel], "", index=d["time_s"])
+
+    plugin = type("plugin", (), {"suspid_register_readers": staticmethod(hookimpl(lambda register: register(LabReader)))})
+    registry.add_plugin(plugin, "lab-readers")
+    data = _ingest_file(folder, "csv", **{"recording.path": str(tmp_path / "run.labz"), "recording.options": {}})
+    r = _run(folder, data, tmp_path / "labz")               # chosen by the extension .labz
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0 and r.report["format"] == "labz"
+    data["recording"]["path"] = str(folder / "recording.unknown")
+    with pytest.raises(ConfigError, match=r"key 'recording.format': no reader for extension '.unknown'.*labz \(.labz\)"):
+        _run(folder, data, tmp_path / "unknown")
