@@ -18,9 +18,10 @@ system (the ingest file maps them back):
 | ``recording.csv`` | numpy text | ``time_s``, one column per channel with ``[unit]`` |
 | ``track-record.csv`` | numpy text | distance (m), LL, AL, XL, GA in mm |
 
-Beside them: ``suspid.yaml`` (the simulator with the four recorded sensors)
-and ``ingest-<format>.yaml``, ready for ``suspid ingest``; ``truth.json``
-holds the offset and the speed profile.
+Beside them: ``suspid.yaml`` (the simulator with the four recorded sensors),
+``ingest-<format>.yaml``, ready for ``suspid ingest``, ``measured.yaml`` (a
+measured-data config on what ``ingest-mf4.yaml`` writes, for ``suspid
+validate``); ``truth.json`` holds the offset and the speed profile.
 
 Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...]``
 (a few seconds; tests call :func:`make` with a ``tmp_path``).
@@ -97,7 +98,8 @@ def sensors_options() -> list[dict]:
 
 
 @functools.lru_cache(maxsize=4)
-def simulate(profile: Profile, fs: float, offset_m: float, seed: int, noise_mps2: float = 0.004):
+def simulate(profile: Profile, fs: float, offset_m: float, seed: int, noise_mps2: float = 0.004,
+             w: tuple[tuple[str, float], ...] = ()):
     """Accelerations ``(4, n)`` m/s^2 on the recording's time grid, speed ``(n,)``, odometry ``(n,)``,
     and the fine track (x in track coordinates, irregularities (4, n_x) m)."""
     n = int(math.floor(profile.duration * fs)) + 1
@@ -118,7 +120,7 @@ def simulate(profile: Profile, fs: float, offset_m: float, seed: int, noise_mps2
     seg_irr = np.array([np.interp(d[i_a] + xs + offset_m, x_track, row) for row in irr])
     seg = TrackSegment("run", xs, seg_irr, np.maximum(speed_x, v_sim))
     sim = ExudynTrain(solver="time", fs_hz=fs, sensors=sensors_options(), taper_m=10.0)
-    resp = sim.simulate({}, [seg])[0]
+    resp = sim.simulate(dict(w), [seg])[0]
     acc = rng.normal(0.0, noise_mps2, (len(CHANNELS), n))
     order = [list(resp.channels).index(c) for c in CHANNELS]
     m = min(resp.accelerations.shape[1], n - i_a)
@@ -215,15 +217,19 @@ FILES = {"mf4": "recording.mf4", "mat": "recording.mat", "mat73": "recording-v73
 
 
 def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0, offset_m: float = 137.37,
-         seed: int = 3, profile: Profile | None = None, artefacts: Artefacts | None = None) -> dict:
+         seed: int = 3, profile: Profile | None = None, artefacts: Artefacts | None = None,
+         w: dict[str, float] | None = None) -> dict:
     """Write the recordings, the track record, ``suspid.yaml``, ``ingest-<format>.yaml`` and ``truth.json``.
+
+    :param w: the vehicle's parameters (SI) where they differ from exudyn-train's nominal ones.
 
     :returns: the truth: offset, profile, files.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     profile = profile or Profile()
-    t, v, d, acc, x_track, irr = simulate(profile, fs, offset_m, seed)   # cached: copy what is changed
+    t, v, d, acc, x_track, irr = simulate(profile, fs, offset_m, seed, w=tuple(sorted((w or {}).items())))
+    # simulate() is cached: copy what is changed
     acc = acc.copy()
     for c, (level, t0, t1) in (artefacts.saturate if artefacts else {}).items():
         row, sel = list(CHANNELS).index(c), (t >= t0) & (t < t1)
@@ -234,9 +240,12 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     t_v = np.arange(0.0, t[-1] + 1e-9, 1 / 50.0)
     v_kmh_50 = np.round(profile.speed(t_v) * 3.6, 2)
     _write_track(out / "track-record.csv", x_track, irr)
-    (out / "suspid.yaml").write_text(yaml.safe_dump({
-        "name": "recordings", "simulator": {"plugin": "exudyn-train", "options": {
-            "fs_hz": fs, "sensors": sensors_options()}}}, sort_keys=False))
+    simulator = {"plugin": "exudyn-train", "options": {"fs_hz": fs, "sensors": sensors_options()}}
+    (out / "suspid.yaml").write_text(yaml.safe_dump({"name": "recordings", "simulator": simulator}, sort_keys=False))
+    (out / "measured.yaml").write_text(yaml.safe_dump({   # what `suspid validate` reads after ingest-mf4.yaml
+        "name": "measured", "simulator": simulator, "data": {
+            "source": "measured", "track_file": "ingested/mf4/track",
+            "measurements": "ingested/mf4/accelerations"}}, sort_keys=False))
     for fmt in formats:
         path = out / FILES[fmt]
         if fmt == "mf4":
@@ -253,7 +262,7 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
         else:
             raise ValueError(f"unknown format {fmt}; formats: {', '.join(FORMATS)}")
         (out / f"ingest-{fmt}.yaml").write_text(yaml.safe_dump(ingest_file(fmt, FILES[fmt], fmt), sort_keys=False))
-    truth = {"offset_m": offset_m, "fs_hz": fs, "seed": seed, "profile": asdict(profile),
+    truth = {"offset_m": offset_m, "fs_hz": fs, "seed": seed, "profile": asdict(profile), "w": dict(w or {}),
              "distance_m": float(d[-1]), "duration_s": float(t[-1]), "files": {f: FILES[f] for f in formats},
              "track_channels": list(IRREGULARITY_CHANNELS)}
     (out / "truth.json").write_text(json.dumps(truth, indent=2))
