@@ -42,7 +42,7 @@ class Alignment:
     offset_m: float              # track distance = odometry distance + offset_m
     peak_ratio: float            # confidence (inf: fixed offset)
     rho: float                   # normalised correlation at the peak
-    lags_m: np.ndarray           # sensor offsets searched
+    lags_m: np.ndarray           # odometry offsets searched (sensor lags minus the lever)
     correlation: np.ndarray      # normalised correlation at each lag
     channel: str | None
     lever_m: float

@@ -26,7 +26,6 @@ one is a warning in the quality report, and the declared one is used.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any, Literal
 
@@ -239,6 +238,3 @@ def kind_of(channel: str, kinds) -> str | None:
     words = channel.replace("-", "_").split("_")
     return next((k for k in kinds if k in words), None)
 
-
-def finite(x: float) -> bool:
-    return math.isfinite(x)

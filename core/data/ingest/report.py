@@ -78,8 +78,10 @@ def markdown(rep: dict[str, Any]) -> str:
     if al["method"] == "given":
         lines.append(f"Offset given in the config: {al['offset_m']:.3f} m.")
     else:
+        lever = f"lever {al['lever_m']:.2f} m" + (
+            f", found on the model at {3.6 * al['calibration_speed_mps']:.0f} km/h" if al["calibration_speed_mps"] else "")
         lines.append(f"Track distance = odometry distance + **{al['offset_m']:.3f} m**, from the correlation of "
-                     f"`{al['channel']}` (lever {al['lever_m']:g} m) with the vertical profile: "
+                     f"`{al['channel']}` ({lever}) with the vertical profile: "
                      f"peak correlation {al['rho']:.3f}, peak ratio **{al['peak_ratio']:.2f}** (confidence).")
     lines += ["", "## Warnings", ""]
     lines += [f"- {w}" for w in rep["warnings"]] or ["None."]
@@ -90,8 +92,9 @@ def markdown(rep: dict[str, Any]) -> str:
     for c, q in rep["channels"].items():
         rng = q["rms_range"]
         ok = "-" if rng is None else ("yes" if rng[0] <= q["rms_moving"] <= rng[1] else "**no**")
+        jitter = f"{100 * q['jitter']:.2g}" if q["jitter"] > 1e-8 else "0"    # float time stamps: ~1e-10
         lines.append(f"| {c} | {q['name']} | {q['declared_unit']} / {q['file_unit'] or '-'} | {q['fs_file_hz']:g} | "
-                     f"{100 * q['jitter']:.2g} | {q['gaps']} | {q['dropouts']} | {q['clipped']} | {q['flat']} | "
+                     f"{jitter} | {q['gaps']} | {q['dropouts']} | {q['clipped']} | {q['flat']} | "
                      f"{q['spikes']} | {q['rms_moving']:.4g} | {ok} |")
     lines += ["", f"## Segments ({len(rep['segments'])})", "",
               "| segment | t s | odometer m | track m | speed km/h (min-max) | RMS m/s^2 per channel |",
