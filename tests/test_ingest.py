@@ -242,3 +242,31 @@ def test_a_lab_can_add_its_own_reader(recordings, tmp_path):
     data["recording"]["path"] = str(folder / "recording.unknown")
     with pytest.raises(ConfigError, match=r"key 'recording.format': no reader for extension '.unknown'.*labz \(.labz\)"):
         _run(folder, data, tmp_path / "unknown")
+
+
+@pytest.mark.parametrize("fmt", ["csv", "mat"])
+def test_odometry_distance_instead_of_speed(recordings, tmp_path, fmt):
+    folder, truth = recordings
+    data = _ingest_file(folder, fmt, **{"recording.speed": None})
+    data["recording"]["distance"] = {"name": "ODO", "unit": "m"}
+    r = _run(folder, data, tmp_path / f"odo-{fmt}")
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0
+    assert len(r.segments) >= 3 and r.report["motion"]["kind"] == "distance"
+
+
+def test_speed_and_distance_together_is_a_config_error(recordings):
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv")
+    data["recording"]["distance"] = {"name": "ODO", "unit": "m"}
+    with pytest.raises(ConfigError, match="give the train's motion once: recording.speed or recording.distance"):
+        suspid.ingest(data)
+
+
+def test_track_quantity_that_does_not_follow_is_an_ambiguous_alignment(recordings, tmp_path):
+    """Aligning on the gauge instead of the longitudinal level finds no clear peak: an error, not an offset."""
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv", **{"track.channels.vertical.name": "GA", "alignment.min_peak_ratio": 2.0})
+    with pytest.raises(DataError, match=r"alignment is ambiguous: the correlation peak at offset .* is only "
+                                        r".* times the next one"):
+        _run(folder, data, tmp_path / "ambiguous")
+    assert not (tmp_path / "ambiguous").exists()

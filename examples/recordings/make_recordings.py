@@ -12,10 +12,10 @@ system (the ingest file maps them back):
 | file | library | content |
 | --- | --- | --- |
 | ``recording.mf4`` | asammdf | accelerations at ``fs`` Hz, speed at 50 Hz (its own time base) |
-| ``recording.mat`` | scipy.io.savemat (v5) | one time vector ``t``, speed on it |
+| ``recording.mat`` | scipy.io.savemat (v5) | one time vector ``t``, speed and odometry ``ODO`` on it |
 | ``recording-v73.mat`` | h5py (MATLAB 7.3 layout: HDF5 with a 512-byte header) | the same |
 | ``recording.tdms`` | npTDMS | waveform channels (``wf_increment``), speed at 50 Hz |
-| ``recording.csv`` | numpy text | ``time_s``, one column per channel with ``[unit]`` |
+| ``recording.csv`` | numpy text | ``time_s``, one column per channel with ``[unit]``, ``ODO [m]`` |
 | ``track-record.csv`` | numpy text | distance (m), LL, AL, XL, GA in mm |
 
 Beside them: ``suspid.yaml`` (the simulator with the four recorded sensors),
@@ -139,8 +139,8 @@ def _write_mf4(path: Path, t, acc, t_v, v_kmh, fs):
     mdf.close()
 
 
-def _mat_vars(t, acc, v_kmh_t) -> dict:
-    out = {"t": t, "V_TRAIN": v_kmh_t}
+def _mat_vars(t, acc, v_kmh_t, odo) -> dict:
+    out = {"t": t, "V_TRAIN": v_kmh_t, "ODO": odo}
     for i, (name, unit, f) in enumerate(CHANNELS.values()):
         out[name] = acc[i] * f
     return out
@@ -174,9 +174,9 @@ def _write_tdms(path: Path, acc, v_kmh_50, fs):
         w.write_segment(objs)
 
 
-def _write_csv(path: Path, t, acc, v_kmh_t):
-    cols = ["time_s"] + [f"{name} [{unit}]" for name, unit, _ in CHANNELS.values()] + ["V_TRAIN [km/h]"]
-    data = np.column_stack([t] + [acc[i] * f for i, (_, _, f) in enumerate(CHANNELS.values())] + [v_kmh_t])
+def _write_csv(path: Path, t, acc, v_kmh_t, odo):
+    cols = ["time_s"] + [f"{name} [{unit}]" for name, unit, _ in CHANNELS.values()] + ["V_TRAIN [km/h]", "ODO [m]"]
+    data = np.column_stack([t] + [acc[i] * f for i, (_, _, f) in enumerate(CHANNELS.values())] + [v_kmh_t, odo])
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("# example recording written by make_recordings.py\n" + ",".join(cols) + "\n")
         np.savetxt(fh, data, delimiter=",", fmt="%.9g")
@@ -237,6 +237,7 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     for c, (t0, t1) in (artefacts.dropout if artefacts else {}).items():
         acc[list(CHANNELS).index(c), (t >= t0) & (t < t1)] = np.nan
     v_kmh = np.round(v * 3.6, 2)
+    odo = np.round(d, 2)                             # odometry (MAT and CSV), cm resolution
     t_v = np.arange(0.0, t[-1] + 1e-9, 1 / 50.0)
     v_kmh_50 = np.round(profile.speed(t_v) * 3.6, 2)
     _write_track(out / "track-record.csv", x_track, irr)
@@ -252,13 +253,13 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
             _write_mf4(path, t, acc, t_v, v_kmh_50, fs)
         elif fmt == "mat":
             import scipy.io
-            scipy.io.savemat(path, _mat_vars(t, acc, v_kmh), oned_as="column")
+            scipy.io.savemat(path, _mat_vars(t, acc, v_kmh, odo), oned_as="column")
         elif fmt == "mat73":
-            _write_mat73(path, _mat_vars(t, acc, v_kmh))
+            _write_mat73(path, _mat_vars(t, acc, v_kmh, odo))
         elif fmt == "tdms":
             _write_tdms(path, acc, v_kmh_50, fs)
         elif fmt == "csv":
-            _write_csv(path, t, acc, v_kmh)
+            _write_csv(path, t, acc, v_kmh, odo)
         else:
             raise ValueError(f"unknown format {fmt}; formats: {', '.join(FORMATS)}")
         (out / f"ingest-{fmt}.yaml").write_text(yaml.safe_dump(ingest_file(fmt, FILES[fmt], fmt), sort_keys=False))
