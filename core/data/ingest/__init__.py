@@ -15,6 +15,7 @@ from typing import Any, Callable, Mapping, Sequence
 from pydantic import ValidationError
 
 from suspid.config import apply_overrides, build_simulator, load_config, read_yaml
+from suspid.errors import ConfigError
 from suspid.options import raise_validation_error
 
 from .options import IngestOptions
@@ -52,8 +53,7 @@ def run(source: str | Path | Mapping[str, Any], overrides: Sequence[str] = (), *
     out = Path(out_dir) if out_dir is not None else opts.output_dir(base)
     try:
         return run_ingest(opts, simulator, out, log)
-    except Exception as exc:
-        from suspid.errors import ConfigError
-        if isinstance(exc, ConfigError) and exc.file is None:   # keys of the ingest file: name it
+    except ConfigError as exc:
+        if exc.file is None:   # a key of the ingest file, found while running: name the file
             raise ConfigError(exc.detail, file=file, key=exc.key) from None
         raise
