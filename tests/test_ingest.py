@@ -270,3 +270,23 @@ def test_track_quantity_that_does_not_follow_is_an_ambiguous_alignment(recording
                                         r".* times the next one"):
         _run(folder, data, tmp_path / "ambiguous")
     assert not (tmp_path / "ambiguous").exists()
+
+
+def test_flat_line_spike_and_jitter_are_reported(tmp_path):
+    art = GEN.Artefacts(flat={"carbody_middle_lateral": (50.0, 52.0)}, spike={"bogie_front_lateral": (65.0, 80.0)},
+                        jitter_s=1e-4)
+    truth = GEN.make(tmp_path, ["mf4"], artefacts=art)
+    r = suspid.ingest(tmp_path / "ingest-mf4.yaml", out_dir=tmp_path / "out")
+    flat = [w for w in r.warnings if "flat line" in w]
+    spikes = [w for w in r.warnings if "spike" in w]
+    jitter = [w for w in r.warnings if "sampling jitter" in w]
+    assert len(flat) == 1 and "carbody_middle_lateral" in flat[0]
+    assert len(spikes) == 1 and "bogie_front_lateral" in spikes[0]
+    assert len(jitter) == len(GEN.CHANNELS)                       # every acceleration channel's time stamps
+    assert r.report["channels"]["bogie_front_vertical"]["jitter"] == pytest.approx(1e-4 / 5e-3 * 2 ** 0.5, rel=0.2)   # std(dt) / dt
+    reasons = {e["reason"] for e in r.report["excluded"]}
+    assert "flat line in carbody_middle_lateral" in reasons and "spikes in bogie_front_lateral" in reasons
+    for seg in r.report["segments"]:
+        assert seg["t_end_s"] <= 50.0 or seg["t_start_s"] >= 52.0
+        assert not seg["t_start_s"] <= 65.0 <= seg["t_end_s"]
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0

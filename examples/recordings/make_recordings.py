@@ -88,6 +88,9 @@ class Artefacts:
 
     saturate: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # channel -> (level m/s^2, t0, t1)
     dropout: dict[str, tuple[float, float]] = field(default_factory=dict)   # channel -> (t0, t1) s of NaN
+    flat: dict[str, tuple[float, float]] = field(default_factory=dict)      # channel -> (t0, t1) s held constant
+    spike: dict[str, tuple[float, float]] = field(default_factory=dict)     # channel -> (t s, value m/s^2)
+    jitter_s: float = 0.0        # rms jitter of the acceleration time stamps (MDF4 only: it stores them)
 
 
 def sensors_options() -> list[dict]:
@@ -236,6 +239,15 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
         acc[row, sel] = np.clip(acc[row, sel], -level, level)
     for c, (t0, t1) in (artefacts.dropout if artefacts else {}).items():
         acc[list(CHANNELS).index(c), (t >= t0) & (t < t1)] = np.nan
+    for c, (t0, t1) in (artefacts.flat if artefacts else {}).items():
+        sel = np.flatnonzero((t >= t0) & (t < t1))
+        acc[list(CHANNELS).index(c), sel] = acc[list(CHANNELS).index(c), sel[0]]
+    for c, (ts, value) in (artefacts.spike if artefacts else {}).items():
+        acc[list(CHANNELS).index(c), int(round(ts * fs))] = value
+    t_acc = t
+    if artefacts and artefacts.jitter_s:
+        t_acc = t + np.random.default_rng(seed + 1).normal(0.0, artefacts.jitter_s, t.size)
+        t_acc = np.maximum.accumulate(t_acc)
     v_kmh = np.round(v * 3.6, 2)
     odo = np.round(d, 2)                             # odometry (MAT and CSV), cm resolution
     t_v = np.arange(0.0, t[-1] + 1e-9, 1 / 50.0)
@@ -250,7 +262,7 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     for fmt in formats:
         path = out / FILES[fmt]
         if fmt == "mf4":
-            _write_mf4(path, t, acc, t_v, v_kmh_50, fs)
+            _write_mf4(path, t_acc, acc, t_v, v_kmh_50, fs)
         elif fmt == "mat":
             import scipy.io
             scipy.io.savemat(path, _mat_vars(t, acc, v_kmh, odo), oned_as="column")
