@@ -38,9 +38,10 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
 # The API comes last: its modules import the markers above.
-from suspid.api import (Validation, diagnose, identify, load_config, modes, monitor, segments,  # noqa: E402
-                        simulate, study, validate)
+from suspid.api import (Validation, diagnose, identify, ingest, load_config, modes, monitor,  # noqa: E402
+                        segments, simulate, study, validate)
 from suspid.workflows.identify import IdentificationResult  # noqa: E402
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
-           "diagnose", "identify", "load_config", "modes", "monitor", "segments", "simulate", "study", "validate"]
+           "diagnose", "identify", "ingest", "load_config", "modes", "monitor", "segments", "simulate", "study",
+           "validate"]

@@ -23,6 +23,8 @@ from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, Union
 
 from suspid.config import Config, build_simulator, load_config as _load, override_arguments
+from suspid.data.ingest import IngestResult
+from suspid.data.ingest import run as _run_ingest
 from suspid.data.track import read_track
 from suspid.interfaces import TrackSegment
 from suspid.method.spectra import compute_spectra
@@ -193,3 +195,19 @@ def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float
     out = Path(out_dir) if out_dir is not None else cfg.run_dir()
     out.mkdir(parents=True, exist_ok=True)
     return _simulate.modes_report(build_simulator(cfg), speed_mps, out, w)
+
+
+def ingest(ingest_file: str | Path | Mapping[str, Any], overrides: Overrides = None, *,
+           out_dir: str | Path | None = None, log: Log | None = None) -> IngestResult:
+    """Cut a long recording into measured-data segments (``suspid ingest``): units, alignment, quality.
+
+    :param ingest_file: an ingest YAML file (or a mapping with the same content, see ``docs/ingest.md``):
+        the recording and its channel mapping, the speed or distance channel, the track record, and the
+        suspid ``config`` whose simulator's channels the recorded ones map to.
+    :param out_dir: default ``output.dir`` of the file, else ``ingested/<recording stem>/`` beside it.
+    :returns: a :class:`suspid.data.ingest.IngestResult`: the track and accelerations written (the
+        ``data.track_file`` and ``data.measurements`` of a measured-data config), the offset and its
+        confidence, the segments, the warnings; ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
+    :raises suspid.errors.SuspidError: a config or data problem, in one line.
+    """
+    return _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))

@@ -164,6 +164,20 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     console.print((out.study_dir / "study.md").read_text(encoding="utf-8"))
 
 
+@app.command()
+def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/ingest.md).", show_default=False),
+           set_: Optional[List[str]] = SetOpt,
+           out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: the file's output.dir)."),
+           quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Cut a long recording (mf4, mat, tdms, csv, hdf5) into segments: units, track alignment, quality report."""
+    r = api.ingest(ingest_file, set_ or [], out_dir=out, log=_log(quiet))
+    for w in r.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    console.print(f"{len(r.segments)} segments, offset {r.offset_m:.2f} m (peak ratio {r.peak_ratio:.2f}); "
+                  f"data.track_file: {r.track_path}, data.measurements: {r.measurements_path}; "
+                  f"report: {r.out_dir / 'ingest.md'}", markup=False, highlight=False)
+
+
 def _log(quiet: bool):
     """Progress messages of a command: dimmed lines on the console, none with --quiet."""
     return (lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]"))

@@ -87,3 +87,17 @@ def suspid_register_effects(register: Register) -> None:
         for simulators that support it.
     :returns: nothing; the return value is ignored.
     """
+
+
+@hookspec
+def suspid_register_readers(register: Register) -> None:
+    """Register recording readers: one per file format of a data-acquisition system (``suspid ingest``).
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each reader class. ``cls``
+        subclasses :class:`suspid.interfaces.Reader`, has a unique ``name`` and
+        lists the file ``extensions`` it reads; ingest configs select it as
+        ``recording: {format: <name>}`` or by the file's extension.
+    :returns: nothing; the return value is ignored.
+    """

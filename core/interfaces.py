@@ -418,3 +418,74 @@ class Effect(ABC):
     def defaults(cls) -> dict[str, Any]:
         """Every parameter at its default value."""
         return cls.Options().model_dump()
+
+
+# ---------------------------------------------------------------------------------------------- readers
+@dataclass
+class Signal:
+    """One channel of a recording, as a :class:`Reader` returns it.
+
+    :ivar name: the channel's name in the file.
+    :ivar values: ``(n,)`` float64 samples, in the unit the file stores them in
+        (suspid converts them by the unit the config declares).
+    :ivar unit: the unit the file gives for the channel (``""`` when it has none); informative only.
+    :ivar index: ``(n,)`` abscissa of each sample (time in s for a recording,
+        distance in m for a track record), or ``None`` for a uniform record.
+    :ivar step: sampling step of a uniform record (s or m), ``None`` when ``index`` is given.
+    :ivar start: abscissa of the first sample of a uniform record.
+    """
+
+    name: str
+    values: np.ndarray
+    unit: str = ""
+    index: np.ndarray | None = None
+    step: float | None = None
+    start: float = 0.0
+
+
+class Reader(ABC):
+    """A file format of a data-acquisition system: lists channels and reads them one at a time.
+
+    Subclasses set ``name`` and ``extensions`` (lower case, with the dot, e.g.
+    ``(".mf4",)``) and may set ``Options``. The constructor stores the path and
+    options and opens nothing; :meth:`channels` and :meth:`read` do the work.
+    A reader must not hold the whole file in memory: :meth:`read` returns one
+    channel (formats stored row by row read the columns :meth:`select` named in
+    one pass, in chunks). Use it as a context manager, so that :meth:`close`
+    releases the file. Errors a user can cause (missing file, unknown channel,
+    malformed content) raise :class:`suspid.errors.DataError` naming the file.
+    """
+
+    name: ClassVar[str]
+    extensions: ClassVar[tuple[str, ...]] = ()
+    Options: ClassVar[type | None] = None
+
+    def __init__(self, path: Any, **options: Any) -> None:
+        self.path = path
+        self.options = options
+
+    @abstractmethod
+    def channels(self) -> list[str]:
+        """Names of the channels in the file (as :meth:`read` accepts them)."""
+
+    @abstractmethod
+    def read(self, channel: str) -> Signal:
+        """One channel: its samples, the file's unit, and its abscissa (``index`` or ``step``/``start``).
+
+        :raises suspid.errors.DataError: the channel is not in the file (listing those that are).
+        """
+
+    def select(self, channels: Sequence[str]) -> None:
+        """Announce the channels that will be read, so that row-oriented formats parse the file once.
+
+        Default: nothing to do (column-oriented formats read each channel on its own).
+        """
+
+    def close(self) -> None:
+        """Release the file; default: nothing to release."""
+
+    def __enter__(self) -> "Reader":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()

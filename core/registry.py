@@ -38,6 +38,7 @@ KINDS: dict[str, str] = {
     "surrogate": "suspid_register_surrogates",
     "executor": "suspid_register_executors",
     "effect": "suspid_register_effects",
+    "reader": "suspid_register_readers",
 }
 """Plugin kind -> the register hook that provides it."""
 

@@ -1,0 +1,240 @@
+"""The ingest config: one validated model (unknown keys are errors), units declared, never guessed.
+
+An ingest file names the suspid config whose simulator defines the channels,
+the recording with its channel mapping, the speed (or distance) channel, the
+track record, and how to align, cut and check::
+
+    config: ../configs/quickstart.yaml          # its simulator's channels() are the targets
+    recording:
+      path: run-2026-11-03.mf4                  # format by extension, or format: mdf4
+      channels:                                 # simulator channel -> recorded channel
+        carbody_front_vertical: {name: ACC_Z_K1, unit: mm/s^2, sign: 1}
+        bogie_front_vertical: {name: ACC_Z_B1, unit: g}
+      speed: {name: V_GPS, unit: km/h}          # or distance: {name: ODO, unit: m}
+    track:
+      path: track-car-2026-10.csv
+      options: {step: 0.25}                     # the reader's options
+      channels: {vertical: {name: LL_mean, unit: mm}, lateral: {name: AL_mean, unit: mm}}
+    alignment: {channel: bogie_front_vertical, lever_m: 9.5}
+    segments: {length_m: 1000, speed_tolerance: 0.02, min_speed_kmh: 100}
+    output: {dir: ingested, format: csv}
+
+Every unit is one of :data:`ACCELERATION_UNITS`, :data:`SPEED_UNITS`,
+:data:`LENGTH_UNITS`; a unit the file states that disagrees with the declared
+one is a warning in the quality report, and the declared one is used.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt, field_validator, model_validator
+
+from suspid.interfaces import IRREGULARITY_CHANNELS
+from suspid.options import ConfigPath, Section
+
+G = 9.80665
+"""Standard gravity, m/s^2 per g."""
+
+ACCELERATION_UNITS = {"m/s^2": 1.0, "mm/s^2": 1e-3, "g": G}
+"""Declared acceleration unit -> factor to m/s^2."""
+SPEED_UNITS = {"m/s": 1.0, "km/h": 1 / 3.6}
+"""Declared speed unit -> factor to m/s."""
+LENGTH_UNITS = {"m": 1.0, "mm": 1e-3, "km": 1e3}
+"""Declared length unit -> factor to m."""
+
+_ALIASES = {"m/s²": "m/s^2", "m/s2": "m/s^2", "m s^-2": "m/s^2", "mm/s²": "mm/s^2", "mm/s2": "mm/s^2",
+            "kph": "km/h", "kmh": "km/h", "km/hr": "km/h", "mps": "m/s"}
+
+
+def canonical_unit(unit: str) -> str:
+    """A unit's spelling as in the tables (``m/s²`` -> ``m/s^2``), for comparisons with the file's."""
+    u = unit.strip()
+    return _ALIASES.get(u, _ALIASES.get(u.lower(), u))
+
+
+def _unit_field(table: dict[str, float]):
+    def check(value: str) -> str:
+        u = canonical_unit(value)
+        if u not in table:
+            raise ValueError(f"unknown unit '{value}'; expected one of: {', '.join(table)}")
+        return u
+    return check
+
+
+class ChannelMap(Section):
+    """One recorded acceleration channel feeding one simulator channel."""
+
+    name: str = Field(min_length=1, description="channel name in the recording")
+    unit: str = Field(description=f"declared unit: {', '.join(ACCELERATION_UNITS)}")
+    sign: Literal[1, -1] = Field(default=1, description="-1 when the sensor axis points the other way")
+    full_scale: PositiveFloat | None = Field(default=None, description="sensor range in the declared unit: "
+                                             "|value| >= 0.999 full_scale counts as clipped")
+
+    _unit = field_validator("unit")(classmethod(lambda cls, v: _unit_field(ACCELERATION_UNITS)(v)))
+
+    @property
+    def factor(self) -> float:
+        """Multiplier from the recorded values to m/s^2 (sign included)."""
+        return self.sign * ACCELERATION_UNITS[self.unit]
+
+
+class SpeedChannel(Section):
+    name: str = Field(min_length=1, description="speed channel in the recording")
+    unit: str = Field(description=f"declared unit: {', '.join(SPEED_UNITS)}")
+
+    _unit = field_validator("unit")(classmethod(lambda cls, v: _unit_field(SPEED_UNITS)(v)))
+
+
+class LengthChannel(Section):
+    name: str = Field(min_length=1, description="channel name in the file")
+    unit: str = Field(description=f"declared unit: {', '.join(LENGTH_UNITS)}")
+
+    _unit = field_validator("unit")(classmethod(lambda cls, v: _unit_field(LENGTH_UNITS)(v)))
+
+
+class RecordingSection(Section):
+    """The long recording of the data-acquisition system."""
+
+    path: ConfigPath = Field(description="the recording file")
+    format: str | None = Field(default=None, description="reader name (default: by the file's extension)")
+    options: dict[str, Any] = Field(default_factory=dict, description="the reader's options")
+    channels: dict[str, ChannelMap] = Field(description="simulator channel -> recorded channel")
+    speed: SpeedChannel | None = Field(default=None, description="speed channel (give speed or distance)")
+    distance: LengthChannel | None = Field(default=None, description="odometry distance channel")
+    fs_hz: PositiveFloat | None = Field(default=None, description="output sampling rate (default: the "
+                                        "recording's, from the first mapped channel)")
+
+    @model_validator(mode="after")
+    def _speed_or_distance(self) -> "RecordingSection":
+        if (self.speed is None) == (self.distance is None):
+            raise ValueError("give the train's motion once: recording.speed or recording.distance")
+        if not self.channels:
+            raise ValueError("recording.channels maps no channel")
+        return self
+
+
+class TrackRecordSection(Section):
+    """The track geometry record of a track recording car, indexed by distance."""
+
+    path: ConfigPath = Field(description="the track record file")
+    format: str | None = Field(default=None, description="reader name (default: by the file's extension)")
+    options: dict[str, Any] = Field(default_factory=dict, description="the reader's options (e.g. step: 0.25 "
+                                    "in the record's length unit, or index: <distance channel>)")
+    channels: dict[str, LengthChannel] = Field(description=f"track quantity ({', '.join(IRREGULARITY_CHANNELS)})"
+                                               " -> recorded channel; vertical is required")
+    distance_unit: str = Field(default="m", description="unit of the record's abscissa (index or step)")
+    step_m: PositiveFloat | None = Field(default=None, le=5.0, description="distance step of the written track "
+                                         "segments, m (default: the record's)")
+
+    _du = field_validator("distance_unit")(classmethod(lambda cls, v: _unit_field(LENGTH_UNITS)(v)))
+
+    @field_validator("channels")
+    @classmethod
+    def _quantities(cls, value: dict[str, LengthChannel]) -> dict[str, LengthChannel]:
+        unknown = [k for k in value if k not in IRREGULARITY_CHANNELS]
+        if unknown:
+            raise ValueError(f"unknown track quantity '{unknown[0]}'; expected: {', '.join(IRREGULARITY_CHANNELS)}")
+        if "vertical" not in value:
+            raise ValueError("the vertical profile (longitudinal level) is required: it aligns the record")
+        return value
+
+
+class AlignmentSection(Section):
+    """Alignment of the track record to the vehicle's distance (the odometry offset).
+
+    The vertical acceleration of ``channel`` (a bogie or axlebox, which follow
+    the track at long wavelengths), double-integrated over distance in the band
+    ``wavelength_m``, is cross-correlated with the band-limited vertical profile.
+    """
+
+    channel: str | None = Field(default=None, description="simulator channel to correlate (default: the first "
+                                "mapped *axlebox*/*bogie* vertical channel)")
+    lever_m: float | Literal["model"] = Field(
+        default="model", description="where the channel's response meets the track, m ahead of the odometry "
+        "reference point (the point segment distances refer to; exudyn-train: the car centre); 'model': "
+        "found by running the same correlation on the configured simulator at the recording's speed, which "
+        "also takes in the response's own delay (the geometric lever of exudyn-train's front bogie is 9.5 m, "
+        "its effective one about 7.7 m at 300 km/h)")
+    wavelength_m: tuple[PositiveFloat, PositiveFloat] = Field(default=(8.0, 70.0), description="band of "
+                                                              "wavelengths compared, m (short, long)")
+    search_m: PositiveFloat = Field(default=500.0, description="offsets searched: guess_m +- search_m")
+    guess_m: float = Field(default=0.0, description="centre of the offsets searched, m")
+    min_peak_ratio: float = Field(default=1.5, ge=1.0, description="ratio of the correlation peak to the "
+                                  "highest other peak below which the alignment is an error")
+    offset_m: float | None = Field(default=None, description="known offset: skip the correlation")
+
+    @field_validator("wavelength_m")
+    @classmethod
+    def _band(cls, value):
+        if value[0] >= value[1]:
+            raise ValueError("wavelength_m must be (short, long) with short < long")
+        return value
+
+
+class SegmentsSection(Section):
+    """How the recording is cut into segments at quasi-constant speed."""
+
+    length_m: PositiveFloat = Field(default=1000.0, description="segment length, m")
+    speed_tolerance: PositiveFloat = Field(default=0.02, le=0.5, description="largest |v - mean v| / mean v "
+                                           "inside a segment")
+    min_speed_kmh: NonNegativeFloat = Field(default=100.0, description="slower stretches (stations, "
+                                            "manoeuvres) are skipped")
+    step_m: PositiveFloat | None = Field(default=None, description="how far a rejected window start moves on, m "
+                                         "(default length_m / 20)")
+    margin_s: NonNegativeFloat = Field(default=0.5, description="time excluded around a dropout, clipped "
+                                       "stretch, flat line or spike, s")
+    max_segments: PositiveInt | None = Field(default=None, description="keep at most this many (the first)")
+    prefix: str = Field(default="seg", pattern=r"^[A-Za-z0-9_.\-]+$", description="segment names <prefix>-001")
+
+
+class QualitySection(Section):
+    """Thresholds of the quality checks."""
+
+    spike_sigma: PositiveFloat = Field(default=12.0, description="a sample further than this many robust "
+                                       "standard deviations (1.4826 MAD) from the median is a spike")
+    flat_s: PositiveFloat = Field(default=0.5, description="a stretch this long of identical values while "
+                                  "moving is a flat line (dead sensor)")
+    clip_min_run: PositiveInt = Field(default=3, description="consecutive samples at the channel's extreme "
+                                      "value that count as clipping")
+    gap_factor: PositiveFloat = Field(default=1.5, description="a time step longer than this many nominal "
+                                      "steps is a dropout")
+    rms_range: dict[str, tuple[NonNegativeFloat, PositiveFloat]] = Field(
+        default_factory=lambda: {"carbody": (0.003, 2.0), "bogie": (0.02, 20.0), "axlebox": (0.3, 500.0)},
+        description="plausible RMS in m/s^2 while moving, by channel kind (a word of the channel name)")
+    exclude: list[Literal["dropouts", "clipping", "flat", "spikes"]] = Field(
+        default_factory=lambda: ["dropouts", "clipping", "flat", "spikes"],
+        description="what excludes a stretch from the segments (the rest is only reported)")
+    figures: bool = Field(default=True, description="write the PNG figures")
+
+
+class OutputSection(Section):
+    dir: ConfigPath | None = Field(default=None, description="output folder (default: ingested/<recording "
+                                   "stem>/ beside the ingest file)")
+    format: Literal["csv", "hdf5"] = Field(default="csv", description="csv: track/ and accelerations/ "
+                                           "folders; hdf5: track.h5 and accelerations.h5")
+
+
+class IngestOptions(Section):
+    """A whole ingest file (``suspid ingest INGEST.yaml``)."""
+
+    config: ConfigPath | None = Field(default=None, description="the suspid config whose simulator defines "
+                                      "the channels (default: the built-in exudyn-train with its defaults)")
+    recording: RecordingSection
+    track: TrackRecordSection
+    alignment: AlignmentSection = Field(default_factory=AlignmentSection)
+    segments: SegmentsSection = Field(default_factory=SegmentsSection)
+    quality: QualitySection = Field(default_factory=QualitySection)
+    output: OutputSection = Field(default_factory=OutputSection)
+
+    def output_dir(self, base: Path) -> Path:
+        """The output folder: ``output.dir`` or ``ingested/<recording stem>/`` beside the ingest file."""
+        return self.output.dir if self.output.dir is not None else base / "ingested" / self.recording.path.stem
+
+
+def kind_of(channel: str, kinds) -> str | None:
+    """The kind of a simulator channel (``carbody``, ``bogie``, ``axlebox``): a word of its name."""
+    words = channel.replace("-", "_").split("_")
+    return next((k for k in kinds if k in words), None)
+

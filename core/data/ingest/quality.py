@@ -1,0 +1,153 @@
+"""Quality checks of each channel of a recording (on the common grid, in m/s^2).
+
+- **dropouts**: NaN samples (NaN in the file, or gaps in its time stamps);
+- **clipping**: ``clip_min_run`` or more consecutive identical samples within
+  2 % of the channel's largest magnitude (a saturated sensor holds its
+  extreme), or ``|a| >= 0.999 full_scale`` when the sensor range is declared;
+- **flat lines**: ``flat_s`` or more of identical consecutive values while moving;
+- **spikes**: samples further than ``spike_sigma`` robust standard deviations
+  (1.4826 x median absolute deviation, over the moving samples) from the median;
+- **RMS** while moving against the plausible range of the channel's kind
+  (``quality.rms_range``): outside it usually means a wrong declared unit;
+- **sampling jitter**: the spread of the file's time steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .load import Recording
+from .options import IngestOptions, kind_of
+
+
+@dataclass
+class ChannelQuality:
+    dropouts: int = 0
+    clipped: int = 0
+    flat: int = 0
+    spikes: int = 0
+    rms_moving: float = float("nan")
+    rms_range: tuple[float, float] | None = None
+    masks: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"dropouts": self.dropouts, "clipped": self.clipped, "flat": self.flat, "spikes": self.spikes,
+                "rms_moving": self.rms_moving,
+                "rms_range": list(self.rms_range) if self.rms_range else None}
+
+
+def runs(mask: np.ndarray) -> np.ndarray:
+    """``(n_runs, 2)`` start and stop (exclusive) of the runs of True in ``mask``."""
+    m = np.concatenate(([False], mask, [False]))
+    edges = np.flatnonzero(m[1:] != m[:-1])
+    return edges.reshape(-1, 2)
+
+
+def long_runs(mask: np.ndarray, min_len: int) -> np.ndarray:
+    """``mask`` restricted to its runs of at least ``min_len`` samples."""
+    out = np.zeros_like(mask)
+    for a, b in runs(mask):
+        if b - a >= min_len:
+            out[a:b] = True
+    return out
+
+
+def dilate(mask: np.ndarray, k: int) -> np.ndarray:
+    """``mask`` grown by ``k`` samples on each side."""
+    if k <= 0 or not mask.any():
+        return mask
+    out = mask.copy()
+    for a, b in runs(mask):
+        out[max(0, a - k):b + k] = True
+    return out
+
+
+def check_channel(a: np.ndarray, moving: np.ndarray, fs: float, opts: IngestOptions,
+                  full_scale: float | None, kind: str | None) -> ChannelQuality:
+    """The checks of the module docstring on one channel ``a`` (m/s^2)."""
+    q = opts.quality
+    out = ChannelQuality()
+    finite = np.isfinite(a)
+    drop = ~finite
+    out.dropouts = int(drop.sum())
+    good = a[finite & moving]
+    if good.size == 0:
+        out.masks = {"dropouts": drop}
+        return out
+    if full_scale is not None:
+        clip = finite & (np.abs(a) >= 0.999 * full_scale)
+    else:   # a saturated sensor holds its extreme value: runs of identical samples near max |a|
+        top = 0.98 * float(np.max(np.abs(good)))
+        held = np.zeros(a.size, dtype=bool)
+        held[1:] = np.diff(a) == 0
+        held[:-1] |= held[1:]
+        with np.errstate(invalid="ignore"):
+            clip = long_runs(held & (np.abs(a) >= top), q.clip_min_run)
+    out.clipped = int(clip.sum())
+    same = np.zeros(a.size, dtype=bool)
+    same[1:] = (np.diff(a) == 0) & moving[1:]
+    flat = long_runs(same, max(2, int(round(q.flat_s * fs))))
+    out.flat = int(flat.sum())
+    sample = good[:: max(1, good.size // 200_000)]
+    med = float(np.median(sample))
+    sigma = 1.4826 * float(np.median(np.abs(sample - med)))
+    spikes = np.zeros(a.size, dtype=bool)
+    if sigma > 0:
+        with np.errstate(invalid="ignore"):
+            spikes = finite & (np.abs(a - med) > q.spike_sigma * sigma) & ~clip
+    out.spikes = int(spikes.sum())
+    out.rms_moving = float(np.sqrt(np.mean((good - good.mean()) ** 2)))
+    if kind is not None:
+        out.rms_range = tuple(q.rms_range[kind])
+    out.masks = {"dropouts": drop, "clipping": clip, "flat": flat, "spikes": spikes}
+    return out
+
+
+def check_recording(rec: Recording, opts: IngestOptions, moving: np.ndarray
+                    ) -> tuple[dict[str, ChannelQuality], list[str]]:
+    """Every channel's checks, and one warning line per problem found."""
+    out, warnings = {}, []
+    kinds = list(opts.quality.rms_range)
+    for row, c in enumerate(rec.channels):
+        m = opts.recording.channels[c]
+        fs_si = None if m.full_scale is None else m.full_scale * abs(m.factor)
+        cq = check_channel(rec.accelerations[row], moving, rec.grid.fs, opts, fs_si, kind_of(c, kinds))
+        out[c] = cq
+        name = f"channel {c} ('{m.name}')"
+        dur = 1.0 / rec.grid.fs
+        if cq.dropouts:
+            warnings.append(f"{name}: {cq.dropouts} dropped samples ({cq.dropouts * dur:.2f} s: NaN or gaps in time)")
+        if cq.clipped:
+            warnings.append(f"{name}: clipped (saturated) on {cq.clipped} samples ({cq.clipped * dur:.2f} s)")
+        if cq.flat:
+            warnings.append(f"{name}: flat line (identical values while moving) on {cq.flat * dur:.2f} s")
+        if cq.spikes:
+            warnings.append(f"{name}: {cq.spikes} spike samples (> {opts.quality.spike_sigma:g} robust sigma)")
+        if cq.rms_range is not None and np.isfinite(cq.rms_moving):
+            lo, hi = cq.rms_range
+            if not lo <= cq.rms_moving <= hi:
+                warnings.append(f"{name}: RMS {cq.rms_moving:.4g} m/s^2 while moving is outside the plausible "
+                                f"range [{lo:g}, {hi:g}] m/s^2 of a {kind_of(c, kinds)} channel: is the declared "
+                                f"unit '{m.unit}' right?")
+        info = rec.info[c]
+        if info.jitter > 1e-3:
+            warnings.append(f"{name}: sampling jitter {100 * info.jitter:.2g} % of the time step")
+        if info.n_gaps:
+            warnings.append(f"{name}: {info.n_gaps} gaps in the time stamps")
+    return out, warnings
+
+
+def excluded_mask(quality: dict[str, ChannelQuality], opts: IngestOptions, fs: float
+                  ) -> dict[str, np.ndarray]:
+    """Reason -> samples excluded for it (any channel), grown by ``segments.margin_s``."""
+    k = int(round(opts.segments.margin_s * fs))
+    out = {}
+    for reason in opts.quality.exclude:
+        masks = [cq.masks[reason] for cq in quality.values() if reason in cq.masks]
+        if masks:
+            m = np.logical_or.reduce(masks)
+            if m.any():
+                out[reason] = dilate(m, k)
+    return out

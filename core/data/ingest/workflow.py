@@ -1,0 +1,280 @@
+"""``suspid ingest``: from a long recording to segments in the documented measured-data layout.
+
+Steps: read the mapped channels onto one time grid in SI units
+(:mod:`~suspid.data.ingest.load`), check them (:mod:`~suspid.data.ingest.quality`),
+align the track record (:mod:`~suspid.data.ingest.align`), cut segments at
+quasi-constant speed (:mod:`~suspid.data.ingest.segment`), write the segments with
+their provenance and the quality report (:mod:`~suspid.data.ingest.report`). The
+output folder is touched only once the inputs have been read and checked.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import h5py
+import numpy as np
+
+import suspid
+from suspid.data.track import (check_response, read_accelerations, read_track, write_accelerations_csv,
+                               write_accelerations_h5, write_track_csv, write_track_h5)
+from suspid.errors import ConfigError, DataError
+from suspid.infra.files import write_text
+from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackSegment
+
+from . import report as _report
+from .align import Alignment, align
+from .load import Recording, TrackRecord, read_recording, read_track_record
+from .options import IngestOptions, kind_of
+from .quality import check_recording, excluded_mask
+from .segment import Excluded, Window, cut
+
+Log = Callable[[str], None]
+
+CHECK_WORDS = {"dropouts": "dropout", "clipping": "clipping (saturated sensor)", "flat": "flat line",
+               "spikes": "spikes"}
+
+
+@dataclass
+class IngestResult:
+    """What :func:`suspid.ingest` did.
+
+    :ivar out_dir: the output folder (``ingest.md``, ``ingest.json``, the figures, the segments).
+    :ivar track_path: the track segments (``data.track_file`` of a measured-data config).
+    :ivar measurements_path: the accelerations (``data.measurements``).
+    :ivar offset_m: track distance = odometry distance + offset_m.
+    :ivar peak_ratio: the alignment's confidence (correlation peak / highest other peak).
+    :ivar segments: the names of the segments written.
+    :ivar warnings: one line per problem of the quality report.
+    :ivar report: the content of ``ingest.json``.
+    """
+
+    out_dir: Path
+    track_path: Path
+    measurements_path: Path
+    offset_m: float
+    peak_ratio: float
+    segments: list[str]
+    warnings: list[str]
+    report: dict[str, Any] = field(repr=False, default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Equals ``ingest.json``."""
+        return self.report
+
+
+def check_mapping(opts: IngestOptions, sim_channels: Sequence[str], simulator: str) -> None:
+    """Every simulator channel is mapped, and only those."""
+    mapped = opts.recording.channels
+    missing = [c for c in sim_channels if c not in mapped]
+    if missing:
+        raise ConfigError(f"no mapping for simulator channel(s) {', '.join(missing)} (simulator '{simulator}' "
+                          f"has channels {', '.join(sim_channels)}); map each to a recorded channel, or "
+                          f"configure the simulator's sensors to the recorded ones", key="recording.channels")
+    extra = [c for c in mapped if c not in sim_channels]
+    if extra:
+        raise ConfigError(f"'{extra[0]}' is not a channel of simulator '{simulator}'; its channels: "
+                          f"{', '.join(sim_channels)}", key=f"recording.channels.{extra[0]}")
+
+
+def alignment_channel(opts: IngestOptions, channels: Sequence[str]) -> str | None:
+    """``alignment.channel``, or the first mapped vertical axlebox, then bogie, channel."""
+    if opts.alignment.channel is not None:
+        if opts.alignment.channel not in channels:
+            raise ConfigError(f"'{opts.alignment.channel}' is not a mapped channel; mapped: {', '.join(channels)}",
+                              key="alignment.channel")
+        return opts.alignment.channel
+    for kind in ("axlebox", "bogie"):
+        for c in channels:
+            if kind_of(c, [kind]) and "vertical" in c:
+                return c
+    return None
+
+
+def _motion_reasons(rec: Recording, opts: IngestOptions) -> dict[str, np.ndarray]:
+    v = rec.speed
+    return {"speed unknown (dropout of the speed or distance channel)": ~np.isfinite(v),
+            f"below {opts.segments.min_speed_kmh:g} km/h (station, manoeuvre)":
+                np.isfinite(v) & (v * 3.6 < opts.segments.min_speed_kmh)}
+
+
+def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, offset: float, dx: float
+                   ) -> TrackSegment | None:
+    """The track under the odometry reference point during window ``w``, at its mean speed; None when
+    the record does not cover it."""
+    fs = rec.grid.fs
+    duration = (w.i1 - w.i0) / fs
+    v = (rec.distance[w.i1] - rec.distance[w.i0]) / duration if w.i1 < rec.distance.size else w.v_mean
+    n = int(round(v * duration / dx)) + 1
+    x = rec.distance[w.i0] + offset + np.arange(n) * dx
+    x_src = track.x0 + np.arange(track.irregularities.shape[1]) * track.dx
+    if x[0] < x_src[0] or x[-1] > x_src[-1]:
+        return None
+    irr = np.array([np.interp(x, x_src, row) for row in track.irregularities])
+    if not np.all(np.isfinite(irr)):
+        return None
+    return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])})
+
+
+def _provenance(rec: Recording, w: Window, seg: TrackSegment, al: Alignment) -> dict[str, Any]:
+    g = rec.grid
+    return {"source": str(rec.path), "source_format": rec.reader,
+            "t_start_s": g.t0 + w.i0 / g.fs, "t_end_s": g.t0 + w.i1 / g.fs,
+            "odometer_start_m": float(rec.distance[w.i0]), "track_start_m": seg.meta["track_start_m"],
+            "offset_m": al.offset_m, "offset_peak_ratio": al.peak_ratio,
+            "speed_min_mps": w.v_min, "speed_max_mps": w.v_max,
+            "ingested_by": f"suspid {suspid.__version__}"}
+
+
+def _with_provenance(tmp: Path, final: Path, prov: dict[str, Any]) -> None:
+    """Move a written CSV to ``final`` (atomically) with ``# key: value`` provenance lines after the
+    second comment line."""
+    lines = tmp.read_text(encoding="utf-8").split("\n")
+    extra = [f"# {k}: {v}" for k, v in prov.items()]
+    write_text(final, "\n".join(lines[:2] + extra + lines[2:]))
+    tmp.unlink()
+
+
+def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], resps: list[Response],
+                   provs: list[dict[str, Any]]) -> tuple[Path, Path]:
+    """Write track and accelerations in the documented layout, with provenance; returns both paths."""
+    out.mkdir(parents=True, exist_ok=True)
+    if opts.output.format == "hdf5":
+        paths = (out / "track.h5", out / "accelerations.h5")
+        for path, write in zip(paths, (lambda p: write_track_h5(segs, p), lambda p: write_accelerations_h5(resps, p))):
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=out)
+            os.close(fd)
+            try:
+                write(Path(tmp))
+                with h5py.File(tmp, "a") as f:
+                    f.attrs["source"] = str(opts.recording.path)
+                    for s, prov in zip(segs, provs):
+                        for k, v in prov.items():
+                            f["segments"][s.name].attrs[k] = v
+                os.replace(tmp, path)
+            except BaseException:
+                Path(tmp).unlink(missing_ok=True)
+                raise
+        return paths
+    track_dir, acc_dir = out / "track", out / "accelerations"
+    for d in (track_dir, acc_dir):
+        d.mkdir(exist_ok=True)
+        for old in d.glob("*.csv"):   # segments of an earlier ingest of the same folder
+            old.unlink()
+    for s, r, prov in zip(segs, resps, provs):
+        tmp = track_dir / f".{s.name}.csv.tmp"
+        write_track_csv(s, tmp)
+        _with_provenance(tmp, track_dir / f"{s.name}.csv", prov)
+        tmp = acc_dir / f".{s.name}.csv.tmp"
+        write_accelerations_csv(r, tmp)
+        _with_provenance(tmp, acc_dir / f"{s.name}.csv", prov)
+    return track_dir, acc_dir
+
+
+def check_written(track_path: Path, acc_path: Path, segs: list[TrackSegment], resps: list[Response],
+                  channels: Sequence[str]) -> None:
+    """Read back what `suspid validate` and `suspid run` will read: every track segment, and the first
+    record of accelerations (HDF5: the segment order), without holding all the records twice."""
+    names = [s.name for s in segs]
+    if acc_path.is_dir():
+        first = read_accelerations(acc_path / f"{names[0]}.csv", channels)[0]
+        order = sorted(p.stem for p in acc_path.glob("*.csv"))
+    else:
+        with h5py.File(acc_path, "r") as f:
+            order = [o.decode() if isinstance(o, bytes) else str(o) for o in f["segments"].attrs["order"]]
+        first = read_accelerations_h5_first(acc_path, names[0], channels)
+    if ([s.name for s in read_track(track_path)] != names or sorted(order) != sorted(names)
+            or first.accelerations.shape != resps[0].accelerations.shape):
+        raise DataError(f"{acc_path}: the segments written could not be read back")
+
+
+def read_accelerations_h5_first(path: Path, name: str, channels: Sequence[str]) -> Response:
+    """One record of an accelerations HDF5 file, checked as the reader checks it."""
+    with h5py.File(path, "r") as f:
+        d = f["segments"][name]["accelerations"]
+        names = [c.decode() if isinstance(c, bytes) else str(c) for c in f.attrs["channels"]]
+        r = Response(tuple(names), float(d.attrs["fs_hz"]), np.asarray(d[()], dtype=float), name)
+    return check_response(r, path, channels)
+
+
+def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = lambda s: None) -> IngestResult:
+    """The whole ingest (module docstring) for ``simulator``'s channels; ``out`` is the output folder."""
+    channels = list(simulator.channels())
+    check_mapping(opts, channels, simulator.name)
+    log(f"reading {opts.recording.path}")
+    rec = read_recording(opts, channels)
+    warnings = list(rec.warnings)
+    g = rec.grid
+    v_min = opts.segments.min_speed_kmh / 3.6
+    moving = np.isfinite(rec.speed) & (rec.speed >= v_min)
+    total_moving = float(np.sum(np.diff(rec.distance)[moving[1:]])) if g.n > 1 else 0.0
+    if total_moving < opts.segments.length_m:
+        raise DataError(f"{opts.recording.path}: the recording covers {total_moving:.0f} m at "
+                        f"{opts.segments.min_speed_kmh:g} km/h or more, shorter than one segment "
+                        f"(segments.length_m = {opts.segments.length_m:g} m)")
+    log("quality checks")
+    quality, qwarn = check_recording(rec, opts, moving)
+    warnings += qwarn
+    bad_by = excluded_mask(quality, opts, g.fs)
+    log(f"reading the track record {opts.track.path}")
+    track, twarn = read_track_record(opts.track, IRREGULARITY_CHANNELS)
+    warnings += twarn
+    ach = alignment_channel(opts, channels)
+    usable = moving & ~np.logical_or.reduce([np.zeros(g.n, bool), *bad_by.values()])
+    log("aligning the track record")
+    al = align(rec.distance, rec.speed, rec.accelerations[channels.index(ach)] if ach else np.full(g.n, np.nan),
+               usable, track, opts.alignment, ach, v_min, simulator)
+    if al.method == "correlation":
+        if al.rho < 0:
+            warnings.append(f"alignment: the correlation peak is negative ({al.rho:.2f}): is the sign of "
+                            f"channel {ach} right?")
+        if al.peak_ratio < opts.alignment.min_peak_ratio:
+            raise DataError(f"{opts.track.path}: alignment is ambiguous: the correlation peak at offset "
+                            f"{al.offset_m:.2f} m is only {al.peak_ratio:.2f} times the next one "
+                            f"(alignment.min_peak_ratio = {opts.alignment.min_peak_ratio:g}); check the "
+                            f"channel, alignment.lever_m and the track units, or give alignment.offset_m")
+    x_src_end = track.x0 + (track.irregularities.shape[1] - 1) * track.dx
+    reasons = _motion_reasons(rec, opts)
+    for check, mask in bad_by.items():
+        where = ", ".join(c for c, cq in quality.items() if check in cq.masks and cq.masks[check].any())
+        reasons[f"{CHECK_WORDS[check]} in {where}"] = mask
+    reasons["outside the track record"] = ((rec.distance + al.offset_m < track.x0)
+                                           | (rec.distance + al.offset_m > x_src_end))
+    windows, excluded = cut(rec.distance, rec.speed, reasons, opts.segments, g.fs)
+    dx = opts.track.step_m or track.dx
+    segs, resps, provs, kept = [], [], [], []
+    width = max(3, len(str(len(windows))))
+    for w in windows:
+        name = f"{opts.segments.prefix}-{len(segs) + 1:0{width}d}"
+        seg = _track_segment(w, name, rec, track, al.offset_m, dx)
+        if seg is None:
+            excluded.append(Excluded("track record has gaps or ends under this segment", w.i0, w.i1))
+            continue
+        segs.append(seg)
+        resps.append(Response(tuple(channels), g.fs, rec.accelerations[:, w.i0:w.i1], name))   # a view
+        provs.append(_provenance(rec, w, seg, al))
+        kept.append(w)
+    excluded.sort(key=lambda e: e.i0)
+    if not segs:
+        seconds: dict[str, float] = {}
+        for e in excluded:
+            seconds[e.reason] = seconds.get(e.reason, 0.0) + (e.i1 - e.i0) / g.fs
+        why = "; ".join(f"{r} ({s:.0f} s)" for r, s in sorted(seconds.items(), key=lambda kv: -kv[1]))
+        raise DataError(f"{opts.recording.path}: no segment of {opts.segments.length_m:g} m could be cut; "
+                        f"excluded: {why or 'nothing usable'}")
+    if (rec.speed[np.isfinite(rec.speed)] > 150).any():
+        warnings.append(f"speed: above 540 km/h somewhere: is the declared unit "
+                        f"'{(opts.recording.speed or opts.recording.distance).unit}' right?")
+    log(f"writing {len(segs)} segments to {out}")
+    track_path, acc_path = write_segments(opts, out, segs, resps, provs)
+    check_written(track_path, acc_path, segs, resps, channels)
+    rep = _report.build(opts, rec, quality, al, kept, segs, provs, excluded, warnings, track_path, acc_path, out)
+    figures = _report.figures(opts, rec, al, kept, excluded, out) if opts.quality.figures else []
+    rep["figures"] = [str(p.name) for p in figures]
+    _report.write(rep, out)
+    return IngestResult(out, track_path, acc_path, al.offset_m, al.peak_ratio, [s.name for s in segs],
+                        warnings, rep)

@@ -1,0 +1,121 @@
+"""``csv``: long delimited text recordings (a header line of channel names, one row per sample).
+
+Lines starting with ``#`` before the header are comments. Units may follow a
+name in brackets (``ACC_Z_K1 [mm/s^2]``); the channel is then named without
+them. The abscissa is a column (``index: time_s``) or a uniform ``step``.
+The file is parsed once, in chunks of rows, keeping only the columns that
+:meth:`CsvReader.select` named.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from pathlib import Path
+from typing import ClassVar, Sequence
+
+import numpy as np
+from pydantic import Field, PositiveFloat, PositiveInt
+
+from suspid.errors import DataError
+from suspid.interfaces import Reader, Signal
+from suspid.options import Section
+
+from ._common import check_exists, unknown_channel
+
+_UNIT = re.compile(r"^(.*?)\s*[\[(]([^\])]*)[\])]\s*$")
+
+
+class CsvOptions(Section):
+    """``recording.options`` of the ``csv`` reader."""
+
+    delimiter: str = Field(default=",", min_length=1, max_length=1, description="column separator")
+    index: str | None = Field(default=None, description="column of the abscissa (time in s, or distance in m)")
+    step: PositiveFloat | None = Field(default=None, description="uniform sampling step when there is no "
+                                       "index column (s, or m for a track record)")
+    chunk_rows: PositiveInt = Field(default=200_000, description="rows parsed at a time")
+
+
+class CsvReader(Reader):
+    """Delimited text, one row per sample."""
+
+    name: ClassVar[str] = "csv"
+    extensions: ClassVar[tuple[str, ...]] = (".csv", ".txt")
+    Options: ClassVar[type] = CsvOptions
+
+    def __init__(self, path, **options) -> None:
+        super().__init__(Path(path), **options)
+        self.opts = CsvOptions(**options)
+        self._columns: dict[str, np.ndarray] = {}
+        self._header: list[str] | None = None
+        self._units: dict[str, str] = {}
+        self._skip = 0
+
+    def _read_header(self) -> list[str]:
+        if self._header is None:
+            check_exists(self.path)
+            with open(self.path, encoding="utf-8", errors="replace") as fh:
+                for n, line in enumerate(fh):
+                    if line.strip() and not line.lstrip().startswith("#"):
+                        break
+                else:
+                    raise DataError(f"{self.path}: no header line (column names) found")
+            names = []
+            for raw in line.rstrip("\r\n").split(self.opts.delimiter):
+                raw = raw.strip().strip('"')
+                m = _UNIT.match(raw)
+                name, unit = (m.group(1).strip(), m.group(2).strip()) if m else (raw, "")
+                names.append(name)
+                self._units[name] = unit
+            if len(set(names)) != len(names):
+                raise DataError(f"{self.path}: repeated column names in the header")
+            self._header, self._skip = names, n + 1
+        return self._header
+
+    def channels(self) -> list[str]:
+        return [c for c in self._read_header() if c != self.opts.index]
+
+    def select(self, channels: Sequence[str]) -> None:
+        header = self._read_header()
+        wanted = list(dict.fromkeys([*channels, *([self.opts.index] if self.opts.index else [])]))
+        for c in wanted:
+            if c not in header:
+                raise unknown_channel(self.path, c, header)
+        wanted = [c for c in wanted if c not in self._columns]
+        if not wanted:
+            return
+        cols = [header.index(c) for c in wanted]
+        parts: list[np.ndarray] = []
+        with open(self.path, encoding="utf-8", errors="replace") as fh:
+            lines = itertools.islice(fh, self._skip, None)
+            row = self._skip + 1
+            while True:
+                chunk = list(itertools.islice(lines, self.opts.chunk_rows))
+                if not chunk:
+                    break
+                try:
+                    block = np.loadtxt(chunk, delimiter=self.opts.delimiter, usecols=cols, ndmin=2,
+                                       comments="#", dtype=np.float64)
+                except ValueError as exc:
+                    raise DataError(f"{self.path}: rows {row}-{row + len(chunk) - 1}: "
+                                    f"{str(exc).splitlines()[0]}") from None
+                parts.append(block)
+                row += len(chunk)
+        data = np.concatenate(parts) if parts else np.empty((0, len(cols)))
+        for j, c in enumerate(wanted):
+            self._columns[c] = np.ascontiguousarray(data[:, j])
+        del data, parts
+
+    def read(self, channel: str) -> Signal:
+        if channel not in self._columns:
+            self.select([channel])
+        values = self._columns[channel]
+        if self.opts.index:
+            return Signal(channel, values, self._units.get(channel, ""), index=self._columns[self.opts.index])
+        if self.opts.step is None:
+            raise DataError(f"{self.path}: the csv reader needs the abscissa: recording option 'index' "
+                            f"(a column) or 'step'")
+        return Signal(channel, values, self._units.get(channel, ""), step=self.opts.step)
+
+    def close(self) -> None:
+        self._columns.clear()

@@ -1,0 +1,82 @@
+"""``tdms``: NI TDMS files through npTDMS.
+
+Channels are named ``group/channel``. The file is opened in streaming mode
+(``TdmsFile.open``: metadata only) and each channel's data is read when asked
+for. The abscissa comes from the waveform properties ``wf_increment`` and
+``wf_start_offset``, or from a channel named by the ``index`` option; the
+unit from ``unit_string``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, ClassVar
+
+from pydantic import Field, PositiveFloat
+
+from suspid.errors import DataError
+from suspid.interfaces import Reader, Signal
+from suspid.options import Section
+
+from ._common import as_float, check_exists, optional_library, unknown_channel
+
+
+class TdmsOptions(Section):
+    """``recording.options`` of the ``tdms`` reader."""
+
+    index: str | None = Field(default=None, description="channel (group/channel) of the abscissa")
+    step: PositiveFloat | None = Field(default=None, description="sampling step for channels without "
+                                       "waveform properties")
+
+
+class TdmsReader(Reader):
+    """NI TDMS through npTDMS."""
+
+    name: ClassVar[str] = "tdms"
+    extensions: ClassVar[tuple[str, ...]] = (".tdms",)
+    Options: ClassVar[type] = TdmsOptions
+
+    def __init__(self, path, **options) -> None:
+        super().__init__(Path(path), **options)
+        self.opts = TdmsOptions(**options)
+        self._f: Any = None
+
+    def _file(self) -> Any:
+        if self._f is None:
+            check_exists(self.path)
+            nptdms = optional_library("nptdms", "npTDMS", self.path)
+            try:
+                self._f = nptdms.TdmsFile.open(str(self.path))
+            except Exception as exc:  # npTDMS raises several types for a file that is not TDMS
+                raise DataError(f"{self.path}: not a readable TDMS file ({str(exc).splitlines()[0]})") from None
+        return self._f
+
+    def channels(self) -> list[str]:
+        return [f"{g.name}/{c.name}" for g in self._file().groups() for c in g.channels()
+                if f"{g.name}/{c.name}" != self.opts.index]
+
+    def _channel(self, name: str) -> Any:
+        f = self._file()
+        group, _, chan = name.partition("/")
+        try:
+            return f[group][chan]
+        except KeyError:
+            raise unknown_channel(self.path, name, self.channels()) from None
+
+    def read(self, channel: str) -> Signal:
+        ch = self._channel(channel)
+        values = as_float(ch[:], self.path, channel)
+        unit = str(ch.properties.get("unit_string", ""))
+        if self.opts.index:
+            return Signal(channel, values, unit, index=as_float(self._channel(self.opts.index)[:], self.path,
+                                                                self.opts.index))
+        step = ch.properties.get("wf_increment", self.opts.step)
+        if step is None:
+            raise DataError(f"{self.path}: channel '{channel}' has no wf_increment property; give recording "
+                            f"option 'index' (a channel) or 'step'")
+        return Signal(channel, values, unit, step=float(step), start=float(ch.properties.get("wf_start_offset", 0.0)))
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None

@@ -1,0 +1,292 @@
+"""suspid ingest: readers, units, alignment, segmentation, quality report, written layout.
+
+The recordings come from ``examples/recordings/make_recordings.py`` (suspid's
+exudyn-train model on a long synthetic track, written through each format's
+own library), generated once per module in a temporary folder.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import suspid
+from suspid import registry
+from suspid.data.track import read_accelerations, read_track
+from suspid.errors import ConfigError, DataError
+
+from conftest import ROOT, run_cli
+
+pytest.importorskip("asammdf")
+pytest.importorskip("nptdms")
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("make_recordings", ROOT / "examples/recordings/make_recordings.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["make_recordings"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+GEN = _generator()
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    out = tmp_path_factory.mktemp("recordings")
+    truth = GEN.make(out)
+    return out, truth
+
+
+def _ingest_file(folder: Path, fmt: str, **changes) -> dict:
+    data = yaml.safe_load((folder / f"ingest-{fmt}.yaml").read_text())
+    for key, value in changes.items():
+        node = data
+        *parents, last = key.split(".")
+        for p in parents:
+            node = node[p]
+        if value is None:
+            node.pop(last)
+        else:
+            node[last] = value
+    return data
+
+
+def _run(folder: Path, data: dict, out: Path):
+    path = folder / f"ingest-{out.name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return suspid.ingest(path, out_dir=out)
+
+
+def test_every_builtin_reader_is_registered_with_extensions():
+    names = registry.names("reader")
+    assert {"mdf4", "mat", "tdms", "csv", "hdf5"} <= set(names)
+    for n in ("mdf4", "mat", "tdms", "csv", "hdf5"):
+        assert registry.get("reader", n).extensions
+
+
+@pytest.mark.parametrize("fmt", ["mf4", "mat", "mat73", "tdms", "csv"])
+def test_offset_found_within_1_m_and_segments_at_constant_speed(recordings, tmp_path, fmt):
+    folder, truth = recordings
+    r = suspid.ingest(folder / f"ingest-{fmt}.yaml", out_dir=tmp_path / fmt)
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0, r.offset_m
+    assert r.peak_ratio > 3.0
+    assert len(r.segments) >= 3
+    assert r.warnings == []
+    profile = GEN.Profile(**truth["profile"])
+    tol = 0.02
+    for seg in r.report["segments"]:
+        t = np.linspace(seg["t_start_s"], seg["t_end_s"], 500)
+        v_true = profile.speed(t)
+        assert v_true.min() * 3.6 >= 100.0
+        assert np.max(np.abs(v_true - v_true.mean())) <= tol * v_true.mean() * 1.01
+        assert seg["speed_max_mps"] - seg["speed_min_mps"] <= 2 * tol * seg["speed_mps"]
+    # the documented layout, read as `suspid validate` and `suspid run` read it
+    segs = read_track(r.track_path)
+    recs = read_accelerations(r.measurements_path, list(GEN.CHANNELS))
+    assert [s.name for s in segs] == [x.segment for x in recs] == r.segments
+    for s, x in zip(segs, recs):
+        assert abs(s.duration() - x.duration) <= max(0.02 * x.duration, 2 / x.fs)
+    first = (r.track_path / f"{r.segments[0]}.csv").read_text()
+    assert f"# source: {folder / GEN.FILES[fmt]}" in first and "# offset_m: " in first
+    report = json.loads((r.out_dir / "ingest.json").read_text())
+    assert report == json.loads(json.dumps(r.to_dict(), default=str))
+    for fig in ("speed.png", "alignment.png", "spectrogram_carbody.png", "spectrogram_bogie.png"):
+        assert (r.out_dir / fig).stat().st_size > 1000
+
+
+def test_units_are_converted_by_the_declared_unit(recordings, tmp_path):
+    """mm/s^2 and g in the file come out in m/s^2: the same values through mf4 and csv."""
+    folder, _ = recordings
+    a = suspid.ingest(folder / "ingest-mf4.yaml", out_dir=tmp_path / "mf4")
+    b = suspid.ingest(folder / "ingest-csv.yaml", out_dir=tmp_path / "csv")
+    ra, rb = read_accelerations(a.measurements_path), read_accelerations(b.measurements_path)
+    np.testing.assert_allclose(ra[0].accelerations, rb[0].accelerations, rtol=1e-6, atol=1e-6)
+    rms = a.report["channels"]["bogie_front_vertical"]["rms_moving"]
+    assert 0.3 < rms < 5.0      # g converted, not left as ~0.1
+
+
+def test_hdf5_output_validates_with_a_measured_config(recordings, tmp_path):
+    folder, _ = recordings
+    r = suspid.ingest(folder / "ingest-tdms.yaml", {"output.format": "hdf5"}, out_dir=tmp_path / "h5")
+    assert r.track_path.name == "track.h5" and r.measurements_path.name == "accelerations.h5"
+    cfg = yaml.safe_load((folder / "suspid.yaml").read_text())
+    cfg["data"] = {"source": "measured", "track_file": str(r.track_path), "measurements": str(r.measurements_path)}
+    assert suspid.validate(cfg).n_measured_segments == len(r.segments)
+
+
+def test_mm_per_s2_declared_as_m_per_s2_is_one_warning_line(recordings, tmp_path):
+    folder, _ = recordings
+    # a MAT file has no units: only the implausible RMS can tell
+    data = _ingest_file(folder, "mat", **{"recording.channels.carbody_front_vertical.unit": "m/s^2"})
+    r = _run(folder, data, tmp_path / "wrong-unit")
+    lines = [w for w in r.warnings if "carbody_front_vertical" in w]
+    assert len(lines) == 1 and "RMS" in lines[0] and "declared unit 'm/s^2'" in lines[0]
+    # the MDF file states its units: the disagreement is a warning too, naming both
+    data = _ingest_file(folder, "mf4", **{"recording.channels.carbody_front_vertical.unit": "m/s^2"})
+    r = _run(folder, data, tmp_path / "wrong-unit-mf4")
+    assert any("the file gives the unit 'mm/s^2' but the config declares 'm/s^2'" in w for w in r.warnings)
+
+
+def test_unknown_unit_is_a_config_error(recordings):
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv", **{"recording.channels.carbody_front_vertical.unit": "gal"})
+    with pytest.raises(ConfigError, match=r"recording.channels.carbody_front_vertical.unit.*unknown unit 'gal'"):
+        suspid.ingest(data)
+
+
+def test_missing_channel_mapping_is_a_config_error(recordings, tmp_path):
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv", **{"recording.channels.bogie_front_lateral": None})
+    with pytest.raises(ConfigError, match=r"recording.channels.*no mapping for simulator channel\(s\) "
+                                          r"bogie_front_lateral") as err:
+        _run(folder, data, tmp_path / "missing")
+    assert "\n" not in str(err.value)
+    assert not (tmp_path / "missing").exists()       # nothing written before the inputs are valid
+
+
+def test_channel_absent_from_the_file_is_a_data_error(recordings, tmp_path):
+    folder, _ = recordings
+    data = _ingest_file(folder, "mf4", **{"recording.channels.bogie_front_lateral.name": "ACC_Y_B9"})
+    with pytest.raises(DataError, match=r"recording.mf4: no channel 'ACC_Y_B9' \(mapped to bogie_front_lateral\)"):
+        _run(folder, data, tmp_path / "absent")
+
+
+def test_unknown_key_is_rejected(recordings):
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv")
+    data["segments"]["lenght_m"] = 500
+    with pytest.raises(ConfigError, match=r"segments.lenght_m.*unknown key; expected one of: .*length_m"):
+        suspid.ingest(data)
+
+
+def test_recording_shorter_than_one_segment_is_a_data_error(recordings, tmp_path):
+    folder, truth = recordings
+    data = _ingest_file(folder, "csv", **{"segments.length_m": 50_000.0})
+    with pytest.raises(DataError, match=r"shorter than one segment \(segments.length_m = 50000 m\)"):
+        _run(folder, data, tmp_path / "short")
+
+
+def test_saturated_channel_is_reported_and_excluded(tmp_path):
+    truth = GEN.make(tmp_path, ["csv"], artefacts=GEN.Artefacts(saturate={"bogie_front_vertical": (4.2, 0, 1e9)}))
+    r = suspid.ingest(tmp_path / "ingest-csv.yaml", out_dir=tmp_path / "out")
+    lines = [w for w in r.warnings if "clipped" in w]
+    assert len(lines) == 1 and "bogie_front_vertical" in lines[0]
+    clipped = [e for e in r.report["excluded"] if e["reason"].startswith("clipping (saturated sensor) in "
+                                                                          "bogie_front_vertical")]
+    assert clipped
+    for seg in r.report["segments"]:
+        for e in clipped:
+            assert seg["t_end_s"] <= e["t_start_s"] + 1e-9 or seg["t_start_s"] >= e["t_end_s"] - 1e-9
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0
+
+
+def test_dropout_is_reported_and_excluded(tmp_path):
+    GEN.make(tmp_path, ["mf4"], artefacts=GEN.Artefacts(dropout={"carbody_front_vertical": (70.0, 70.5)}))
+    r = suspid.ingest(tmp_path / "ingest-mf4.yaml", out_dir=tmp_path / "out")
+    lines = [w for w in r.warnings if "dropped samples" in w]
+    assert len(lines) == 1 and "carbody_front_vertical" in lines[0]
+    drop = [e for e in r.report["excluded"] if e["reason"] == "dropout in carbody_front_vertical"]
+    assert len(drop) == 1 and drop[0]["t_start_s"] <= 70.0 and drop[0]["t_end_s"] >= 70.5
+    for seg in r.report["segments"]:
+        assert seg["t_end_s"] <= drop[0]["t_start_s"] + 1e-9 or seg["t_start_s"] >= drop[0]["t_end_s"] - 1e-9
+
+
+def test_cli_ingest_and_its_one_line_error(recordings, tmp_path):
+    folder, _ = recordings
+    p = run_cli("ingest", str(folder / "ingest-mat.yaml"), "--out", str(tmp_path / "cli"), "--quiet")
+    assert p.returncode == 0, p.stderr
+    assert "segments, offset 137." in p.stdout and "ingest.md" in p.stdout
+    p = run_cli("ingest", str(folder / "ingest-mat.yaml"), "--set", "recording.channels.bogie_front_lateral=null")
+    assert p.returncode == 2
+    assert p.stderr.strip().count("\n") == 0 and p.stderr.startswith("error: ")
+
+
+
+def test_a_lab_can_add_its_own_reader(recordings, tmp_path):
+    from suspid import hookimpl
+    from suspid.interfaces import Reader, Signal
+
+    folder, truth = recordings
+    table = np.loadtxt(folder / "recording.csv", delimiter=",", skiprows=2)
+    names = ["time_s"] + [n for n, _, _ in GEN.CHANNELS.values()] + ["V_TRAIN"]
+    with open(tmp_path / "run.labz", "wb") as fh:
+        np.savez(fh, **{n: table[:, i] for i, n in enumerate(names)})
+
+    class LabReader(Reader):
+        name = "labz"
+        extensions = (".labz",)
+
+        def _data(self):
+            return np.load(self.path)
+
+        def channels(self):
+            return [n for n in self._data().files if n != "time_s"]
+
+        def read(self, channel):
+            d = self._data()
+            return Signal(channel, d[channel], "", index=d["time_s"])
+
+    plugin = type("plugin", (), {"suspid_register_readers": staticmethod(hookimpl(lambda register: register(LabReader)))})
+    registry.add_plugin(plugin, "lab-readers")
+    data = _ingest_file(folder, "csv", **{"recording.path": str(tmp_path / "run.labz"), "recording.options": {}})
+    r = _run(folder, data, tmp_path / "labz")               # chosen by the extension .labz
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0 and r.report["format"] == "labz"
+    data["recording"]["path"] = str(folder / "recording.unknown")
+    with pytest.raises(ConfigError, match=r"key 'recording.format': no reader for extension '.unknown'.*labz \(.labz\)"):
+        _run(folder, data, tmp_path / "unknown")
+
+
+@pytest.mark.parametrize("fmt", ["csv", "mat"])
+def test_odometry_distance_instead_of_speed(recordings, tmp_path, fmt):
+    folder, truth = recordings
+    data = _ingest_file(folder, fmt, **{"recording.speed": None})
+    data["recording"]["distance"] = {"name": "ODO", "unit": "m"}
+    r = _run(folder, data, tmp_path / f"odo-{fmt}")
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0
+    assert len(r.segments) >= 3 and r.report["motion"]["kind"] == "distance"
+
+
+def test_speed_and_distance_together_is_a_config_error(recordings):
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv")
+    data["recording"]["distance"] = {"name": "ODO", "unit": "m"}
+    with pytest.raises(ConfigError, match="give the train's motion once: recording.speed or recording.distance"):
+        suspid.ingest(data)
+
+
+def test_track_quantity_that_does_not_follow_is_an_ambiguous_alignment(recordings, tmp_path):
+    """Aligning on the gauge instead of the longitudinal level finds no clear peak: an error, not an offset."""
+    folder, _ = recordings
+    data = _ingest_file(folder, "csv", **{"track.channels.vertical.name": "GA", "alignment.min_peak_ratio": 2.0})
+    with pytest.raises(DataError, match=r"alignment is ambiguous: the correlation peak at offset .* is only "
+                                        r".* times the next one"):
+        _run(folder, data, tmp_path / "ambiguous")
+    assert not (tmp_path / "ambiguous").exists()
+
+
+def test_flat_line_spike_and_jitter_are_reported(tmp_path):
+    art = GEN.Artefacts(flat={"carbody_middle_lateral": (50.0, 52.0)}, spike={"bogie_front_lateral": (65.0, 80.0)},
+                        jitter_s=1e-4)
+    truth = GEN.make(tmp_path, ["mf4"], artefacts=art)
+    r = suspid.ingest(tmp_path / "ingest-mf4.yaml", out_dir=tmp_path / "out")
+    flat = [w for w in r.warnings if "flat line" in w]
+    spikes = [w for w in r.warnings if "spike" in w]
+    jitter = [w for w in r.warnings if "sampling jitter" in w]
+    assert len(flat) == 1 and "carbody_middle_lateral" in flat[0]
+    assert len(spikes) == 1 and "bogie_front_lateral" in spikes[0]
+    assert len(jitter) == len(GEN.CHANNELS)                       # every acceleration channel's time stamps
+    assert r.report["channels"]["bogie_front_vertical"]["jitter"] == pytest.approx(1e-4 / 5e-3 * 2 ** 0.5, rel=0.2)   # std(dt) / dt
+    reasons = {e["reason"] for e in r.report["excluded"]}
+    assert "flat line in carbody_middle_lateral" in reasons and "spikes in bogie_front_lateral" in reasons
+    for seg in r.report["segments"]:
+        assert seg["t_end_s"] <= 50.0 or seg["t_start_s"] >= 52.0
+        assert not seg["t_start_s"] <= 65.0 <= seg["t_end_s"]
+    assert abs(r.offset_m - truth["offset_m"]) < 1.0
