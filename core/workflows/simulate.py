@@ -6,7 +6,7 @@ segments and writes ``simulation.h5`` and ``spectra.png`` into a folder;
 e.g. ``exudyn-train``) for its modes and writes ``modes.json``.
 
 ``simulation.h5`` is an accelerations file in the layout of
-:mod:`suspid.data.track` (``/segments/<name>/accelerations`` (n_channels, n_t)
+:mod:`suspid.data.files` (``/segments/<name>/accelerations`` (n_channels, n_t)
 m/s^2 with attribute ``fs_hz``; root attribute ``channels``), plus
 
 - ``/y`` ``(n_segments, n_channels, n_freqs)``: spectra in dB (paper eq. 1-2),
@@ -29,7 +29,7 @@ import numpy as np
 from suspid.errors import SimulatorError
 from suspid.infra.files import canonical, pyplot, save_figure, write_text
 from suspid.interfaces import Response, Simulator, TrackSegment
-from suspid.data.track import read_accelerations_h5, write_accelerations_h5
+from suspid.data.files import read_accelerations_h5, write_accelerations_h5
 
 SpectraFn = Callable[[Sequence[Response]], tuple[np.ndarray, np.ndarray]]
 """responses -> (y (n_samples, n_channels, n_freqs) dB, freqs (n_freqs,) Hz)."""
