@@ -45,3 +45,18 @@ class DataError(SuspidError):
 
 class SimulatorError(SuspidError):
     """A simulator run failed (external program, invalid output, unstable model)."""
+
+
+class DataWarning(UserWarning):
+    """Data that are possible but implausible (units, a dead channel); an error in strict mode."""
+
+
+class LedgerError(SuspidError):
+    """A run ledger cannot be used: not an SQLite database, damaged, another schema, or not writable.
+
+    The message names the file and the remedy.
+    """
+
+
+class RunDirError(SuspidError):
+    """A run directory is in use by another process, or holds the run of another config."""

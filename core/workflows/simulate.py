@@ -77,11 +77,9 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         named.append(Response(tuple(r.channels), float(r.fs), np.asarray(r.accelerations, dtype=float), name))
     y, freqs = (spectra_fn or default_spectra)(named)
     path = out / "simulation.h5"
-    write_accelerations_h5(named, path)
-    import h5py
-
     values = _parameter_values(simulator, w)
-    with h5py.File(path, "a") as f:
+
+    def spectra_and_identity(f) -> None:   # written with the records, in one atomic write
         f.create_dataset("y", data=np.asarray(y, dtype=float))
         f.create_dataset("freqs", data=np.asarray(freqs, dtype=float))
         f["y"].attrs["units"] = "dB re 1 m s^-1.5 (10 log10 |A_hat|, paper eq. 1)"
@@ -89,6 +87,8 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         f.attrs["simulator"] = simulator.name
         f.attrs["parameters"] = json.dumps(values, sort_keys=True)
         f.attrs["identity"] = json.dumps(canonical(simulator.identity()), sort_keys=True)
+
+    write_accelerations_h5(named, path, extra=spectra_and_identity)
     plot_spectra(y, freqs, list(named[0].channels), out / "spectra.png",
                  title=f"{simulator.name}: {len(named)} segment(s)")
     return path
