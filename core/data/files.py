@@ -47,6 +47,13 @@ Track (``format = "suspid-track"``)::
     /segments/<name>/irregularities  (4, n_x) m; attrs: channels = IRREGULARITY_CHANNELS
     /segments/<name>/speed           () or (n_x,) m/s
 
+Files are written in the HDF5 1.10 format (readable by HDF5 >= 1.10), whose
+metadata carry checksums, and array datasets with a Fletcher-32 checksum
+(chunked), so that a damaged byte is found when the file is read, not taken
+for data. Files without checksums (written by other programs) are read too,
+but a damaged one may then read as plausible numbers, and damaged metadata of
+the older format can even make the HDF5 library loop forever.
+
 Accelerations (``format = "suspid-accelerations"``)::
 
     /                         attrs: format, version = 1, channels = channel names
@@ -89,7 +96,6 @@ import csv
 import io
 import math
 import os
-import shutil
 import warnings
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -557,10 +563,28 @@ def _open(path: Path, fmt: str) -> Any:
                               f"expected '{fmt}'")
         if not isinstance(f.get("segments"), h5py.Group):
             raise _fail(path, "no /segments group")
-    except BaseException:
-        f.close()
+    except BaseException as exc:
+        _close(f)
+        if isinstance(exc, _H5_FAULTS):
+            raise _damaged(path, exc) from exc
         raise
     return f
+
+
+_H5_FAULTS = (OSError, KeyError, RuntimeError, TypeError, ValueError)
+"""What h5py raises, anywhere, on a damaged file (truncated, flipped bits)."""
+
+
+def _damaged(path: Path, exc: BaseException) -> DataError:
+    detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return _fail(path, f"damaged or unreadable HDF5 file ({type(exc).__name__}: {detail})")
+
+
+def _close(f: Any) -> None:
+    try:
+        f.close()
+    except Exception:   # closing a damaged file can fail too; the error being raised names it
+        pass
 
 
 class _Reading:
@@ -578,13 +602,9 @@ class _Reading:
         return self.f
 
     def __exit__(self, kind: Any, exc: BaseException | None, tb: Any) -> bool:
-        try:
-            self.f.close()
-        except Exception:   # closing a damaged file can fail too; the error below names it
-            pass
-        if isinstance(exc, (OSError, KeyError, RuntimeError, TypeError, ValueError)):
-            detail = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise _fail(self.path, f"damaged or unreadable HDF5 file ({type(exc).__name__}: {detail})") from exc
+        _close(self.f)
+        if isinstance(exc, _H5_FAULTS):
+            raise _damaged(self.path, exc) from exc
         return False
 
 
@@ -611,21 +631,46 @@ def _order(f: Any, path: Path) -> list[str]:
 
 
 def _write_h5(path: Path, fill: Any, append: bool = False) -> Path:
-    """Write an HDF5 file atomically: ``fill(f)`` on a temporary copy, then moved over ``path``."""
+    """Write an HDF5 file atomically: built in memory by ``fill(f)``, then written by ``atomic_open``.
+
+    In memory (h5py's ``core`` driver), because h5py's own writes to disk fail
+    badly on a full disk: an error while closing, then a crash (SIGSEGV) of the
+    interpreter. A write of the finished image fails like any Python write,
+    and the previous file stays.
+    """
     h5py = _h5()
 
     def write() -> None:
-        with atomic_open(path, "w+b") as fh:
-            mode = "w"
-            if append and path.exists():
-                with open(path, "rb") as src:
-                    shutil.copyfileobj(src, fh)
-                fh.seek(0)
-                mode = "r+"
-            with h5py.File(fh, mode) as f:
-                fill(f)
+        source = path if append and path.exists() else f"{path}.in-memory"
+        mode = "r+" if source == path else "w"
+        with h5py.File(source, mode, driver="core", backing_store=False, libver=("v110", "latest")) as f:
+            fill(f)
+            f.flush()
+            image = f.id.get_file_image()
+        with atomic_open(path, "wb") as fh:
+            fh.write(image)
 
     return _written(path, write)
+
+
+def _fixed(text: str | Sequence[str]) -> Any:
+    """Text attributes as fixed-length UTF-8 bytes, kept in the checksummed object header.
+
+    Variable-length strings live in a global heap without checksums, and a
+    damaged one can make the HDF5 library loop forever when it is read.
+    """
+    if isinstance(text, str):
+        return np.bytes_(text.encode())
+    items = [s.encode() for s in text]
+    return np.array(items, dtype=f"S{max([len(s) for s in items] + [1])}")
+
+
+def _array(group: Any, key: str, values: Any) -> Any:
+    """A float dataset; arrays carry a Fletcher-32 checksum, so that a flipped bit is found on reading."""
+    a = np.asarray(values, dtype=float)
+    if a.ndim == 0:
+        return group.create_dataset(key, data=a)
+    return group.create_dataset(key, data=a, chunks=True, fletcher32=True)
 
 
 def write_track_h5(segments: Sequence[TrackSegment], path: str | Path) -> Path:
@@ -638,17 +683,17 @@ def write_track_h5(segments: Sequence[TrackSegment], path: str | Path) -> Path:
         check_segment(s, path)
 
     def fill(f: Any) -> None:
-        f.attrs["format"] = TRACK_FORMAT
+        f.attrs["format"] = _fixed(TRACK_FORMAT)
         f.attrs["version"] = FORMAT_VERSION
         group = f.create_group("segments")
-        group.attrs["order"] = names
+        group.attrs["order"] = _fixed(names)
         for s in segments:
             g = group.create_group(s.name)
-            g.create_dataset("distance", data=np.asarray(s.distance, dtype=float))
-            d = g.create_dataset("irregularities", data=np.asarray(s.irregularities, dtype=float))
-            d.attrs["channels"] = list(IRREGULARITY_CHANNELS)
-            d.attrs["units"] = "m"
-            g.create_dataset("speed", data=np.asarray(s.speed, dtype=float))
+            _array(g, "distance", s.distance)
+            d = _array(g, "irregularities", s.irregularities)
+            d.attrs["channels"] = _fixed(IRREGULARITY_CHANNELS)
+            d.attrs["units"] = _fixed("m")
+            _array(g, "speed", s.speed)
 
     return _write_h5(path, fill)
 
@@ -706,18 +751,17 @@ def write_accelerations_h5(responses: Sequence[Response], path: str | Path, mode
             raise _fail(path, f"record '{r.segment}' has channels {list(r.channels)}, expected {list(channels)}")
 
     def fill(f: Any) -> None:
-        f.attrs["format"] = ACCELERATIONS_FORMAT
+        f.attrs["format"] = _fixed(ACCELERATIONS_FORMAT)
         f.attrs["version"] = FORMAT_VERSION
-        f.attrs["channels"] = list(channels)
+        f.attrs["channels"] = _fixed(channels)
         if "segments" in f:
             del f["segments"]
         group = f.create_group("segments")
-        group.attrs["order"] = names
+        group.attrs["order"] = _fixed(names)
         for r in responses:
-            d = group.create_group(r.segment).create_dataset(
-                "accelerations", data=np.asarray(r.accelerations, dtype=float))
+            d = _array(group.create_group(r.segment), "accelerations", r.accelerations)
             d.attrs["fs_hz"] = float(r.fs)
-            d.attrs["units"] = "m/s^2"
+            d.attrs["units"] = _fixed("m/s^2")
         if extra is not None:
             extra(f)
 
