@@ -58,5 +58,9 @@ class LedgerError(SuspidError):
     """
 
 
+class LedgerWarning(UserWarning):
+    """A damaged run ledger was moved aside (``--fresh``) and an empty one started."""
+
+
 class RunDirError(SuspidError):
     """A run directory is in use by another process, or holds the run of another config."""

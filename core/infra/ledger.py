@@ -19,7 +19,7 @@ header, ``PRAGMA quick_check``, the tables of a suspid ledger and its
 ``schema_version`` (:data:`SCHEMA_VERSION`). A file that fails one of them
 raises :class:`suspid.errors.LedgerError` naming the file and the remedy
 (move it away, or start over with ``--fresh``); nothing in it is changed.
-:meth:`Ledger.fresh` (``--fresh``) clears a sound ledger and moves a damaged
+:meth:`Ledger.clear` (``--fresh``) clears a sound ledger and moves a damaged
 or foreign one aside as ``ledger.sqlite.damaged-<UTC time>`` (with its
 ``-wal`` and ``-shm`` files) without opening it. A write that fails (a full
 disk, a read-only folder, a ledger locked for longer than ``timeout_s``)
@@ -35,6 +35,7 @@ import os
 import sqlite3
 import threading
 import time
+import warnings
 from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,7 +43,7 @@ from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
-from suspid.errors import LedgerError
+from suspid.errors import LedgerError, LedgerWarning
 from suspid.infra.files import canonical
 
 SCHEMA_VERSION = 1
@@ -279,20 +280,10 @@ class Ledger:
 
     @classmethod
     def fresh(cls, path: str | Path, timeout_s: float = 60.0,
-              log: Callable[[str], None] = lambda s: None) -> "Ledger":
-        """The ledger for ``--fresh``: a sound one cleared, a damaged or foreign one moved aside unopened.
-
-        :param log: told where a damaged ledger was moved.
-        """
-        path = Path(path)
-        try:
-            check_ledger_file(path)
-        except LedgerError as exc:
-            moved = move_aside(path)
-            log(f"{exc}; moved to {moved}")
-            return cls(path, timeout_s)
+              log: Callable[[str], None] | None = None) -> "Ledger":
+        """The ledger at ``path`` emptied for ``--fresh`` (:meth:`clear`, which copes with a damaged file)."""
         ledger = cls(path, timeout_s)
-        ledger.clear()
+        ledger.clear(log)
         return ledger
 
     def close(self) -> None:
@@ -398,6 +389,21 @@ class Ledger:
         rows = self._read("SELECT value FROM artifacts WHERE key = ?", (key,))
         return np.load(BytesIO(rows[0][0]), allow_pickle=False) if rows else None
 
-    def clear(self) -> None:
-        """Forget every result (``--fresh``; :meth:`fresh` also copes with a damaged file)."""
+    def clear(self, log: Callable[[str], None] | None = None) -> None:
+        """Forget every result (``--fresh``).
+
+        A damaged or foreign file (see :func:`check_ledger_file`) is not opened
+        but moved aside (:func:`move_aside`) and an empty ledger started; where
+        it went is passed to ``log``, or else issued as a :class:`LedgerWarning`.
+        """
+        if getattr(self._local, "conn", None) is None:
+            try:
+                check_ledger_file(self.path)
+            except LedgerError as exc:
+                moved = move_aside(self.path)
+                message = f"{exc}; moved to {moved}, starting an empty ledger"
+                if log is not None:
+                    log(message)
+                else:
+                    warnings.warn(message, LedgerWarning, stacklevel=2)
         self._transaction([(f"DELETE FROM {table}", ()) for table in ("evaluations", "iterations", "artifacts")])
