@@ -549,8 +549,8 @@ def _open(path: Path, fmt: str) -> Any:
         raise _fail(path, "file not found") from None
     except IsADirectoryError:
         raise _fail(path, "is a folder, not a file") from None
-    except PermissionError as exc:
-        raise _fail(path, f"cannot read the file ({_os_reason(exc)})") from None
+    except PermissionError:   # (h5py's own text repeats the path over several clauses)
+        raise _fail(path, "cannot read the file (permission denied)") from None
     except OSError as exc:
         raise _fail(path, f"not a readable HDF5 file ({str(exc).splitlines()[0]})") from None
     try:
