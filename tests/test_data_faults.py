@@ -143,7 +143,8 @@ def h5_order_is_numbers(tmp):
 @case
 def h5_format_is_a_number(tmp):
     path = _h5_acc(tmp, lambda f: f.attrs.__setitem__("format", 7))
-    return lambda: read_accelerations_h5(path), path, [str(path), "format attribute is", "expected 'suspid-accelerations'"]
+    return (lambda: read_accelerations_h5(path), path,
+            [str(path), "format attribute is", "expected 'suspid-accelerations'"])
 
 
 @case

@@ -143,7 +143,8 @@ class RunLock:
             self.run_dir.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         except OSError as exc:
-            raise RunDirError(f"{self.path}: cannot create the lock file of the run directory ({_reason(exc)})") from None
+            raise RunDirError(f"{self.path}: cannot create the lock file of the run directory "
+                              f"({_reason(exc)})") from None
         if not _try_lock(fd):
             os.close(fd)
             info = self.holder(self.run_dir)
