@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping, Sequence, Union
 from suspid.config import Config, build_simulator, load_config as _load, override_arguments
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
-from suspid.data.track import read_track
+from suspid.data.files import read_track
 from suspid.interfaces import TrackSegment
 from suspid.method.spectra import compute_spectra
 from suspid.workflows import diagnose as _diagnose
@@ -103,7 +103,8 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
 
 
 def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False,
-             progress: bool = False, log: Log | None = None, retry_failed: bool = False) -> IdentificationResult:
+             progress: bool = False, log: Log | None = None, retry_failed: bool = False,
+             force: bool = False) -> IdentificationResult:
     """The identification (``suspid run``): noise model, maximin design, Kriging, EGO, intervals.
 
     Writes ``result.json``, ``report.md``, the figures, ``noise_model.npz`` and
@@ -114,11 +115,12 @@ def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool =
     :param progress: show rich progress bars.
     :param log: receives one line per step (default: silent).
     :param retry_failed: simulate again the points whose simulation failed in an earlier run.
+    :param force: take over a run directory that holds the run of another config.
     :returns: the typed result; ``result.to_dict()`` equals ``result.json``.
     """
     cfg = validate(config, overrides).config
     return _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None),
-                         retry_failed=retry_failed)
+                         retry_failed=retry_failed, force=force)
 
 
 def study(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
@@ -161,7 +163,7 @@ def segments(config: ConfigSource, overrides: Overrides = None) -> list[TrackSeg
         return synthetic_track(cfg, "measurement")
     if cfg.data.track_file is None:
         raise cfg.error("measured data need data.track_file", "data.track_file")
-    return read_track(cfg.data.track_file)
+    return read_track(cfg.data.track_file, strict=cfg.data.strict)
 
 
 def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[str, float] | None = None,

@@ -30,6 +30,12 @@ console = Console(soft_wrap=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
 SetOpt = typer.Option(None, "--set", help="Override a config value: key.path=value (repeatable).")
+StrictOpt = typer.Option(False, "--strict", help="Implausible measured data (units, dead channels) are errors, "
+                                                 "not warnings (data.strict).")
+
+
+def _overrides(set_: Optional[List[str]], strict: bool) -> list[str]:
+    return [*(set_ or []), *(["data.strict=true"] if strict else [])]
 
 
 def _version(value: bool) -> None:
@@ -64,12 +70,12 @@ def plugins() -> None:
 
 
 @app.command()
-def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
+def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt, strict: bool = StrictOpt) -> None:
     """Check a config (every section, plugins' options, parameters, data files, study/monitor/diagnose); exit 0 when valid.
 
     Everything that needs no simulation is checked: what this accepts, run will not reject for the config's sake.
     """
-    checked = api.validate(config, set_ or [])
+    checked = api.validate(config, _overrides(set_, strict))
     cfg = checked.config
     data = f", {checked.n_measured_segments} measured segments" if checked.n_measured_segments else ""
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "
@@ -81,14 +87,17 @@ def run(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
         fresh: bool = typer.Option(False, "--fresh", help="Start over: forget the run's ledger."),
         retry_failed: bool = typer.Option(False, "--retry-failed",
                                           help="Simulate again the points whose simulation failed before."),
+        force: bool = typer.Option(False, "--force", help="Take over a run directory that holds another "
+                                                          "config's run."),
+        strict: bool = StrictOpt,
         quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
     """Identify the parameters: design, Kriging, EGO; writes result.json and report.md in the run directory.
 
     Interrupt with Ctrl-C at any time; running the same command again resumes
     from the ledger without recomputing finished simulations.
     """
-    out = api.identify(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet),
-                       retry_failed=retry_failed)
+    out = api.identify(config, _overrides(set_, strict), fresh=fresh, progress=not quiet, log=_log(quiet),
+                       retry_failed=retry_failed, force=force)
     _print_result(out.to_dict(), out.run_dir)
 
 

@@ -56,3 +56,22 @@ class PluginBugError(PluginError):
     """
 
     exit_code = 1
+
+
+class DataWarning(UserWarning):
+    """Data that are possible but implausible (units, a dead channel); an error in strict mode."""
+
+
+class LedgerError(SuspidError):
+    """A run ledger cannot be used: not an SQLite database, damaged, another schema, or not writable.
+
+    The message names the file and the remedy.
+    """
+
+
+class LedgerWarning(UserWarning):
+    """A damaged run ledger was moved aside (``--fresh``) and an empty one started."""
+
+
+class RunDirError(SuspidError):
+    """A run directory is in use by another process, or holds the run of another config."""

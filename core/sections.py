@@ -79,6 +79,8 @@ class DataSection(Section):
         "(experiment), e.g. simulator_options with a hidden effect")
     measurements: ConfigPath | None = Field(default=None, description="measured data file or folder")
     track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
+    strict: bool = Field(default=False, description="implausible measured data (units, dead channels) are "
+                         "errors, not warnings (``--strict``)")
 
     @field_validator("measurements", "track_file")
     @classmethod

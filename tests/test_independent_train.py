@@ -159,7 +159,7 @@ def test_files_are_read_and_accepted_by_suspid(dates):
     from suspid.workflows.problem import read_measurements
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
     from suspid.method.spectra import compute_spectra
-    from suspid.data.track import read_accelerations, read_track
+    from suspid.data.files import read_accelerations, read_track
 
     channels = ExudynTrain().channels()
     assert list(TR.CHANNELS) == list(channels)

@@ -18,7 +18,7 @@ import yaml
 
 import suspid
 from suspid import registry
-from suspid.data.track import read_accelerations, read_track
+from suspid.data.files import read_accelerations, read_track
 from suspid.errors import ConfigError, DataError
 
 from conftest import ROOT, run_cli

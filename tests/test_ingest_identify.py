@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 import suspid
-from suspid.data.track import read_accelerations, read_track, write_accelerations_csv, write_track_csv
+from suspid.data.files import read_accelerations, read_track, write_accelerations_csv, write_track_csv
 from suspid.interfaces import Response
 from suspid.method.noise import fit_noise_model
 from suspid.method.spectra import compute_spectra

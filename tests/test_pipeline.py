@@ -116,7 +116,8 @@ def test_sigkill_during_design_then_resume_gives_same_result(tmp_path):
 def measured(tmp_path_factory):
     """A measured data set in the documented CSV layout: exudyn accelerations on synthetic track."""
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
-    from suspid.data.track import synthetic_segments, write_accelerations_csv, write_track_csv
+    from suspid.data.files import write_accelerations_csv, write_track_csv
+    from suspid.data.track import synthetic_segments
 
     root = tmp_path_factory.mktemp("measured")
     segments = synthetic_segments({"n_segments": 3, "length_m": 600.0, "speed_kmh": 300.0, "seed": 3})

@@ -8,9 +8,10 @@ import pytest
 
 from suspid.errors import DataError
 from suspid.interfaces import Response, TrackSegment
-from suspid.data.track import (read_accelerations, read_accelerations_csv, read_accelerations_h5, read_track,
-                          read_track_csv, read_track_h5, synthetic_segments, write_accelerations_csv,
-                          write_accelerations_h5, write_track, write_track_csv, write_track_h5)
+from suspid.data.files import (read_accelerations, read_accelerations_csv, read_accelerations_h5, read_track,
+                               read_track_csv, read_track_h5, write_accelerations_csv, write_accelerations_h5,
+                               write_track, write_track_csv, write_track_h5)
+from suspid.data.track import synthetic_segments
 
 
 @pytest.fixture

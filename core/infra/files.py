@@ -20,6 +20,16 @@ from typing import IO, Any, Iterator, Mapping
 import numpy as np
 
 
+def _file_mode() -> int:
+    """The mode of a newly created file under this process's umask (0644 with the usual 022)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+_FILE_MODE = _file_mode()
+
+
 def canonical(obj: Any) -> Any:
     """JSON-able canonical form: sorted mappings, floats to 17 significant digits, arrays as lists,
     paths as strings, pydantic models as their JSON dump; anything else as its ``repr``."""
@@ -56,6 +66,7 @@ def atomic_open(path: str | Path, mode: str = "w", *, fsync: bool = False, **kwa
         kwargs.setdefault("encoding", "utf-8")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
+        os.chmod(tmp, _FILE_MODE)  # mkstemp makes the file private (0600): give it an ordinary file's mode
         with os.fdopen(fd, mode, **kwargs) as fh:
             yield fh
             fh.flush()

@@ -13,6 +13,18 @@ being killed (SIGKILL); only an operating-system crash or power loss could
 lose the last transactions. Each process (or thread) opens its own connection;
 writes are short ``BEGIN IMMEDIATE`` transactions and wait for the lock up to
 ``timeout_s``, so several worker processes can write to one ledger.
+
+Checks on open. The first connection of a process checks the file: an SQLite
+header, ``PRAGMA quick_check``, the tables of a suspid ledger and its
+``schema_version`` (:data:`SCHEMA_VERSION`). A file that fails one of them
+raises :class:`suspid.errors.LedgerError` naming the file and the remedy
+(move it away, or start over with ``--fresh``); nothing in it is changed.
+:meth:`Ledger.clear` (``--fresh``) clears a sound ledger and moves a damaged
+or foreign one aside as ``ledger.sqlite.damaged-<UTC time>`` (with its
+``-wal`` and ``-shm`` files) without opening it. A write that fails (a full
+disk, a read-only folder, a ledger locked for longer than ``timeout_s``)
+raises :class:`~suspid.errors.LedgerError` with SQLite's own reason; what was
+committed before is kept.
 """
 
 from __future__ import annotations
@@ -23,15 +35,22 @@ import os
 import sqlite3
 import threading
 import time
+import warnings
+from datetime import datetime, timezone
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
+from suspid.errors import LedgerError, LedgerWarning
 from suspid.infra.files import canonical
 
 SCHEMA_VERSION = 1
+"""Version of the tables below; a ledger of another version is refused (no migration exists yet)."""
+
+SQLITE_HEADER = b"SQLite format 3\x00"
+_REMEDY = "move it away or run with --fresh (which sets it aside)"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -54,6 +73,14 @@ CREATE TABLE IF NOT EXISTS iterations (
 );
 CREATE TABLE IF NOT EXISTS artifacts (key TEXT PRIMARY KEY, value BLOB NOT NULL, created_at REAL NOT NULL);
 """
+
+_COLUMNS = {
+    "meta": ["key", "value"],
+    "evaluations": ["key", "w", "J", "psi", "status", "error", "wall_time_s", "finished_at", "worker"],
+    "iterations": ["run", "iteration", "record"],
+    "artifacts": ["key", "value", "created_at"],
+}
+"""The tables of a suspid ledger and their columns, as created by the schema above."""
 
 
 def stable_hash(*parts: Any) -> str:
@@ -92,6 +119,118 @@ class Evaluation:
         return self.status == "ok"
 
 
+def _reason(exc: BaseException) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def write_error(path: Path, exc: sqlite3.Error, timeout_s: float) -> LedgerError:
+    """A one-line LedgerError for an SQLite error raised while writing or reading ``path``."""
+    reason = _reason(exc)
+    low = reason.lower()
+    if "locked" in low or "busy" in low:
+        return LedgerError(f"{path}: the run ledger stayed locked by another process for more than "
+                           f"{timeout_s:g} s ({reason})")
+    if "malformed" in low or "not a database" in low or "corrupt" in low:
+        return LedgerError(f"{path}: the run ledger is damaged ({reason}); {_REMEDY}")
+    if isinstance(exc, sqlite3.OperationalError) or "i/o" in low or "full" in low or "readonly" in low:
+        return LedgerError(f"{path}: cannot write the run ledger: disk full or not writable ({reason})")
+    return LedgerError(f"{path}: run ledger error ({reason})")
+
+
+def check_ledger_file(path: str | Path) -> None:
+    """Check, without changing anything, that ``path`` is absent, empty or a sound suspid ledger.
+
+    :raises LedgerError: not an SQLite database, damaged (``PRAGMA quick_check``),
+        other tables (not a suspid ledger), or another ``schema_version``; one line
+        naming the file and the remedy.
+    """
+    path = Path(path)
+    if not _check_header(path):
+        return
+    try:
+        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=5.0)
+    except sqlite3.Error as exc:
+        raise LedgerError(f"{path}: cannot open the run ledger ({_reason(exc)}); {_REMEDY}") from None
+    try:
+        _check_connection(conn, path)
+    finally:
+        conn.close()
+
+
+def _check_header(path: Path) -> bool:
+    """False for an absent or empty file; True for an SQLite file; else LedgerError."""
+    try:
+        if not path.exists() or path.stat().st_size == 0:
+            return False
+        with open(path, "rb") as fh:
+            head = fh.read(len(SQLITE_HEADER))
+    except OSError as exc:
+        raise LedgerError(f"{path}: cannot read the run ledger ({(exc.strerror or _reason(exc)).lower()})") from None
+    if head != SQLITE_HEADER:
+        raise LedgerError(f"{path}: not an SQLite database, so not a run ledger; {_REMEDY}")
+    return True
+
+
+def _check_connection(conn: sqlite3.Connection, path: Path) -> bool:
+    """Integrity, tables and schema version of an open ledger (see :func:`check_ledger_file`).
+
+    :returns: True when the ledger is complete (every table and its schema version), False when it
+        still has to be created.
+    """
+    try:
+        problems = [r[0] for r in conn.execute("PRAGMA quick_check").fetchall()]
+        if problems != ["ok"]:
+            first = " ".join(" ".join(problems).split("*** in database main ***")).split()
+            raise LedgerError(f"{path}: the run ledger is damaged (quick_check: {' '.join(first)[:160]}); "
+                              f"{_REMEDY}")
+        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+                  if not r[0].startswith("sqlite_")}
+        if not tables:
+            return False
+        if tables != set(_COLUMNS):
+            raise LedgerError(f"{path}: not a suspid run ledger (tables: {', '.join(sorted(tables))}); {_REMEDY}")
+        for table, columns in _COLUMNS.items():
+            found = [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
+            if found != columns:
+                raise LedgerError(f"{path}: not a suspid run ledger (table {table} has columns "
+                                  f"{', '.join(found)}); {_REMEDY}")
+        row = conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+    except sqlite3.Error as exc:
+        if "locked" in str(exc).lower() or "busy" in str(exc).lower():
+            return False   # a writer is creating it right now
+        raise LedgerError(f"{path}: the run ledger is damaged ({_reason(exc)}); {_REMEDY}") from None
+    if row is None:
+        return False   # created, schema version not yet written
+    if row[0] != str(SCHEMA_VERSION):
+        newer = row[0].isdigit() and int(row[0]) > SCHEMA_VERSION
+        raise LedgerError(f"{path}: the run ledger has schema version {row[0]}, this suspid reads version "
+                          f"{SCHEMA_VERSION}" + (" (written by a newer suspid: upgrade suspid, or " if newer
+                                                 else " (") + f"{_REMEDY})")
+    return True
+
+
+def move_aside(path: str | Path) -> Path | None:
+    """Rename a ledger (and its ``-wal``/``-shm`` files) to ``<name>.damaged-<UTC time>``, unopened.
+
+    :returns: the new path of the ledger, or None when there was no file.
+    """
+    path = Path(path)
+    stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S.%fZ")
+    target = path.with_name(f"{path.name}.damaged-{stamp}")
+    moved = None
+    for suffix in ("", "-wal", "-shm", "-journal"):
+        src = path.with_name(path.name + suffix)
+        if src.exists():
+            try:
+                os.replace(src, target.with_name(target.name + suffix))
+            except OSError as exc:
+                raise LedgerError(f"{src}: cannot move the run ledger aside "
+                                  f"({(exc.strerror or _reason(exc)).lower()})") from None
+            if suffix == "":
+                moved = target
+    return moved
+
+
 class Ledger:
     """An SQLite ledger at ``path`` (created on first use)."""
 
@@ -107,15 +246,45 @@ class Ledger:
         conn = getattr(self._local, "conn", None)
         pid = getattr(self._local, "pid", None)
         if conn is None or pid != os.getpid():
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            conn = sqlite3.connect(self.path, timeout=self.timeout_s, isolation_level=None)
-            conn.execute("PRAGMA journal_mode=WAL")
-            conn.execute("PRAGMA synchronous=NORMAL")
-            conn.execute(f"PRAGMA busy_timeout={int(self.timeout_s * 1000)}")
-            conn.executescript(_SCHEMA)
-            conn.execute("INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+            conn = self._connect()
             self._local.conn, self._local.pid = conn, os.getpid()
         return conn
+
+    def _connect(self) -> sqlite3.Connection:
+        """A checked connection (module docstring); every failure is one LedgerError naming the file."""
+        _check_header(self.path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise LedgerError(f"{self.path}: cannot create the folder of the run ledger "
+                              f"({(exc.strerror or _reason(exc)).lower()})") from None
+        conn = None
+        try:
+            conn = sqlite3.connect(self.path, timeout=self.timeout_s, isolation_level=None)
+            conn.execute(f"PRAGMA busy_timeout={int(self.timeout_s * 1000)}")
+            complete = _check_connection(conn, self.path)   # before anything is written to the file
+            if not complete:   # (a complete one is opened without writing: no wait for a busy writer)
+                conn.execute("PRAGMA journal_mode=WAL")
+            conn.execute("PRAGMA synchronous=NORMAL")
+            if not complete:
+                conn.executescript(_SCHEMA)
+                conn.execute("INSERT OR IGNORE INTO meta VALUES ('schema_version', ?)", (str(SCHEMA_VERSION),))
+        except LedgerError:
+            conn.close()
+            raise
+        except sqlite3.Error as exc:
+            if conn is not None:
+                conn.close()
+            raise write_error(self.path, exc, self.timeout_s) from exc
+        return conn
+
+    @classmethod
+    def fresh(cls, path: str | Path, timeout_s: float = 60.0,
+              log: Callable[[str], None] | None = None) -> "Ledger":
+        """The ledger at ``path`` emptied for ``--fresh`` (:meth:`clear`, which copes with a damaged file)."""
+        ledger = cls(path, timeout_s)
+        ledger.clear(log)
+        return ledger
 
     def close(self) -> None:
         conn = getattr(self._local, "conn", None)
@@ -124,14 +293,48 @@ class Ledger:
             self._local.conn = None
 
     def _write(self, sql: str, params: tuple) -> None:
+        self._transaction([(sql, params)])
+
+    def _transaction(self, statements: list[tuple[str, tuple]]) -> None:
+        """Run ``statements`` in one write transaction; a failure rolls back and raises LedgerError.
+
+        A failed COMMIT (disk full, I/O error) is reported with SQLite's reason;
+        when SQLite has already rolled the transaction back, no second error
+        hides the first one.
+        """
         conn = self.connection
-        conn.execute("BEGIN IMMEDIATE")
         try:
-            conn.execute(sql, params)
-            conn.execute("COMMIT")
-        except BaseException:
-            conn.execute("ROLLBACK")
-            raise
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                for sql, params in statements:
+                    conn.execute(sql, params)
+                conn.execute("COMMIT")
+            except BaseException:
+                if conn.in_transaction:
+                    try:
+                        conn.execute("ROLLBACK")
+                    except sqlite3.Error:
+                        pass   # the error being raised says what went wrong
+                raise
+        except sqlite3.Error as exc:
+            raise write_error(self.path, exc, self.timeout_s) from exc
+
+    def _read(self, sql: str, params: tuple = ()) -> list[tuple]:
+        """All rows of a query; an SQLite error (a page damaged since the checks) raises LedgerError."""
+        try:
+            return self.connection.execute(sql, params).fetchall()
+        except sqlite3.Error as exc:
+            raise write_error(self.path, exc, self.timeout_s) from exc
+
+    # -- meta ------------------------------------------------------------------------
+    def get_meta(self, key: str) -> str | None:
+        """A value of the meta table (``schema_version``, ...), or None."""
+        rows = self._read("SELECT value FROM meta WHERE key = ?", (key,))
+        return rows[0][0] if rows else None
+
+    def set_meta(self, key: str, value: str) -> None:
+        """Set a value of the meta table."""
+        self._write("INSERT OR REPLACE INTO meta VALUES (?, ?)", (key, str(value)))
 
     # -- evaluations -----------------------------------------------------------
     def put(self, ev: Evaluation) -> None:
@@ -142,18 +345,18 @@ class Ledger:
              ev.status, ev.error, ev.wall_time_s, ev.finished_at, ev.worker or f"pid{os.getpid()}"))
 
     def get(self, key: str) -> Evaluation | None:
-        row = self.connection.execute("SELECT * FROM evaluations WHERE key = ?", (key,)).fetchone()
-        return self._row(row) if row else None
+        rows = self._read("SELECT * FROM evaluations WHERE key = ?", (key,))
+        return self._row(rows[0]) if rows else None
 
     def evaluations(self, status: str | None = None) -> Iterator[Evaluation]:
         """Every evaluation, in the order it was committed."""
         sql = "SELECT * FROM evaluations" + (" WHERE status = ?" if status else "") + " ORDER BY rowid"
-        for row in self.connection.execute(sql, (status,) if status else ()):
+        for row in self._read(sql, (status,) if status else ()):
             yield self._row(row)
 
     def count(self, status: str | None = "ok") -> int:
         sql = "SELECT COUNT(*) FROM evaluations" + (" WHERE status = ?" if status else "")
-        return self.connection.execute(sql, (status,) if status else ()).fetchone()[0]
+        return self._read(sql, (status,) if status else ())[0][0]
 
     @staticmethod
     def _row(row: tuple) -> Evaluation:
@@ -168,8 +371,7 @@ class Ledger:
                     (run, int(iteration), json.dumps(canonical(record))))
 
     def iterations(self, run: str) -> list[dict[str, Any]]:
-        rows = self.connection.execute(
-            "SELECT record FROM iterations WHERE run = ? ORDER BY iteration", (run,)).fetchall()
+        rows = self._read("SELECT record FROM iterations WHERE run = ? ORDER BY iteration", (run,))
         return [json.loads(r[0]) for r in rows]
 
     # -- artifacts (arrays, small files) -------------------------------------------
@@ -184,13 +386,24 @@ class Ledger:
     def get_array(self, key: str) -> np.ndarray | None:
         from io import BytesIO
 
-        row = self.connection.execute("SELECT value FROM artifacts WHERE key = ?", (key,)).fetchone()
-        return np.load(BytesIO(row[0]), allow_pickle=False) if row else None
+        rows = self._read("SELECT value FROM artifacts WHERE key = ?", (key,))
+        return np.load(BytesIO(rows[0][0]), allow_pickle=False) if rows else None
 
-    def clear(self) -> None:
-        """Forget everything (``--fresh``)."""
-        conn = self.connection
-        conn.execute("BEGIN IMMEDIATE")
-        for table in ("evaluations", "iterations", "artifacts"):
-            conn.execute(f"DELETE FROM {table}")
-        conn.execute("COMMIT")
+    def clear(self, log: Callable[[str], None] | None = None) -> None:
+        """Forget every result (``--fresh``).
+
+        A damaged or foreign file (see :func:`check_ledger_file`) is not opened
+        but moved aside (:func:`move_aside`) and an empty ledger started; where
+        it went is passed to ``log``, or else issued as a :class:`LedgerWarning`.
+        """
+        if getattr(self._local, "conn", None) is None:
+            try:
+                check_ledger_file(self.path)
+            except LedgerError as exc:
+                moved = move_aside(self.path)
+                message = f"{exc}; moved to {moved}, starting an empty ledger"
+                if log is not None:
+                    log(message)
+                else:
+                    warnings.warn(message, LedgerWarning, stacklevel=2)
+        self._transaction([(f"DELETE FROM {table}", ()) for table in ("evaluations", "iterations", "artifacts")])

@@ -32,6 +32,7 @@ from suspid.config import Config
 from suspid.errors import SimulatorError
 from suspid.infra.files import write_json, write_text
 from suspid.infra.ledger import Evaluation, Ledger
+from suspid.infra.lock import open_run_dir
 from suspid.infra.threads import single_blas_thread
 from suspid.optimize.design import from_unit, make_design
 from suspid.optimize.ego import EGOResult, run_ego
@@ -130,16 +131,10 @@ class IdentificationResult:
         return max(errors) if errors else None
 
 
-def prepare_run_dir(config: Config, fresh: bool = False) -> tuple[Path, Ledger]:
-    """The run directory with the resolved config written atomically, and its ledger (cleared if ``fresh``)."""
-    run_dir = config.run_dir()
-    run_dir.mkdir(parents=True, exist_ok=True)
+def write_config(config: Config, run_dir: Path) -> None:
+    """The resolved config, ``config.yaml`` in the run directory (atomically)."""
     write_text(run_dir / "config.yaml", yaml.safe_dump(config.model_dump(mode="json", exclude={"source_file"}),
                                                        sort_keys=False))
-    ledger = Ledger(run_dir / "ledger.sqlite")
-    if fresh:
-        ledger.clear()
-    return run_dir, ledger
 
 
 def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> dict[str, Any]:
@@ -155,7 +150,8 @@ def surrogate_for(config: Config):
 
 
 def run(config: Config, *, fresh: bool = False, progress: bool = False,
-        log: Callable[[str], None] = lambda s: None, retry_failed: bool = False) -> IdentificationResult:
+        log: Callable[[str], None] = lambda s: None, retry_failed: bool = False,
+        force: bool = False) -> IdentificationResult:
     """The whole identification (see the module docstring); writes result.json and report.md.
 
     A simulation that fails (a :class:`~suspid.errors.SimulatorError`) at a point
@@ -170,9 +166,20 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
     :param progress: show rich progress bars.
     :param log: receives one line per step.
     :param retry_failed: simulate again the points whose simulation failed before.
+    :param force: take over a run directory that holds another config's run.
+    :raises RunDirError: the run directory is in use by another process, or holds another config's run.
     """
+    run_dir = config.run_dir()
+    with open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, fresh=fresh,
+                      force=force, log=log) as ledger:
+        write_config(config, run_dir)
+        return _run(config, run_dir, ledger, progress=progress, log=log, retry_failed=retry_failed)
+
+
+def _run(config: Config, run_dir: Path, ledger: Ledger, *, progress: bool, log: Callable[[str], None],
+         retry_failed: bool) -> IdentificationResult:
+    """:func:`run` inside its locked run directory."""
     t_start = time.perf_counter()
-    run_dir, ledger = prepare_run_dir(config, fresh)
     n_before = ledger.count()
     problem = build_problem(config, ledger, log)
     problem.noise_model.save(run_dir / "noise_model.npz")

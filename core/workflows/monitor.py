@@ -83,7 +83,7 @@ import numpy as np
 from suspid.config import Config, build_simulator, identified_bounds, load_config, override_arguments
 from suspid.errors import ConfigError
 from suspid.infra.files import atomic_open, pyplot, save_figure, write_json, write_text
-from suspid.infra.ledger import Ledger
+from suspid.infra.lock import open_run_dir
 from suspid.infra.seeds import seed_for
 from suspid.sections import MonitorOptions, Scenario
 from suspid.workflows.identify import IdentificationResult, run
@@ -234,16 +234,11 @@ def identify_reference(source: ConfigSource, overrides: Sequence[str], config: C
     ref_dir = config.run_dir() / "reference"
     ref_cfg = load_config(source, [*overrides, *override_arguments({"monitor": None, "output.dir": str(ref_dir),
                                                            "name": f"{config.name}-reference"})])
-    ref_dir.mkdir(parents=True, exist_ok=True)
-    ledger = Ledger(ref_dir / "ledger.sqlite")
-    try:
-        if fresh:
-            ledger.clear()
+    with open_run_dir(ref_dir, config_name=ref_cfg.name, config_file=ref_cfg.source_file, fresh=fresh,
+                      log=log) as ledger:
         log("reference date: identifying the noise model B once for every date (paper §2.3)")
         problem = build_problem(ref_cfg, ledger, log)
         return problem.noise_model.save(ref_dir / "noise_model.npz")
-    finally:
-        ledger.close()
 
 
 def monitor_dates(source: ConfigSource, overrides: Sequence[str], config: Config, opts: MonitorOptions,

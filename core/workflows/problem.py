@@ -27,7 +27,8 @@ import numpy as np
 from suspid import registry
 from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
 from suspid.data.experiment import apply_model_error
-from suspid.data.track import read_accelerations, read_track, synthetic_segments
+from suspid.data.files import read_accelerations_records, read_track
+from suspid.data.track import synthetic_segments
 from suspid.errors import DataError, PluginBugError, SimulatorError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
@@ -155,21 +156,25 @@ def synthetic_track(config: Config, date: str, n_segments: int | None = None) ->
     return synthetic_segments(options.model_copy(update=update))
 
 
-def read_measurements(measurements: Path, track_file: Path | None, channels: Sequence[str]
-                      ) -> tuple[list[TrackSegment], list[Response]]:
+DURATION_TOLERANCE = 0.01
+"""A record may differ from its track segment's duration by this fraction (1 %: a sampling rate 1.5 % off is refused)."""
+
+
+def read_measurements(measurements: Path, track_file: Path | None, channels: Sequence[str], *,
+                      strict: bool = False) -> tuple[list[TrackSegment], list[Response]]:
     """Measured accelerations and the track geometry measured with them, paired by segment name.
 
-    :raises DataError: naming the file, when a segment has no track, the
+    :param strict: implausible values (units, dead channels) are errors, not warnings.
+    :raises DataError: naming the file, when a segment has no track or is given twice, the
         channels differ, or a record's duration does not match its segment.
     """
     if track_file is None:
         raise DataError(f"{measurements}: measured accelerations need the track measured with them "
                         f"(data.track_file)")
-    files = sorted(Path(measurements).glob("*.csv")) if Path(measurements).is_dir() else [Path(measurements)]
-    records = [(f, r) for f in files for r in read_accelerations(f, channels)]  # each error names its file
+    records = read_accelerations_records(measurements, channels, strict=strict)  # each error names its file
     if not records:
         raise DataError(f"{measurements}: no acceleration records found")
-    by_name = {s.name: s for s in read_track(track_file)}
+    by_name = {s.name: s for s in read_track(track_file, strict=strict)}
     segments = []
     for f, r in records:
         seg = by_name.get(r.segment)
@@ -177,7 +182,7 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
             raise DataError(f"{f}: record '{r.segment}' has no track segment of that name in "
                             f"{track_file} (segments: {', '.join(sorted(by_name)) or 'none'})")
         expected = seg.duration()
-        if abs(r.duration - expected) > max(0.02 * expected, 2.0 / r.fs):
+        if abs(r.duration - expected) > max(DURATION_TOLERANCE * expected, 2.0 / r.fs):
             raise DataError(f"{f}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
                             f"segment takes {expected:.2f} s at the recorded speed")
         segments.append(seg)
@@ -196,7 +201,7 @@ def validate_data(config: Config) -> int:
     if config.data.measurements is None:
         raise config.error("measured data need data.measurements", "data.measurements")
     segments, responses = read_measurements(config.data.measurements, config.data.track_file,
-                                            simulator.channels())
+                                            simulator.channels(), strict=config.data.strict)
     compute_spectra(responses, config.spectra)
     return len(segments)
 
@@ -256,7 +261,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     else:
         w_ref = None
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,
-                                                channels=channels)
+                                                channels=channels, strict=config.data.strict)
         y_mes, freqs = compute_spectra(responses, spectra_options)
         if not noise_path:
             raise config.error("measured data need a noise model identified at the reference date "

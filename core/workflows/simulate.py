@@ -6,7 +6,7 @@ segments and writes ``simulation.h5`` and ``spectra.png`` into a folder;
 e.g. ``exudyn-train``) for its modes and writes ``modes.json``.
 
 ``simulation.h5`` is an accelerations file in the layout of
-:mod:`suspid.data.track` (``/segments/<name>/accelerations`` (n_channels, n_t)
+:mod:`suspid.data.files` (``/segments/<name>/accelerations`` (n_channels, n_t)
 m/s^2 with attribute ``fs_hz``; root attribute ``channels``), plus
 
 - ``/y`` ``(n_segments, n_channels, n_freqs)``: spectra in dB (paper eq. 1-2),
@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -32,7 +31,7 @@ from suspid.errors import SimulatorError
 from suspid.infra.files import canonical, pyplot, save_figure, write_text
 from suspid.method.spectra import compute_spectra
 from suspid.interfaces import Response, Simulator, TrackSegment
-from suspid.data.track import read_accelerations_h5, write_accelerations_h5
+from suspid.data.files import read_accelerations_h5, write_accelerations_h5
 
 SpectraFn = Callable[[Sequence[Response]], tuple[np.ndarray, np.ndarray]]
 """responses -> (y (n_samples, n_channels, n_freqs) dB, freqs (n_freqs,) Hz)."""
@@ -78,10 +77,9 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         named.append(Response(tuple(r.channels), float(r.fs), np.asarray(r.accelerations, dtype=float), name))
     y, freqs = (spectra_fn or default_spectra)(named)
     path = out / "simulation.h5"
-    tmp = out / ".simulation.h5.tmp"  # written whole, then moved over the target (a failure keeps the old file)
-    write_accelerations_h5(named, tmp)
     values = _parameter_values(simulator, w)
-    with h5py.File(tmp, "a") as f:
+
+    def spectra_and_identity(f) -> None:   # written with the records, in one atomic write
         f.create_dataset("y", data=np.asarray(y, dtype=float))
         f.create_dataset("freqs", data=np.asarray(freqs, dtype=float))
         f["y"].attrs["units"] = "dB re 1 m s^-1.5 (10 log10 |A_hat|, paper eq. 1)"
@@ -89,7 +87,8 @@ def write_simulation(simulator: Simulator, segments: Sequence[TrackSegment], w: 
         f.attrs["simulator"] = simulator.name
         f.attrs["parameters"] = json.dumps(values, sort_keys=True)
         f.attrs["identity"] = json.dumps(canonical(simulator.identity()), sort_keys=True)
-    os.replace(tmp, path)
+
+    write_accelerations_h5(named, path, extra=spectra_and_identity)
     plot_spectra(y, freqs, list(named[0].channels), out / "spectra.png",
                  title=f"{simulator.name}: {len(named)} segment(s)")
     return path

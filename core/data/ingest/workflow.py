@@ -20,7 +20,7 @@ import h5py
 import numpy as np
 
 import suspid
-from suspid.data.track import (check_response, read_accelerations, read_track, write_accelerations_csv,
+from suspid.data.files import (check_response, read_accelerations, read_track, write_accelerations_csv,
                                write_accelerations_h5, write_track_csv, write_track_h5)
 from suspid.errors import ConfigError, DataError
 from suspid.infra.files import write_text

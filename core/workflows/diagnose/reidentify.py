@@ -14,7 +14,7 @@ import yaml
 
 from suspid.config import Config
 from suspid.infra.files import canonical, write_text
-from suspid.infra.ledger import Ledger
+from suspid.infra.lock import open_run_dir
 from suspid.sections import OutputSection
 from suspid.workflows.identify import run
 from suspid.workflows.problem import build_problem, simulate_spectra
@@ -57,12 +57,10 @@ def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fre
         out = run(cfg, fresh=fresh, progress=progress, log=log)
         problem, result, w = out.problem, out.to_dict(), dict(out.w_opt)
     else:
-        run_dir.mkdir(parents=True, exist_ok=True)
-        ledger = Ledger(run_dir / "ledger.sqlite")
-        if fresh:
-            ledger.clear()
-        problem, result, w = build_problem(cfg, ledger, log), None, {}
-        problem.noise_model.save(run_dir / "noise_model.npz")
+        with open_run_dir(run_dir, config_name=cfg.name, config_file=cfg.source_file, fresh=fresh,
+                          log=log) as ledger:
+            problem, result, w = build_problem(cfg, ledger, log), None, {}
+            problem.noise_model.save(run_dir / "noise_model.npz")
     y_sim = simulate_spectra(problem.simulator, w, problem.segments, cfg.spectra)[0]
     return Stage(label, cfg, problem, w, y_sim, result)
 
