@@ -133,9 +133,11 @@ class WheelPolygonOptions(_Params):
         return value
 
 
-WHEELSET_SETS: tuple[tuple[int, ...], ...] = ((1,), (2,), (3,), (4,), (1, 2), (3, 4), (1, 2, 3, 4))
-"""Wheelsets a polygon fit tries (1 leads): each one, each bogie's pair, all four. A line on both bogies
-(a re-profiling batch, a rail corrugation every wheelset passes over) is explained by the set, not by one."""
+WHEELSET_SETS: tuple[tuple[int, ...], ...] = ((1,), (2,), (3,), (4,), (1, 2), (1, 3), (1, 4), (2, 3), (2, 4),
+                                              (3, 4), (1, 2, 3, 4))
+"""Wheelsets a polygon fit tries (1 leads): each one, each pair (a bogie's, or one per bogie), all four. A line on
+both bogies (a re-profiling batch, or a rail corrugation every wheelset passes over) is explained by the set,
+not by one wheelset."""
 
 
 class WheelPolygon(Effect):

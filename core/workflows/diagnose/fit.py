@@ -42,6 +42,7 @@ class Candidate:
     signature: dict[str, Any] | None = None
     y_sim: np.ndarray | None = None
     evidence: dict[str, Any] = field(default_factory=dict)
+    own: np.ndarray | None = None                  # (n_cells,) bool: its cells (signature + changed), see name.py
     reason: str | None = None
 
     def as_dict(self) -> dict[str, Any]:

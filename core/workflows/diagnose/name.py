@@ -76,7 +76,8 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
             cand.explained = cand.delta_D_flagged / D0_f if D0_f > 0 else 0.0
             cand.score = cand.delta_D - penalty * cand.n_parameters
             cand.delta_J = j_of_spectra(problem, cand.y_sim)[0] - J0
-            cand.evidence.update(effect_evidence(cls, cand, disc, dmap, null, problem, options, local, penalty))
+            evidence, cand.own = effect_evidence(cls, cand, disc, dmap, null, problem, options, local, penalty)
+            cand.evidence.update(evidence)
         log(f"  {name}: {cand.status}, score {cand.score:.1f} ({cand.evaluations} simulations, "
             f"{time.perf_counter() - t0:.1f} s)")
         ranking.append(cand)
@@ -95,7 +96,8 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
 
 
 def effect_evidence(cls, cand: Candidate, disc: Discrepancy, dmap: DiscrepancyMap, null: NullCalibration,
-                    problem, options: DiagnoseOptions, local: LocalFit | None, penalty: float) -> dict[str, Any]:
+                    problem, options: DiagnoseOptions, local: LocalFit | None, penalty: float
+                    ) -> tuple[dict[str, Any], np.ndarray]:
     """What the naming rule reads about one fitted effect.
 
     - its cells S: the flagged cells its signature covers, plus every cell whose band mean it changes by more
@@ -133,7 +135,7 @@ def effect_evidence(cls, cand: Candidate, disc: Discrepancy, dmap: DiscrepancyMa
         out["score_local_alone"] = local.score(disc.D0, penalty)
         out["score_effect_plus_local"] = with_effect.score(disc.D0, penalty, cand.n_parameters)
         out["score_vs_local"] = out["score_effect_plus_local"] - out["score_local_alone"]
-    return out
+    return out, own
 
 
 def decide(ranking: list[Candidate], bumps: dict[int, Candidate], dmap: DiscrepancyMap,
@@ -143,8 +145,9 @@ def decide(ranking: list[Candidate], bumps: dict[int, Candidate], dmap: Discrepa
     Only the best-scoring effect may be named (a weaker one waits for the next step, once the best is added or
     reported as unexplained); every candidate gets its ``reason`` for the report. Checks, on the evidence of
     :func:`effect_evidence` when it is there: it beats the runner-up and the fixed bump of its size by
-    ``margin``; it explains at least ``min_explained`` of D in its own cells; its own flagged cells are fewer
-    after than before; it flags at most ``max_new_flagged`` (share of the flagged cells before) new cells; with
+    ``margin``; it explains at least ``min_explained`` of D in its own cells; its own flagged cells are not more
+    after than before (at the base parameters, which may have absorbed part of the effect: the strict shrink is
+    checked after the joint fit, :func:`check_after_joint_fit`); it flags at most ``max_new_flagged`` (share of the flagged cells before) new cells; with
     it, the local discrepancy model does better by at least ``margin`` than the local model alone.
     """
     if not dmap.flagged.any():
@@ -174,6 +177,25 @@ def decide(ranking: list[Candidate], bumps: dict[int, Candidate], dmap: Discrepa
                          f"({bump.score if bump is not None else float('nan'):.1f}){extra}{vs_local}")
 
 
+def check_after_joint_fit(before: DiscrepancyMap, after: DiscrepancyMap, own: np.ndarray | None,
+                          options: DiagnoseOptions) -> str | None:
+    """The after-map check of a named effect at the jointly fitted model: the flagged cells shrink, in its own
+    cells too, and at most ``max_new_flagged`` (share of the flagged cells before) appear elsewhere.
+
+    :returns: why the effect is rejected, or None.
+    """
+    n0, n1 = int(before.flagged.sum()), int(after.flagged.sum())
+    new = int((after.flagged & ~before.flagged).sum())
+    if n1 >= n0:
+        return f"after the joint fit the flagged cells do not shrink ({n0} → {n1})"
+    if own is not None and own.any() and int((after.flagged & own).sum()) >= max(1, int((before.flagged & own).sum())):
+        return (f"after the joint fit the flagged cells in its own cells do not shrink "
+                f"({int((before.flagged & own).sum())} → {int((after.flagged & own).sum())})")
+    if new > options.max_new_flagged * n0:
+        return f"after the joint fit it flags {new} new cells elsewhere"
+    return None
+
+
 def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None, n_before: int,
                options: DiagnoseOptions) -> str | None:
     """Why ``best`` may not be named, or None."""
@@ -188,8 +210,8 @@ def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None
     if explained < options.min_explained:
         where = "in its own cells" if "explained_own" in ev else "of the flagged discrepancy"
         return f"it explains only {100 * explained:.0f} % of D {where} (needs {100 * options.min_explained:.0f} %)"
-    if "flagged_own_after" in ev and ev["flagged_own_after"] >= max(1, ev["flagged_own_before"]):
-        return (f"the flagged cells in its signature do not shrink ({ev['flagged_own_before']} → "
+    if "flagged_own_after" in ev and ev["flagged_own_after"] > ev["flagged_own_before"]:
+        return (f"the flagged cells in its own cells grow ({ev['flagged_own_before']} → "
                 f"{ev['flagged_own_after']})")
     if "new_flagged" in ev and ev["new_flagged"] > options.max_new_flagged * n_before:
         cells = ", ".join(f"{r['channel']} {r['f_low_hz']:.3g}-{r['f_high_hz']:.3g} Hz"

@@ -25,7 +25,7 @@ from suspid.workflows.evaluation import j_of_spectra
 from .cells import CellGrid, make_cells
 from .fit import Discrepancy, EffectFitter, _Transform
 from .locate import locate
-from .name import Ranking, rank_effects, unexplained_regions
+from .name import Ranking, check_after_joint_fit, rank_effects, unexplained_regions
 from .null import NullCalibration, calibrate_null
 from .reidentify import Stage, make_stage, write_augmented
 from .report import write_diagnosis_report
@@ -101,8 +101,21 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                 break
             cand = next(c for c in rk.candidates if c.effect == rk.named)
             named.append((cand.effect, dict(cand.parameters), cand.n_parameters))
-            current, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir,
-                                                        noise_path, fresh, progress, log)
+            stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir,
+                                                      noise_path, fresh, progress, log)
+            rejected = check_after_joint_fit(current.dmap, stage.dmap, cand.own, opts)
+            if rejected is not None:   # the after-map decides: the effect is not named after all
+                log(f"step {step}: {cand.effect} retracted: {rejected}")
+                cand.reason = rejected
+                named.pop()
+                record.update(named=None, retracted=cand.effect, gap_retracted=stage.gap(),
+                              reason=f"unexplained discrepancy: no catalogue effect fits (best: {cand.effect}, "
+                                     f"rejected because {rejected})")
+                record["unexplained"] = unexplained_regions(current.dmap, rk.candidates, None)
+                if step == 1:
+                    rk.named, rk.reason = None, record["reason"]
+                break
+            current = stage
             record["named_parameters"] = canonical(named[-1][1])
             record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
             record["gap_after"] = current.gap()
@@ -130,7 +143,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
         "local_model": steps[0]["local_model"],
         "named": named[0][0] if named else None,
         "named_effects": [n for n, _, _ in named],
-        "reason": first.reason,
+        "reason": steps[0]["reason"],
         "named_parameters": canonical(named[0][1]) if named else None,
         "effects": [{"name": n, "parameters": canonical(p)} for n, p, _ in named],
         "steps": steps,
