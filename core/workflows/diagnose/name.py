@@ -91,7 +91,7 @@ def rank_effects(config: Config, problem, w: dict[str, float], y_sim: np.ndarray
             b.score = b.delta_D - penalty * p
         bumps[p] = b
     named, reason = decide(ranking, bumps, dmap, options)
-    unexplained = unexplained_regions(dmap, ranking, named) if dmap.flagged.any() else []
+    unexplained = unexplained_regions(dmap, ranking, named, exclude) if dmap.flagged.any() else []
     return Ranking(ranking, bumps, local, named, reason, unexplained)
 
 
@@ -223,9 +223,11 @@ def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None
     return None
 
 
-def unexplained_regions(dmap: DiscrepancyMap, ranking: list[Candidate], named: str | None) -> list[dict[str, Any]]:
+def unexplained_regions(dmap: DiscrepancyMap, ranking: list[Candidate], named: str | None,
+                        added: Sequence[str] = ()) -> list[dict[str, Any]]:
     """Flagged cells no named effect covers, merged into contiguous bands per (speed, channel): each with the
-    band, its largest magnitude, the best candidate whose signature covers it and why that one was rejected."""
+    band, its largest magnitude, the best candidate whose signature covers it and why that one was rejected
+    (``added``: effects already in the model, named at earlier steps)."""
     grid = dmap.grid
     rows = [r for r in dmap.rows(only_flagged=True)]
     fitted = [c for c in ranking if c.status == "fitted"]
@@ -247,6 +249,9 @@ def unexplained_regions(dmap: DiscrepancyMap, ranking: list[Candidate], named: s
             best = covering[0] if covering else None
             why = (f"best: {best.effect}, rejected because {best.reason}" if best is not None and best.reason
                    else f"best: {best.effect}" if best is not None else "no catalogue effect's signature covers it")
+            left = [n for n in added if registry.get("effect", n)().matching_cells([(channel, lo, hi, speed / 3.6)])]
+            if left:
+                why = f"left after {', '.join(left)} was added; {why}"
             out.append({"channel": channel, "speed_kmh": speed, "f_low_hz": lo, "f_high_hz": hi,
                         "magnitude_db": top["magnitude_db"], "n_cells": len(run),
                         "best_effect": best.effect if best is not None else None,
