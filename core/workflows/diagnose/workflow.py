@@ -21,11 +21,13 @@ from suspid.infra.files import canonical, write_json
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.threads import single_blas_thread
 from suspid.workflows.evaluation import j_of_spectra
+from suspid.workflows.problem import read_measurements
 
 from .cells import CellGrid, make_cells
-from .fit import Discrepancy, EffectFitter, _Transform
+from .coupling import coupling_test
+from .fit import Candidate, Discrepancy, EffectFitter, _Transform
 from .locate import locate
-from .name import Ranking, check_after_joint_fit, rank_effects, unexplained_regions
+from .name import Ranking, _supported_effects, check_after_joint_fit, rank_effects, unexplained_regions
 from .null import NullCalibration, calibrate_null
 from .reidentify import Stage, make_stage, write_augmented
 from .report import write_diagnosis_report
@@ -75,7 +77,9 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
     named: list[tuple[str, dict[str, Any], int]] = []
+    fixed: set[str] = set()           # effects whose parameters come from a direct estimate (not refitted)
     steps: list[dict[str, Any]] = []
+    coupling = _coupling(config, problem, log)
     rankings: list[Ranking] = []
     rank_s = 0.0
     with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.infra.threads)
@@ -84,6 +88,18 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
         _locate(before, grid, null, opts.alpha)
         current = before
         for step in range(1, opts.max_effects + 1):
+            tilted = [r for r in (coupling or []) if r["significant"]]
+            if tilted and "sensor-tilt" not in {n for n, _, _ in named} and _eligible(config, problem, "sensor-tilt"):
+                record, stage = _tilt_from_coupling(config, named, fixed, tilted, coupling, current, step, grid,
+                                                    null, out_dir, noise_path, fresh, progress, log)
+                steps.append(record)
+                rankings.append(Ranking([], {}, None, record["named"], record["reason"], []))
+                if stage is None:
+                    break
+                current = stage
+                if not current.dmap.flagged.any():
+                    break
+                continue
             log(f"step {step}: {int(current.dmap.flagged.sum())} flagged cells; ranking the effects")
             t_rank = time.perf_counter()
             cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
@@ -102,7 +118,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             cand = next(c for c in rk.candidates if c.effect == rk.named)
             named.append((cand.effect, dict(cand.parameters), cand.n_parameters))
             stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir,
-                                                      noise_path, fresh, progress, log)
+                                                      noise_path, fresh, progress, log, fixed)
             rejected = check_after_joint_fit(current.dmap, stage.dmap, cand.own, opts)
             if rejected is not None:   # the after-map decides: the effect is not named after all
                 log(f"step {step}: {cand.effect} retracted: {rejected}")
@@ -128,7 +144,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
         aug_path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path)
         if final_run.resolve() != (out_dir / "after").resolve() and final_run.exists():
             shutil.copytree(final_run, out_dir / "after", dirs_exist_ok=True)
-    first = rankings[0]
+    first = next((r for r in rankings if r.candidates), rankings[0])
     last = steps[-1]
     unexplained = last["unexplained"] if last["named"] is None else (
         unexplained_regions(current.dmap, [], None) if current.dmap.flagged.any() else [])
@@ -138,9 +154,10 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
         "base_model": opts.at,
         "flagged": [{k: r[k] for k in ("channel", "f_low_hz", "f_high_hz", "sign", "magnitude_db", "test", "z", "q",
                                        "speed_kmh")} for r in before.dmap.rows(only_flagged=True)],
-        "ranking": steps[0]["ranking"],
+        "ranking": next((s["ranking"] for s in steps if s.get("ranking")), []),
         "generic_bumps": {str(p): b.as_dict() for p, b in first.bumps.items()},
-        "local_model": steps[0]["local_model"],
+        "local_model": next((s["local_model"] for s in steps if s.get("local_model")), None),
+        "coupling": coupling,
         "named": named[0][0] if named else None,
         "named_effects": [n for n, _, _ in named],
         "reason": steps[0]["reason"],
@@ -184,6 +201,71 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     return DiagnosisResult(out_dir, json.loads(json.dumps(diagnosis)))
 
 
+def _eligible(config: Config, problem, name: str) -> bool:
+    names = config.diagnose.effects if config.diagnose.effects is not None else registry.names("effect")
+    supported = _supported_effects(problem.simulator)
+    return name in names and (supported is None or name in supported)
+
+
+def _coupling(config: Config, problem, log: Callable[[str], None]) -> list[dict[str, Any]] | None:
+    """The coupling test on the measured records (None for a numerical experiment: its data are spectra)."""
+    if config.data.source != "measured" or config.data.measurements is None:
+        return None
+    _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
+    opts = config.diagnose
+    reference = None
+    if opts.coupling_reference is not None:
+        _, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track, problem.channels)
+    rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, config.spectra.f_max_hz),
+                         opts.alpha, reference=reference)
+    for r in rows:
+        log(f"coupling {r['channel']} <- {r['vertical']}: beta {r['beta']:.4f} ± {r['se']:.4f} "
+            f"(t {r['t']:.1f}){' significant' if r['significant'] else ''}")
+    return rows
+
+
+def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dict[str, Any]],
+                        coupling: list[dict[str, Any]], current: Stage, step: int, grid: CellGrid,
+                        null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool, progress: bool,
+                        log: Callable[[str], None]) -> tuple[dict[str, Any], Stage | None]:
+    """Name ``sensor-tilt`` from a significant coupling: the tilted channels, the angle asin |β| (the mean over
+    them, weighted by 1/se²), the tilt alone (no gravity term: the reference date had the sensors' gravity
+    response too). The angle stays as estimated in the joint fit (power spectra hardly see it)."""
+    opts = config.diagnose
+    w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
+    angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
+    params = {"angle_deg": angle, "channels": [r["channel"] for r in tilted], "gravity_roll": False}
+    reason = ("sensor-tilt from the coupling of vertical into lateral at the same point: " + "; ".join(
+        f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle {abs(r['angle_deg']):.2f}°)"
+        for r in tilted))
+    record: dict[str, Any] = {"step": step, "named": "sensor-tilt", "route": "coupling", "reason": reason,
+                              "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
+                              "ranking": [], "local_model": None}
+    log(f"step {step}: {reason}")
+    cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
+    disc = Discrepancy(grid, null, current.problem.y_mes, current.problem.noise_model, current.dmap.flagged,
+                       current.y_sim)
+    fitter = EffectFitter(cfg_now, current.problem, current.w, disc, current.dmap.flagged_cells(), opts, log)
+    spec = {"name": "sensor-tilt", **params}
+    y = fitter.simulate(fitter.simulator_with(spec), {"sensor-tilt/angle_deg": angle})
+    cand = Candidate("sensor-tilt", "fitted", 2, params, y_sim=y if y is not None else current.y_sim)
+    named.append(("sensor-tilt", params, 2))
+    fixed.add("sensor-tilt")
+    stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir, noise_path,
+                                              fresh, progress, log, fixed)
+    n0, n1 = int(current.dmap.flagged.sum()), int(stage.dmap.flagged.sum())
+    if n1 > n0 + opts.max_new_flagged * max(n0, 1):
+        named.pop()
+        fixed.discard("sensor-tilt")
+        record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
+                      reason=f"{reason}; retracted: with it the flagged cells grow ({n0} → {n1})")
+        return record, None
+    record["named_parameters"] = canonical(params)
+    record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
+    record["gap_after"] = stage.gap()
+    return record, stage
+
+
 def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
     stage.dmap = locate(grid, null, stage.problem.y_mes, stage.y_sim, stage.problem.noise_model.mean_, alpha)
     stage.dmap.J = j_of_spectra(stage.problem, stage.y_sim)[0]
@@ -200,7 +282,8 @@ def _with_effects(config: Config, effects: list[tuple[str, dict[str, Any]]]) -> 
 
 def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], cand, current: Stage, step: int,
                  grid: CellGrid, null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool,
-                 progress: bool, log: Callable[[str], None]) -> tuple[Stage, dict[str, Any]]:
+                 progress: bool, log: Callable[[str], None], fixed: set[str] = frozenset()
+                 ) -> tuple[Stage, dict[str, Any]]:
     """Add the named effects to the model and fit them with the suspension: the alternating joint fit.
 
     Round r: identify the suspension with the effects at their current parameters; refit each effect's
@@ -226,6 +309,8 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], c
         _locate(stage, grid, null, opts.alpha)
         moved, refits = 0.0, []
         for i, (name, params, n_par) in enumerate(named):
+            if name in fixed:
+                continue
             cls = registry.get("effect", name)
             others = [(n, p) for j, (n, p, _) in enumerate(named) if j != i]
             cfg_i = _with_effects(config, others)
