@@ -184,3 +184,27 @@ def test_independent_bending_and_tilt_named_in_two_steps(tmp_path, seed):
     d, _ = run_case(tmp_path, "bending+tilt", seed)
     assert d["named_effects"][:2] == ["carbody-bending", "sensor-tilt"], [s["reason"] for s in d["steps"]]
     assert d["gap_after"]["share_flagged"] < 0.03
+
+
+def test_coupling_test_reads_the_tilt_from_the_cross_spectrum():
+    from types import SimpleNamespace
+
+    from suspid.workflows.diagnose.coupling import coupling_test
+
+    rng = np.random.default_rng(0)
+    channels = ["bogie_front_vertical", "bogie_front_lateral"]
+
+    def records(angle_deg):
+        a = math.radians(angle_deg)
+        out = []
+        for _ in range(24):
+            v = np.convolve(rng.standard_normal(800), np.ones(5) / 5, "same")
+            lat = 0.5 * rng.standard_normal(800)                  # lateral above vertical: power hardly changes
+            x = math.cos(a) * lat + math.sin(a) * v
+            out.append(SimpleNamespace(accelerations=np.array([v, x]), fs=100.0))
+        return out
+
+    tilted = coupling_test(records(6.0), channels, (0.4, 40.0))[0]
+    assert tilted["significant"] and tilted["angle_deg"] == pytest.approx(6.0, rel=0.15)
+    null = coupling_test(records(0.0), channels, (0.4, 40.0))[0]
+    assert not null["significant"]

@@ -11,8 +11,9 @@ power spectrum of x changes by sin²α V / L only, invisible where the lateral
 motion dominates (0.1-0.4 dB for 6-10° on a bogie); the cross-spectrum shows
 sin α directly.
 
-Per segment i: β_i = Σ_f Re S_vx / S_xx ÷ Σ_f S_vv / S_xx over the spectra band
-(a weighted least-squares estimate of the constant H, weights 1 / S_xx);
+Per segment i: β_i = Σ_f Re S_vx,i / S̄_xx ÷ Σ_f S_vv,i / S̄_xx over the spectra band
+(a weighted least-squares estimate of the constant H, weights 1 / S̄_xx, S̄_xx the
+mean over the segments: a segment's own S_xx would correlate with its cross-spectrum);
 β = mean β_i, its standard error from the spread over segments, t = β / se
 with v - 1 degrees of freedom; a channel's coupling is significant when its
 p-value is below alpha / (number of tested channels) (Bonferroni). The angle
@@ -77,8 +78,9 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
 
 
 def _betas(records: Sequence, k: int, kv: int, f_band: tuple[float, float], segment_seconds: float) -> np.ndarray:
-    """β_i of every record (see the module docstring)."""
-    betas = []
+    """β_i of every record (see the module docstring). The weights 1 / S_xx come from the mean of S_xx over all
+    records: a record's own S_xx correlates with its cross-spectrum and would bias β_i towards 0."""
+    spectra = []
     for r in records:
         x, y = np.asarray(r.accelerations[k], float), np.asarray(r.accelerations[kv], float)
         n = min(x.size, int(round(segment_seconds * r.fs)))
@@ -87,9 +89,15 @@ def _betas(records: Sequence, k: int, kv: int, f_band: tuple[float, float], segm
         f, s_xx = welch(x, fs=r.fs, nperseg=n)
         _, s_vv = welch(y, fs=r.fs, nperseg=n)
         _, s_vx = csd(y, x, fs=r.fs, nperseg=n)
-        use = (f >= f_band[0]) & (f <= f_band[1]) & (s_xx > 0)
-        if use.sum() < 3:
-            continue
-        w = 1.0 / s_xx[use]
-        betas.append(float(np.sum(np.real(s_vx[use]) * w) / np.sum(s_vv[use] * w)))
-    return np.array(betas)
+        spectra.append((f, s_xx, s_vv, np.real(s_vx)))
+    if not spectra:
+        return np.array([])
+    f0 = spectra[0][0]
+    spectra = [s for s in spectra if s[0].shape == f0.shape and np.allclose(s[0], f0)]
+    use = (f0 >= f_band[0]) & (f0 <= f_band[1])
+    mean_xx = np.mean([s[1] for s in spectra], axis=0)
+    use &= mean_xx > 0
+    if use.sum() < 3:
+        return np.array([])
+    w = 1.0 / mean_xx[use]
+    return np.array([float(np.sum(c[use] * w) / np.sum(v[use] * w)) for _, _, v, c in spectra])
