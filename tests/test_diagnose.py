@@ -128,9 +128,6 @@ def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
                   "score_local_alone": 100.0, "score_effect_plus_local": 400.0, "score_vs_local": 300.0}
     assert "new cells elsewhere" in decide([a, b], bump, Map(), opts)[1]    # 7 → 14: not named
     a.evidence["new_flagged"] = 0
-    a.evidence["flagged_own_after"] = 8
-    assert "grow" in decide([a, b], bump, Map(), opts)[1]
-    a.evidence["flagged_own_after"] = 0
     a.evidence["score_vs_local"] = 5.0
     assert "local discrepancy model" in decide([a, b], bump, Map(), opts)[1]
     a.evidence["score_vs_local"] = 300.0
