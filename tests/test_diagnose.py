@@ -126,8 +126,7 @@ def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
     a.evidence = {"explained_own": 0.95, "own_cells": 10, "flagged_own_before": 7, "flagged_own_after": 0,
                   "new_flagged": 7, "new_flagged_cells": [{"channel": "x", "f_low_hz": 1.0, "f_high_hz": 2.0}],
                   "score_local_alone": 100.0, "score_effect_plus_local": 400.0, "score_vs_local": 300.0}
-    assert "new cells elsewhere" in decide([a, b], bump, Map(), opts)[1]    # 7 → 14: not named
-    a.evidence["new_flagged"] = 0
+    assert decide([a, b], bump, Map(), opts)[0] == "a"     # new cells at the base parameters: evidence only
     a.evidence["score_vs_local"] = 5.0
     assert "local discrepancy model" in decide([a, b], bump, Map(), opts)[1]
     a.evidence["score_vs_local"] = 300.0

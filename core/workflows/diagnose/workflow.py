@@ -253,12 +253,16 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
     fixed.add("sensor-tilt")
     stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir, noise_path,
                                               fresh, progress, log, fixed)
-    n0, n1 = int(current.dmap.flagged.sum()), int(stage.dmap.flagged.sum())
-    if n1 > n0 + opts.max_new_flagged * max(n0, 1):
+    n0 = int(current.dmap.flagged.sum())
+    mine = np.array([grid.channels[grid.index(c)[1]] in params["channels"] for c in range(grid.n_cells)])
+    new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
+    n1 = int(stage.dmap.flagged.sum())
+    if new > max(1.0, opts.max_new_flagged * n0):
         named.pop()
         fixed.discard("sensor-tilt")
         record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
-                      reason=f"{reason}; retracted: with it the flagged cells grow ({n0} → {n1})")
+                      reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
+                             f"({n0} → {n1} in all)")
         return record, None
     record["named_parameters"] = canonical(params)
     record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
