@@ -135,6 +135,25 @@ def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
     assert decide([a, b], bump, Map(), opts) == (None, "no cell is flagged: no discrepancy beyond the noise model")
 
 
+def test_after_map_check_after_the_joint_fit():
+    """A named effect is retracted when, at the jointly fitted model, the flagged cells do not shrink, or new
+    ones appear in the cells it changes (the bracket named as bending: 7 → 14)."""
+    from types import SimpleNamespace
+
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose import check_after_joint_fit
+
+    opts = DiagnoseOptions()
+    before = SimpleNamespace(flagged=np.array([1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0], bool))
+    own = np.array([1, 1, 1, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0], bool)
+    worse = SimpleNamespace(flagged=np.ones(14, bool))
+    assert "do not shrink" in check_after_joint_fit(before, worse, own, opts)
+    fine = SimpleNamespace(flagged=np.array([0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 1, 0], bool))
+    assert check_after_joint_fit(before, fine, own, opts) is None          # a new cell outside its cells: kept
+    spill = SimpleNamespace(flagged=np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0], bool))
+    assert "new cells" in check_after_joint_fit(before, spill, own, opts)
+
+
 # ------------------------------------------------------------------------------------------ experiments
 def _config(tmp_path: Path, name: str, hidden: list, *, speed_kmh=300.0, fs=100.0, f_max=40.0, n_freqs=200,
             n_segments=32, n_reference=48, at="nominal", reidentify=False, extra: dict | None = None) -> Path:
