@@ -221,14 +221,20 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
     return path
 
 
-def parameter_errors(diagnosis: Mapping, truth_json: str | Path) -> dict[str, dict[str, float]]:
-    """Per identified parameter, |error| in % of the true value, before and after (``gap_*['w']``)."""
+def parameter_errors(diagnosis: Mapping, truth_json: str | Path, result_json: str | Path | None = None
+                     ) -> dict[str, dict[str, float]]:
+    """Per identified parameter, the error before and after (``gap_*['w']``): in % of the true value
+    (``gap_before``, ``gap_after``) and, with a run's ``result.json`` (its bounds), signed in % of the admissible
+    interval (``gap_before_interval``, ``gap_after_interval``), suspid's own measure."""
     truth = json.loads(Path(truth_json).read_text())["parameters"]
+    bounds = json.loads(Path(result_json).read_text())["bounds"] if result_json is not None else {}
     out = {}
     for stage in ("gap_before", "gap_after"):
-        gap = diagnosis.get(stage) or {}
-        out[stage] = {n: 100.0 * abs(v - truth[n]) / abs(truth[n]) for n, v in (gap.get("w") or {}).items()
-                      if n in truth}
+        w = (diagnosis.get(stage) or {}).get("w") or {}
+        out[stage] = {n: 100.0 * abs(v - truth[n]) / abs(truth[n]) for n, v in w.items() if n in truth}
+        if bounds:
+            out[stage + "_interval"] = {n: 100.0 * (v - truth[n]) / (bounds[n][1] - bounds[n][0])
+                                        for n, v in w.items() if n in truth and n in bounds}
     return out
 
 
