@@ -201,22 +201,24 @@ def check_after_joint_fit(before: DiscrepancyMap, after: DiscrepancyMap, own: np
 
 def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None, n_before: int,
                options: DiagnoseOptions) -> str | None:
-    """Why ``best`` may not be named, or None."""
+    """Why ``best`` may not be named (every failed check, joined), or None."""
+    why = []
     if runner is not None and best.score - runner.score < options.margin:
-        return (f"it does not beat {runner.effect} clearly (scores {best.score:.1f} and {runner.score:.1f}, "
-                f"margin {options.margin:g})")
+        why.append(f"it does not beat {runner.effect} clearly (scores {best.score:.1f} and {runner.score:.1f}, "
+                   f"margin {options.margin:g})")
     if bump is not None and bump.status == "fitted" and best.score - bump.score < options.margin:
-        return (f"it does not beat a generic bump of {best.n_parameters} parameters clearly "
-                f"(scores {best.score:.1f} and {bump.score:.1f})")
+        why.append(f"it does not beat a generic bump of {best.n_parameters} parameters clearly "
+                   f"(scores {best.score:.1f} and {bump.score:.1f})")
     ev = best.evidence
     explained = ev.get("explained_own", best.explained)
     if explained < options.min_explained:
         where = "in its own cells" if "explained_own" in ev else "of the flagged discrepancy"
-        return f"it explains only {100 * explained:.0f} % of D {where} (needs {100 * options.min_explained:.0f} %)"
+        why.append(f"it explains only {100 * explained:.0f} % of D {where} (needs {100 * options.min_explained:.0f} %)")
     if "score_vs_local" in ev and ev["score_vs_local"] < options.margin:
-        return (f"a local discrepancy model (a free bump per flagged channel) explains the data as well without it "
-                f"(score with the effect {ev['score_effect_plus_local']:.1f}, without {ev['score_local_alone']:.1f})")
-    return None
+        why.append(f"a local discrepancy model (a free bump per flagged channel) explains the data as well without "
+                   f"it (score with the effect {ev['score_effect_plus_local']:.1f}, without "
+                   f"{ev['score_local_alone']:.1f})")
+    return "; ".join(why) or None
 
 
 def unexplained_regions(dmap: DiscrepancyMap, ranking: list[Candidate], named: str | None,
