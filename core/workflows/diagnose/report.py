@@ -179,8 +179,9 @@ Each candidate's parameters are fitted to minimise D = Σ z² over every channel
 residual over its null standard deviation); score = ΔD - p ln(n) ({st['penalty_per_parameter']:.2f} per
 parameter p); a generic bump of the same size is the yardstick. Named
 only with a margin of {st['margin']:g} over the runner-up, the bump and a local discrepancy model (a free bump per
-flagged channel), explaining at least {100 * st['min_explained']:.0f} % of D in its own cells, shrinking the flagged
-cells there and flagging at most {100 * st.get('max_new_flagged', 0):.0f} % new cells elsewhere.
+flagged channel), explaining at least {100 * st['min_explained']:.0f} % of D in its own cells; after the joint fit
+the flagged cells must shrink, with at most {100 * st.get('max_new_flagged', 0):.0f} % new ones (one at least) among
+the cells it changes, or it is retracted.
 
 {markdown_table(['candidate', 'status', 'score', 'p', 'ΔD', 'explained', 'ΔJ', 'main parameter', 'parameters'], rank_rows)}
 
