@@ -8,9 +8,12 @@ segments, reference model error 1.5 dB systematic and 0.5 dB per segment;
 the diagnosis at the nominal parameters, the gap after with the fitted effect
 at the same parameters). Also the null case, the two confounders and,
 with ``--demo``, ``configs/diagnose-hidden-bending.yaml`` (identification
-before and after).
+before and after). With ``--independent``, the hidden-effect experiments on
+the independent train (``tests/independent/effects.py``: data suspid's code
+did not make; identification before and after, joint fit) instead.
 
     python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
+    python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5]
 """
 
 from __future__ import annotations
@@ -77,7 +80,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--demo", action="store_true", help="also run configs/diagnose-hidden-bending.yaml")
     ap.add_argument("--seeds", type=int, nargs="*", default=[3], help="experiment seeds (the tests use 3)")
+    ap.add_argument("--independent", action="store_true", help="the experiments on the independent train")
+    ap.add_argument("--cases", nargs="*", default=None, help="independent cases (default: all)")
     args = ap.parse_args()
+    if args.independent:
+        return independent(args.seeds, args.cases)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"# bench_diagnose  {datetime.date.today()}  python {platform.python_version()}  {platform.machine()}  "
           f"{os.cpu_count()} cpus  load average {load:.2f}")
@@ -116,6 +123,42 @@ def main() -> None:
             print(f"# demo J {gb['J']:.5f} -> {ga['J']:.5f}; errors (% of interval) before "
                   f"{json.dumps({k: round(v, 2) for k, v in gb['errors_percent'].items()})} after "
                   f"{json.dumps({k: round(v, 2) for k, v in ga['errors_percent'].items()})}")
+
+
+def independent(seeds: list[int], cases: list[str] | None) -> None:
+    """The table of the experiments on the independent train (docs/diagnose.md, section 2)."""
+    from independent import effects as HE
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"# bench_diagnose --independent  {datetime.date.today()}  {os.cpu_count()} cpus  load average {load:.2f}")
+    print("| case (seed) | named (steps) | effect parameters | flagged before → after each step | "
+          "errors before → after (% of interval) | unexplained (first) | s |")
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in seeds:
+            for case in cases or list(HE.CASES):
+                hidden, speeds = HE.CASES[case]
+                t0 = time.perf_counter()
+                path = HE.prepare(Path(tmp) / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds)
+                d = suspid.diagnose(path).diagnosis
+                res = json.loads((path.parent / "runs" / "config" / "before" / "result.json").read_text())
+                truth = json.loads((path.parent / "measurement" / "truth.json").read_text())["parameters"]
+
+                def err(gap):
+                    return {n: 100 * (v - truth[n]) / (res["bounds"][n][1] - res["bounds"][n][0])
+                            for n, v in (gap or {}).get("w", {}).items()}
+
+                eb, ea = err(d["gap_before"]), err(d["gap_after"])
+                params = "; ".join(f"{e['name']}: " + ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items()
+                                                               if isinstance(v, float))
+                                   for e in d["effects"]) or "-"
+                seq = " → ".join([f"{100 * d['gap_before']['share_flagged']:.1f} %"]
+                                 + [f"{100 * q['share_flagged_after']:.1f} %" for q in d["sequence"]
+                                    if q["share_flagged_after"] is not None])
+                errs = ", ".join(f"{n} {eb[n]:+.1f} → {ea[n]:+.1f}" if n in ea else f"{n} {eb[n]:+.1f}" for n in eb)
+                first = d["unexplained"][0]["text"] if d["unexplained"] else "-"
+                print(f"| {case} ({seed}) | {', '.join(d['named_effects']) or 'nothing'} | {params} | {seq} | "
+                      f"{errs} | {first} | {time.perf_counter() - t0:.0f} |", flush=True)
 
 
 def _describe(hidden: dict) -> str:

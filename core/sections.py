@@ -169,3 +169,15 @@ class DiagnoseOptions(Section):
     n_starts: int = Field(default=2, ge=1, description="starting points refined per effect")
     max_evaluations: int = Field(default=30, ge=3, description="simulator calls per refinement")
     reidentify: bool = Field(default=True, description="run the identification again with the named effect")
+    max_new_flagged: float = Field(default=0.1, ge=0.0, description="new flagged cells a named effect may create "
+                                   "elsewhere, as a share of the cells flagged before it")
+    max_effects: int = Field(default=3, ge=1, le=10, description="effects named one after the other, at most")
+    joint_rounds: int = Field(default=2, ge=1, le=10, description="rounds of the alternating joint fit (effect "
+                              "parameters at the identified suspension, identification with the effect)")
+    coupling_reference: ConfigPath | None = Field(
+        default=None, description="reference-date measured accelerations (file or folder): their "
+        "vertical-into-lateral coupling is subtracted in the coupling test (the train's own coupling)")
+    coupling_reference_track: ConfigPath | None = Field(
+        default=None, description="the track measured with coupling_reference")
+    joint_tol: float = Field(default=0.01, gt=0.0, description="the joint fit stops when no effect parameter moves "
+                             "by more than this share of its (normalised) range")

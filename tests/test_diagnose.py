@@ -122,8 +122,36 @@ def test_naming_rule_needs_a_margin_over_the_runner_up_and_the_bump():
     bump[2].score = 100.0
     a.explained = 0.3
     assert "explains only" in decide([a, b], bump, Map(), opts)[1]
+    a.explained = 0.9                                                       # the evidence of the after-map
+    a.evidence = {"explained_own": 0.95, "own_cells": 10, "flagged_own_before": 7, "flagged_own_after": 0,
+                  "new_flagged": 7, "new_flagged_cells": [{"channel": "x", "f_low_hz": 1.0, "f_high_hz": 2.0}],
+                  "score_local_alone": 100.0, "score_effect_plus_local": 400.0, "score_vs_local": 300.0}
+    assert decide([a, b], bump, Map(), opts)[0] == "a"     # new cells at the base parameters: evidence only
+    a.evidence["score_vs_local"] = 5.0
+    assert "local discrepancy model" in decide([a, b], bump, Map(), opts)[1]
+    a.evidence["score_vs_local"] = 300.0
+    assert decide([a, b], bump, Map(), opts)[0] == "a"
     Map.flagged = np.array([False, False])
     assert decide([a, b], bump, Map(), opts) == (None, "no cell is flagged: no discrepancy beyond the noise model")
+
+
+def test_after_map_check_after_the_joint_fit():
+    """A named effect is retracted when, at the jointly fitted model, the flagged cells do not shrink, or new
+    ones appear in the cells it changes (the bracket named as bending: 7 → 14)."""
+    from types import SimpleNamespace
+
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose import check_after_joint_fit
+
+    opts = DiagnoseOptions()
+    before = SimpleNamespace(flagged=np.array([1, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0], bool))
+    own = np.array([1, 1, 1, 0, 0, 0, 0, 1, 1, 1, 0, 0, 0, 0], bool)
+    worse = SimpleNamespace(flagged=np.ones(14, bool))
+    assert "do not shrink" in check_after_joint_fit(before, worse, own, opts)
+    fine = SimpleNamespace(flagged=np.array([0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0, 1, 0], bool))
+    assert check_after_joint_fit(before, fine, own, opts) is None          # a new cell outside its cells: kept
+    spill = SimpleNamespace(flagged=np.array([0, 0, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0], bool))
+    assert "new cells" in check_after_joint_fit(before, spill, own, opts)
 
 
 # ------------------------------------------------------------------------------------------ experiments
@@ -346,8 +374,8 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
         f_line = kmh * KMH / (math.pi * 0.92)
         assert any(abs(r["speed_kmh"] - kmh) < 0.1 and r["channel"] == "bogie_front_vertical"
                    and r["f_low_hz"] <= f_line <= r["f_high_hz"] for r in rows), (kmh, rows)
-    ranking, bumps, named, reason = rank_effects(cfg, problem, {}, y_sim, dmap, null, DiagnoseOptions(),
-                                                 lambda s: None)
+    rk = rank_effects(cfg, problem, {}, y_sim, dmap, null, DiagnoseOptions(), lambda s: None)
+    ranking, bumps, named, reason = rk.candidates, rk.bumps, rk.named, rk.reason
     assert named == "wheel-polygon", reason
     polygon = ranking[0]
     assert polygon.parameters["order"] == 1 and polygon.signature["200.0 km/h"]["speed_dependence"] == "proportional"

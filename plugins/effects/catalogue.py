@@ -133,6 +133,13 @@ class WheelPolygonOptions(_Params):
         return value
 
 
+WHEELSET_SETS: tuple[tuple[int, ...], ...] = ((1,), (2,), (3,), (4,), (1, 2), (1, 3), (1, 4), (2, 3), (2, 4),
+                                              (3, 4), (1, 2, 3, 4))
+"""Wheelsets a polygon fit tries (1 leads): each one, each pair (a bogie's, or one per bogie), all four. A line on
+both bogies (a re-profiling batch, or a rail corrugation every wheelset passes over) is explained by the set,
+not by one wheelset."""
+
+
 class WheelPolygon(Effect):
     """Out-of-round wheel, a polygon of order k: a periodic vertical input on the wheel.
 
@@ -171,8 +178,7 @@ class WheelPolygon(Effect):
             orders.update(ks)
             if not ks:   # a band between two orders: both neighbours
                 orders.update(k for k in (math.floor(lo / f1), math.ceil(hi / f1)) if k_lo <= k <= k_hi)
-        wheelsets = sorted({1, 2, 3, 4})
-        return [{"order": k, "wheelsets": [j]} for k in sorted(orders) for j in wheelsets]
+        return [{"order": k, "wheelsets": list(ws)} for k in sorted(orders) for ws in WHEELSET_SETS]
 
 
 # ------------------------------------------------------------------------------------------ yaw damper
@@ -234,7 +240,50 @@ class SensorTilt(Effect):
     def candidates(self, speeds_mps, flagged, channels) -> list[dict[str, Any]]:
         lateral = sorted({c for c, *_ in self.matching_cells(flagged)})
         choices = [[c] for c in lateral] + ([lateral] if len(lateral) > 1 else [])
-        return [{"channels": ch, "angle_deg": a} for ch in choices for a in (2.0, 6.0, 12.0)]
+        # gravity_roll False: the tilt itself (cos α a_lat + sin α a_vert), e.g. when the base model already
+        # has g φ_roll in its lateral sensors, or the reference-date noise model took it in
+        return [{"channels": ch, "angle_deg": a, "gravity_roll": gr} for ch in choices for a in (2.0, 6.0, 12.0)
+                for gr in (False, True)]
+
+    def starts_from_spectra(self, speeds_mps, flagged, channels, spectra: dict[str, Any]) -> list[dict[str, Any]]:
+        """Starting points read from the cross-coupling of vertical into lateral at the same sensor point.
+
+        A tilt α mixes the vertical acceleration of the point into the lateral channel: in power,
+        P_lat,meas = cos²α L + sin²α V, so the excess E = P_meas - L is s (V - L) with s = sin²α (L: the
+        model's lateral power, V: the measured vertical power of the same point, both corrected by μ_B).
+        s is a weighted least-squares fit over the bins where V > L (weights 1/L², relative errors), per
+        flagged lateral channel with a vertical partner (the same name with ``vertical``). The fit's R² is
+        returned as ``coupling_r2``: near 1 when the excess follows the vertical spectrum's shape, which a
+        tilt predicts and few other discrepancies do.
+
+        :param spectra: ``freqs`` (F,) Hz; ``measured`` (G, K, F) dB group means of y_mes - μ_B;
+            ``model`` (G, K, F) dB group means of y_sim; ``channels`` (K,) names.
+        :returns: starts ``{"channels", "angle_deg", "gravity_roll": False, "coupling_r2"}``
+            (``coupling_r2`` is evidence, not an option: the fitter removes it).
+        """
+        names = list(spectra["channels"])
+        meas, model = np.asarray(spectra["measured"]), np.asarray(spectra["model"])
+        starts = []
+        for c in sorted({c for c, *_ in self.matching_cells(flagged)}):
+            partner = c.replace("lateral", "vertical")
+            if partner == c or partner not in names:
+                continue
+            k, kv = names.index(c), names.index(partner)
+            L = 10.0 ** (model[:, k] / 10.0)
+            E = 10.0 ** (meas[:, k] / 10.0) - L
+            X = 10.0 ** (meas[:, kv] / 10.0) - L
+            use = X > 0
+            if use.sum() < 3:
+                continue
+            w = 1.0 / L[use] ** 2
+            s = float(np.sum(w * E[use] * X[use]) / np.sum(w * X[use] ** 2))
+            if not s > 0:
+                continue
+            r2 = 1.0 - float(np.sum(w * (E[use] - s * X[use]) ** 2) / max(np.sum(w * E[use] ** 2), 1e-300))
+            angle = math.degrees(math.asin(min(math.sqrt(s), math.sin(math.radians(self.bounds("angle_deg")[1])))))
+            starts.append({"channels": [c], "angle_deg": round(angle, 4), "gravity_roll": False,
+                           "coupling_r2": round(r2, 4)})
+        return starts
 
 
 # ------------------------------------------------------------------------------------------ conicity

@@ -15,15 +15,15 @@ The method is described in ``docs/diagnose.md``. The modules follow its steps:
 """
 
 from .cells import CellGrid, make_cells
-from .fit import Candidate, Discrepancy, EffectFitter, fit_bump
+from .fit import Candidate, Discrepancy, EffectFitter, LocalFit, fit_bump, fit_local
 from .locate import DiscrepancyMap, locate
-from .name import decide, rank_effects
+from .name import Ranking, check_after_joint_fit, decide, rank_effects, unexplained_regions
 from .null import NullCalibration, analytic_null, calibrate_null, shape_statistic
 from .reidentify import Stage, make_stage, write_augmented
 from .report import figure_map, figure_spectra_gap, write_diagnosis_report
 from .workflow import DiagnosisResult, run_diagnose
 
-__all__ = ["CellGrid", "Candidate", "DiagnosisResult", "Discrepancy", "DiscrepancyMap", "EffectFitter",
+__all__ = ["CellGrid", "Candidate", "DiagnosisResult", "Discrepancy", "DiscrepancyMap", "EffectFitter", "LocalFit", "check_after_joint_fit", "Ranking", "fit_local", "unexplained_regions",
            "NullCalibration", "Stage", "analytic_null", "calibrate_null", "decide",
            "figure_map", "figure_spectra_gap", "fit_bump", "locate", "make_cells", "make_stage", "rank_effects",
            "run_diagnose", "shape_statistic", "write_augmented", "write_diagnosis_report"]

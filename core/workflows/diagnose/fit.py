@@ -41,6 +41,9 @@ class Candidate:
     evaluations: int = 0
     signature: dict[str, Any] | None = None
     y_sim: np.ndarray | None = None
+    evidence: dict[str, Any] = field(default_factory=dict)
+    own: np.ndarray | None = None                  # (n_cells,) bool: its cells (signature + changed), see name.py
+    reason: str | None = None
 
     def as_dict(self) -> dict[str, Any]:
         def num(x):
@@ -50,7 +53,7 @@ class Candidate:
                 "parameters": canonical(self.parameters), "n_parameters": self.n_parameters,
                 "D": num(self.D), "delta_D": num(self.delta_D), "delta_D_flagged": num(self.delta_D_flagged),
                 "explained": num(self.explained), "delta_J": num(self.delta_J), "evaluations": self.evaluations,
-                "signature": self.signature}
+                "signature": self.signature, "evidence": canonical(self.evidence), "rejected_because": self.reason}
 
 
 class Discrepancy:
@@ -79,6 +82,15 @@ class Discrepancy:
 
     def __call__(self, y_sim: np.ndarray) -> tuple[float, float]:
         return self.of_means(self.target - self.grid.group_means(y_sim))
+
+    def within(self, bins: np.ndarray, means: np.ndarray) -> float:
+        """D over the bins ``bins`` ``(G, K, F)`` bool, for model group means ``means`` ``(G, K, F)``."""
+        return float((((self.target - means) / self.scale) ** 2)[bins].sum())
+
+    def spectra(self) -> dict[str, Any]:
+        """What effects' ``starts_from_spectra`` read: group means of y_mes - μ_B and of the base model."""
+        return {"freqs": self.grid.freqs, "channels": self.grid.channels, "measured": self.target,
+                "model": self.base_means}
 
 
 class EffectFitter:
@@ -120,6 +132,16 @@ class EffectFitter:
             return Candidate(cls.name, "excluded by signature (no flagged cell in its channels and band)",
                              signature=sigs)
         starts = effect.candidates(speeds, self.flagged, self.problem.channels)
+        from_data = getattr(effect, "starts_from_spectra", None)        # optional capability of an effect
+        evidence: dict[str, Any] = {}
+        if callable(from_data):
+            extra = from_data(speeds, self.flagged, self.problem.channels, self.disc.spectra())
+            for start in extra:
+                for key in [k for k in start if k not in cls.Options.model_fields]:
+                    evidence.setdefault(key, []).append({"start": {k: v for k, v in start.items()
+                                                                   if k in cls.Options.model_fields},
+                                                         key: start.pop(key)})
+            starts = list(extra) + list(starts)
         if not starts:
             return Candidate(cls.name, "no starting point in the flagged cells", signature=sigs)
         defaults = cls.defaults()
@@ -158,7 +180,26 @@ class EffectFitter:
         params.update({p: float(v) for p, v in zip(fitted, x)})
         D_all, D_f = self.disc(y)
         return Candidate(cls.name, "fitted", n_params, params, D_all, evaluations=self.evaluations - n0,
-                         signature=sigs, y_sim=y, delta_D_flagged=self.disc.D0_flagged - D_f)
+                         signature=sigs, y_sim=y, delta_D_flagged=self.disc.D0_flagged - D_f, evidence=evidence)
+
+    def refit(self, cls, parameters: dict[str, Any], n_parameters: int) -> Candidate:
+        """Refine an effect's continuous parameters from ``parameters`` (its structural choices kept) at ``w``:
+        the alternating joint fit (docs/diagnose.md, "Add and re-identify")."""
+        fitted = list(cls.fitted)
+        spec = {"name": cls.name, **{k: v for k, v in parameters.items() if k not in fitted},
+                **{k: parameters[k] for k in fitted}}
+        transforms = [_Transform(cls, p) for p in fitted]
+        n0 = self.evaluations
+        sim = self.simulator_with(spec)
+        x0 = np.array([float(parameters[p]) for p in fitted])
+        y0 = self.simulate(sim, self._w_effect(cls.name, fitted, x0))
+        if y0 is None:
+            return Candidate(cls.name, "failed: the effect cannot be simulated at these parameters", n_parameters)
+        D, spec, x, y = self._refine(cls.name, fitted, transforms, spec, x0, self.disc(y0)[0], y0)
+        params = {k: v for k, v in spec.items() if k != "name"} | {p: float(v) for p, v in zip(fitted, x)}
+        D_all, D_f = self.disc(y)
+        return Candidate(cls.name, "fitted", n_parameters, params, D_all, evaluations=self.evaluations - n0, y_sim=y,
+                         delta_D_flagged=self.disc.D0_flagged - D_f)
 
     @staticmethod
     def _w_effect(name: str, fitted: list[str], x: np.ndarray) -> dict[str, float]:
@@ -266,3 +307,69 @@ def fit_bump(disc: Discrepancy, dmap: DiscrepancyMap, n_parameters: int) -> Cand
                                               for g, ai in zip(groups, a)}}, D_f)
     D, params, D_f = best
     return Candidate("generic-bump", "fitted", n_parameters, params, D, delta_D_flagged=disc.D0_flagged - D_f)
+
+
+LOCAL_WIDTHS = (1 / 12, 1 / 6, 1 / 3, 2 / 3, 1.0, 2.0, math.inf)
+"""Widths (octaves, the Gaussian's sd in log2 f) of the local discrepancy bumps; inf: a flat offset (a gain)."""
+
+
+@dataclass
+class LocalFit:
+    """The local discrepancy model fitted on top of a model: one free bump per (speed group, channel).
+
+    :ivar D: the criterion D after the bumps; :ivar n_parameters: 3 per bump (amplitude, centre, width),
+        1 per flat offset; :ivar bumps: ``{(group, channel): (amplitude_db, centre_hz, width_octaves, ΔD)}``.
+    """
+
+    D: float
+    n_parameters: int
+    bumps: dict[tuple[int, int], tuple[float, float, float, float]]
+
+    def score(self, D0: float, penalty: float, extra_parameters: int = 0) -> float:
+        """ΔD from ``D0`` minus ``penalty`` per parameter (the bumps' and ``extra_parameters``)."""
+        return (D0 - self.D) - penalty * (self.n_parameters + extra_parameters)
+
+    def as_dict(self, grid: CellGrid) -> dict[str, Any]:
+        return {"D": round(self.D, 4), "n_parameters": self.n_parameters,
+                "bumps": [{"speed_kmh": round(float(grid.speeds[g] * 3.6), 3), "channel": grid.channels[k],
+                           "amplitude_db": round(a, 4), "centre_hz": round(fc, 4),
+                           "width_octaves": None if not math.isfinite(w) else w, "delta_D": round(dd, 3)}
+                          for (g, k), (a, fc, w, dd) in sorted(self.bumps.items())]}
+
+
+def fit_local(disc: Discrepancy, flagged: np.ndarray, means: np.ndarray, penalty: float) -> LocalFit:
+    """A local discrepancy model (in the spirit of Kennedy and O'Hagan 2001) on top of model group means
+    ``means`` ``(G, K, F)``: for each (speed group, channel) holding a flagged cell, the free bump
+    a exp(-½ (log2(f / f_c) / w)²) dB (or a flat offset a) that lowers D most, kept when its ΔD beats
+    ``penalty`` per parameter. Amplitude by weighted least squares; f_c on 64 log-spaced points over the
+    channel's band; w in :data:`LOCAL_WIDTHS`.
+
+    :param flagged: ``(n_cells,)`` bool, the cells whose (group, channel) get a bump.
+    """
+    grid = disc.grid
+    G, K = len(grid.speeds), len(grid.channels)
+    r = disc.target - means                                               # (G, K, F)
+    wgt = 1.0 / disc.scale ** 2
+    D = float((r ** 2 * wgt).sum())
+    lf = np.log2(np.maximum(grid.freqs, 1e-9))
+    centres = np.geomspace(max(grid.freqs[0], 1e-3), grid.freqs[-1], 64)
+    shapes = [(fc, w, np.exp(-0.5 * ((lf - math.log2(fc)) / w) ** 2)) for fc in centres for w in LOCAL_WIDTHS
+              if math.isfinite(w)]
+    shapes.append((float(np.sqrt(grid.freqs[0] * grid.freqs[-1])), math.inf, np.ones_like(lf)))
+    S = np.array([s for _, _, s in shapes])                                # (n_shapes, F)
+    pairs = sorted({grid.index(int(c))[:2] for c in np.nonzero(flagged)[0]})
+    bumps, n_par = {}, 0
+    for g, k in pairs:
+        rk, wk = r[g, k], wgt[g, k]
+        num = S @ (wk * rk)
+        den = (S ** 2) @ wk
+        gain = num ** 2 / np.maximum(den, 1e-300)                          # ΔD of each shape at its best amplitude
+        p = np.array([1 if not math.isfinite(w) else 3 for _, w, _ in shapes])
+        net = gain - penalty * p
+        i = int(np.argmax(net))
+        if net[i] > 0:
+            fc, w, _ = shapes[i]
+            bumps[(g, k)] = (float(num[i] / den[i]), float(fc), float(w), float(gain[i]))
+            D -= float(gain[i])
+            n_par += int(p[i])
+    return LocalFit(D, n_par, bumps)

@@ -65,18 +65,32 @@ def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fre
     return Stage(label, cfg, problem, w, y_sim, result)
 
 
-def write_augmented(config: Config, candidate: Candidate, out_dir: Path, noise_path: Path) -> Path:
-    """``augmented.yaml``: the config with the named effect and the base run's noise model."""
+def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], noise_path: Path, run_dir: Path
+                   ) -> dict[str, Any]:
+    """The config (as data) with ``effects`` ``[(name, parameters)]`` appended to the simulator's effects and
+    the base run's noise model; its output in ``run_dir``."""
     data = config.model_dump(mode="json", exclude={"source_file"})
     options = dict(data["simulator"].get("options") or {})
-    options["effects"] = list(options.get("effects") or []) + [{"name": candidate.effect,
-                                                                **canonical(candidate.parameters)}]
+    options["effects"] = list(options.get("effects") or []) + [{"name": name, **canonical(params)}
+                                                               for name, params in effects]
     data["simulator"]["options"] = options
     data["noise"] = {**(data.get("noise") or {}), "path": str(noise_path)}
     data["name"] = config.name if config.name.endswith("-augmented") else f"{config.name}-augmented"
-    data["output"] = {"dir": str(out_dir / "after"), "figure_channel": config.output.figure_channel}
-    path = out_dir / "augmented.yaml"
+    data["output"] = {"dir": str(run_dir), "figure_channel": config.output.figure_channel}
+    return data
+
+
+def write_augmented(config: Config, effects: Candidate | list[tuple[str, dict[str, Any]]], out_dir: Path,
+                    noise_path: Path, path: Path | None = None, run_dir: Path | None = None) -> Path:
+    """``augmented.yaml``: the config with the named effects (``[(name, parameters)]``, or one candidate) and
+    the base run's noise model; output in ``out_dir/after`` unless ``run_dir``."""
+    if isinstance(effects, Candidate):
+        effects = [(effects.effect, effects.parameters)]
+    data = augmented_data(config, effects, noise_path, run_dir or out_dir / "after")
+    path = path or out_dir / "augmented.yaml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = ", ".join(f"'{n}'" for n, _ in effects)
     header = (f"# Written by suspid diagnose from {config.source_file}:\n"
-              f"# the model with the named effect '{candidate.effect}' and its fitted parameters,\n"
+              f"# the model with the named effects {names} and their fitted parameters,\n"
               f"# and the noise model of the base run (the measurements and B are unchanged).\n")
     return write_text(path, header + yaml.safe_dump(data, sort_keys=False))

@@ -140,6 +140,17 @@ def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Sta
     named = diagnosis["named"]
     verdict = (f"**Named: `{named}`** with {_fmt_params(diagnosis['named_parameters'])}. {diagnosis['reason']}."
                if named else f"**Nothing named.** {diagnosis['reason']}.")
+    if len(diagnosis.get("named_effects") or []) > 1:
+        verdict += " Then: " + "; ".join(f"step {s['step']}: `{s['named']}` ({s['reason']})"
+                                         for s in diagnosis["steps"][1:] if s["named"]) + "."
+    seq_rows = [[s["step"], s["named"] or "(nothing)",
+                 f"{100 * s['gap_before']['share_flagged']:.1f} %",
+                 f"{100 * s['gap_after']['share_flagged']:.1f} %" if s.get("gap_after") else "-",
+                 f"{s['gap_after']['integrated_db_hz']:.2f}" if s.get("gap_after") else "-",
+                 (f"{s['joint_fit']['mode']}, {s['joint_fit']['rounds']} rounds"
+                  f"{', converged' if s['joint_fit'].get('converged') else ''}") if s.get("joint_fit") else "-",
+                 s["reason"]] for s in diagnosis.get("steps", [])]
+    unexplained = "\n".join(f"- {u['text']}" for u in diagnosis.get("unexplained") or []) or "(none)"
     st = diagnosis["statistics"]
     text = f"""# Discrepancy diagnosis `{diagnosis['name']}`
 
@@ -167,12 +178,24 @@ peak tests: a moved resonance, a narrow line). Null calibrated by {st['n_bootstr
 Each candidate's parameters are fitted to minimise D = Σ z² over every channel and frequency (z: the mean
 residual over its null standard deviation); score = ΔD - p ln(n) ({st['penalty_per_parameter']:.2f} per
 parameter p); a generic bump of the same size is the yardstick. Named
-only with a margin of {st['margin']:g} over the runner-up and the bump, explaining at least
-{100 * st['min_explained']:.0f} % of the flagged discrepancy.
+only with a margin of {st['margin']:g} over the runner-up, the bump and a local discrepancy model (a free bump per
+flagged channel), explaining at least {100 * st['min_explained']:.0f} % of D in its own cells; after the joint fit
+the flagged cells must shrink, with at most {100 * st.get('max_new_flagged', 0):.0f} % new ones (one at least) among
+the cells it changes, or it is retracted.
 
 {markdown_table(['candidate', 'status', 'score', 'p', 'ΔD', 'explained', 'ΔJ', 'main parameter', 'parameters'], rank_rows)}
 
-## 3. The gap before and after adding the effect
+## 3. One effect after the other
+
+Joint fit: {diagnosis.get('joint_fit', '-')}.
+
+{markdown_table(['step', 'named', 'flagged before', 'flagged after', 'integrated dB·Hz after', 'joint fit', 'reason'], seq_rows) if seq_rows else ''}
+
+Unexplained at the end:
+
+{unexplained}
+
+## 4. The gap before and after adding the effects
 
 {f"Augmented config: `{diagnosis['augmented_config']}`" if diagnosis['augmented_config'] else 'No augmented config (nothing named).'}
 

@@ -1,9 +1,13 @@
-"""``run_diagnose``: the whole workflow, from a config file to ``diagnosis.json`` and ``diagnosis.md``."""
+"""``run_diagnose``: the whole workflow, from a config file to ``diagnosis.json`` and ``diagnosis.md``.
+
+Method: ``docs/diagnose.md`` (steps 3-6).
+"""
 
 from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,16 +15,20 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from suspid import registry
 from suspid.config import Config, load_config
 from suspid.infra.files import canonical, write_json
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.threads import single_blas_thread
 from suspid.workflows.evaluation import j_of_spectra
+from suspid.workflows.problem import read_measurements
 
-from .cells import make_cells
+from .cells import CellGrid, make_cells
+from .coupling import coupling_test
+from .fit import Candidate, Discrepancy, EffectFitter, _Transform
 from .locate import locate
-from .name import rank_effects
-from .null import calibrate_null
+from .name import Ranking, _supported_effects, check_after_joint_fit, rank_effects, unexplained_regions
+from .null import NullCalibration, calibrate_null
 from .reidentify import Stage, make_stage, write_augmented
 from .report import write_diagnosis_report
 
@@ -34,14 +42,23 @@ class DiagnosisResult:
 
     @property
     def named(self) -> str | None:
-        """The named effect, or None."""
+        """The first named effect, or None."""
         return self.diagnosis["named"]
+
+    @property
+    def named_effects(self) -> list[str]:
+        """Every named effect, in the order they were named."""
+        return list(self.diagnosis["named_effects"])
 
 
 def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str], config: Config, *,
                  fresh: bool = False, progress: bool = False, log: Callable[[str], None] = lambda s: None
                  ) -> DiagnosisResult:
     """Diagnose ``config``: writes diagnosis.json, diagnosis.md and figures in its run folder.
+
+    Steps: identify (or take the nominal model), locate, name an effect; add it, fit it jointly with the
+    suspension (alternating), locate again and name the next one, until nothing more is named, nothing is
+    flagged, or ``diagnose.max_effects`` effects are named.
 
     :param source: the config file or mapping ``config`` was loaded from (with ``overrides``).
     :param fresh: start the identifications over.
@@ -52,47 +69,110 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     opts = config.diagnose
     out_dir = config.run_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
+    noise_path = out_dir / "before" / "noise_model.npz"
     before = make_stage("before", config, opts.at == "identified", out_dir / "before", fresh=fresh,
                         progress=progress, log=log)
     problem = before.problem
     grid = make_cells(problem.channels, problem.freqs, [s.mean_speed for s in problem.segments],
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
+    named: list[tuple[str, dict[str, Any], int]] = []
+    fixed: set[str] = set()           # effects whose parameters come from a direct estimate (not refitted)
+    steps: list[dict[str, Any]] = []
+    coupling = _coupling(config, problem, log)
+    rankings: list[Ranking] = []
+    rank_s = 0.0
     with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.infra.threads)
         null = calibrate_null(grid, problem.noise_model, opts.n_bootstrap,
                               named_rng(config.seed, "diagnose-bootstrap"))
-        mu = problem.noise_model.mean_
-        before.dmap = locate(grid, null, problem.y_mes, before.y_sim, mu, opts.alpha)
-        before.dmap.J = j_of_spectra(problem, before.y_sim)[0]
-        log(f"located: {int(before.dmap.flagged.sum())} flagged cells; ranking the effects")
-        t_rank = time.perf_counter()
-        ranking, bumps, named, reason = rank_effects(config, problem, before.w, before.y_sim, before.dmap, null,
-                                                     opts, log)
-        rank_s = time.perf_counter() - t_rank
-    log(f"named: {named or 'nothing'} ({reason})")
-    after, aug_path = None, None
-    if named is not None:
-        cand = next(c for c in ranking if c.effect == named)
-        aug_path = write_augmented(config, cand, out_dir, out_dir / "before" / "noise_model.npz")
-        aug = load_config(aug_path)
-        if opts.reidentify:
-            after = make_stage("after", aug, True, out_dir / "after", fresh=fresh, progress=progress, log=log)
-        else:
-            after = Stage("after", aug, problem, before.w, cand.y_sim, None)
-        after.dmap = locate(grid, null, after.problem.y_mes, after.y_sim, after.problem.noise_model.mean_,
-                            opts.alpha)
-        after.dmap.J = j_of_spectra(after.problem, after.y_sim)[0]
+        _locate(before, grid, null, opts.alpha)
+        current = before
+        for step in range(1, opts.max_effects + 1):
+            tilted = [r for r in (coupling or []) if r["significant"]]
+            if tilted and "sensor-tilt" not in {n for n, _, _ in named} and _eligible(config, problem, "sensor-tilt"):
+                record, stage = _tilt_from_coupling(config, named, fixed, tilted, coupling, current, step, grid,
+                                                    null, out_dir, noise_path, fresh, progress, log)
+                steps.append(record)
+                rankings.append(Ranking([], {}, None, record["named"], record["reason"], []))
+                if stage is None:
+                    break
+                current = stage
+                if not current.dmap.flagged.any():
+                    break
+                continue
+            log(f"step {step}: {int(current.dmap.flagged.sum())} flagged cells; ranking the effects")
+            t_rank = time.perf_counter()
+            cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
+            rk = rank_effects(cfg_now, current.problem, current.w, current.y_sim, current.dmap, null, opts, log,
+                              exclude=[n for n, _, _ in named])
+            rank_s += time.perf_counter() - t_rank
+            rankings.append(rk)
+            log(f"step {step}: named {rk.named or 'nothing'} ({rk.reason})")
+            record: dict[str, Any] = {"step": step, "named": rk.named, "reason": rk.reason,
+                                      "gap_before": current.gap(), "unexplained": rk.unexplained,
+                                      "ranking": [c.as_dict() for c in rk.candidates],
+                                      "local_model": rk.local.as_dict(grid) if rk.local is not None else None}
+            steps.append(record)
+            if rk.named is None:
+                break
+            cand = next(c for c in rk.candidates if c.effect == rk.named)
+            named.append((cand.effect, dict(cand.parameters), cand.n_parameters))
+            stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir,
+                                                      noise_path, fresh, progress, log, fixed)
+            rejected = check_after_joint_fit(current.dmap, stage.dmap, cand.own, opts)
+            if rejected is not None:   # the after-map decides: the effect is not named after all
+                log(f"step {step}: {cand.effect} retracted: {rejected}")
+                cand.reason = rejected
+                named.pop()
+                record.update(named=None, retracted=cand.effect, gap_retracted=stage.gap(),
+                              reason=f"unexplained discrepancy: no catalogue effect fits (best: {cand.effect}, "
+                                     f"rejected because {rejected})")
+                record["unexplained"] = unexplained_regions(current.dmap, rk.candidates, None)
+                if step == 1:
+                    rk.named, rk.reason = None, record["reason"]
+                break
+            current = stage
+            record["named_parameters"] = canonical(named[-1][1])
+            record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
+            record["gap_after"] = current.gap()
+            if not current.dmap.flagged.any():
+                break
+    after = current if named else None
+    aug_path = None
+    if named:
+        final_run = Path(current.config.output.dir)
+        aug_path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path)
+        if final_run.resolve() != (out_dir / "after").resolve() and final_run.exists():
+            shutil.copytree(final_run, out_dir / "after", dirs_exist_ok=True)
+    first = next((r for r in rankings if r.candidates), rankings[0])
+    last = steps[-1]
+    unexplained = last["unexplained"] if last["named"] is None else (
+        unexplained_regions(current.dmap, [], None) if current.dmap.flagged.any() else [])
     diagnosis = {
         "name": config.name,
         "config": str(config.source_file),
         "base_model": opts.at,
         "flagged": [{k: r[k] for k in ("channel", "f_low_hz", "f_high_hz", "sign", "magnitude_db", "test", "z", "q",
                                        "speed_kmh")} for r in before.dmap.rows(only_flagged=True)],
-        "ranking": [c.as_dict() for c in ranking],
-        "generic_bumps": {str(p): b.as_dict() for p, b in bumps.items()},
-        "named": named,
-        "reason": reason,
-        "named_parameters": next((canonical(c.parameters) for c in ranking if c.effect == named), None),
+        "ranking": next((s["ranking"] for s in steps if s.get("ranking")), []),
+        "generic_bumps": {str(p): b.as_dict() for p, b in first.bumps.items()},
+        "local_model": next((s["local_model"] for s in steps if s.get("local_model")), None),
+        "coupling": coupling,
+        "named": named[0][0] if named else None,
+        "named_effects": [n for n, _, _ in named],
+        "reason": steps[0]["reason"],
+        "named_parameters": canonical(named[0][1]) if named else None,
+        "effects": [{"name": n, "parameters": canonical(p)} for n, p, _ in named],
+        "steps": steps,
+        "sequence": [{"step": s["step"], "named": s["named"],
+                      "share_flagged_before": s["gap_before"]["share_flagged"],
+                      "share_flagged_after": s.get("gap_after", {}).get("share_flagged"),
+                      "integrated_db_hz_after": s.get("gap_after", {}).get("integrated_db_hz")} for s in steps],
+        "unexplained": unexplained,
+        "joint_fit": ("alternating: effect parameters refitted at the re-identified suspension parameters, "
+                      "then the suspension re-identified with them, until no effect parameter moves by more than "
+                      f"{opts.joint_tol:g} of its range ({opts.joint_rounds} rounds at most)") if opts.reidentify
+        else "none: reidentify is false, the effects are fitted at the base parameters",
         "gap_before": before.gap(),
         "gap_after": after.gap() if after is not None else None,
         "augmented_config": str(aug_path) if aug_path is not None else None,
@@ -109,7 +189,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             "bootstrap_null_rate_at_5pct": null.null_rate, "fdr": "Benjamini-Yekutieli", "alpha": opts.alpha,
             "penalty_per_parameter": math.log(grid.n_cells // grid.band_edges.shape[0] * grid.freqs.size),
             "margin": opts.margin,
-            "min_explained": opts.min_explained},
+            "min_explained": opts.min_explained, "max_new_flagged": opts.max_new_flagged},
         "map_before": before.dmap.rows(),
         "map_after": after.dmap.rows() if after is not None else None,
         "wall_time_s": None, "ranking_time_s": round(rank_s, 2),
@@ -117,5 +197,153 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     diagnosis["wall_time_s"] = round(time.perf_counter() - t_start, 2)
     diagnosis = canonical(diagnosis)
     write_json(out_dir / "diagnosis.json", diagnosis)
-    write_diagnosis_report(out_dir, diagnosis, before, after, ranking, bumps)
+    write_diagnosis_report(out_dir, diagnosis, before, after, first.candidates, first.bumps)
     return DiagnosisResult(out_dir, json.loads(json.dumps(diagnosis)))
+
+
+def _eligible(config: Config, problem, name: str) -> bool:
+    names = config.diagnose.effects if config.diagnose.effects is not None else registry.names("effect")
+    supported = _supported_effects(problem.simulator)
+    return name in names and (supported is None or name in supported)
+
+
+def _coupling(config: Config, problem, log: Callable[[str], None]) -> list[dict[str, Any]] | None:
+    """The coupling test on the measured records (None for a numerical experiment: its data are spectra)."""
+    if config.data.source != "measured" or config.data.measurements is None:
+        return None
+    _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
+    opts = config.diagnose
+    reference = None
+    if opts.coupling_reference is not None:
+        _, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track, problem.channels)
+    rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, config.spectra.f_max_hz),
+                         opts.alpha, reference=reference)
+    for r in rows:
+        log(f"coupling {r['channel']} <- {r['vertical']}: beta {r['beta']:.4f} ± {r['se']:.4f} "
+            f"(t {r['t']:.1f}){' significant' if r['significant'] else ''}")
+    return rows
+
+
+def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dict[str, Any]],
+                        coupling: list[dict[str, Any]], current: Stage, step: int, grid: CellGrid,
+                        null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool, progress: bool,
+                        log: Callable[[str], None]) -> tuple[dict[str, Any], Stage | None]:
+    """Name ``sensor-tilt`` from a significant coupling: the tilted channels, the angle asin |β| (the mean over
+    them, weighted by 1/se²), the tilt alone (no gravity term: the reference date had the sensors' gravity
+    response too). The angle stays as estimated in the joint fit (power spectra hardly see it)."""
+    opts = config.diagnose
+    w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
+    angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
+    params = {"angle_deg": angle, "channels": [r["channel"] for r in tilted], "gravity_roll": False}
+    reason = ("sensor-tilt from the coupling of vertical into lateral at the same point: " + "; ".join(
+        f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle {abs(r['angle_deg']):.2f}°)"
+        for r in tilted))
+    record: dict[str, Any] = {"step": step, "named": "sensor-tilt", "route": "coupling", "reason": reason,
+                              "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
+                              "ranking": [], "local_model": None}
+    log(f"step {step}: {reason}")
+    cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
+    disc = Discrepancy(grid, null, current.problem.y_mes, current.problem.noise_model, current.dmap.flagged,
+                       current.y_sim)
+    fitter = EffectFitter(cfg_now, current.problem, current.w, disc, current.dmap.flagged_cells(), opts, log)
+    spec = {"name": "sensor-tilt", **params}
+    y = fitter.simulate(fitter.simulator_with(spec), {"sensor-tilt/angle_deg": angle})
+    cand = Candidate("sensor-tilt", "fitted", 2, params, y_sim=y if y is not None else current.y_sim)
+    named.append(("sensor-tilt", params, 2))
+    fixed.add("sensor-tilt")
+    stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir, noise_path,
+                                              fresh, progress, log, fixed)
+    n0 = int(current.dmap.flagged.sum())
+    mine = np.array([grid.channels[grid.index(c)[1]] in params["channels"] for c in range(grid.n_cells)])
+    new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
+    n1 = int(stage.dmap.flagged.sum())
+    if new > max(1.0, opts.max_new_flagged * n0):
+        named.pop()
+        fixed.discard("sensor-tilt")
+        record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
+                      reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
+                             f"({n0} → {n1} in all)")
+        return record, None
+    record["named_parameters"] = canonical(params)
+    record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
+    record["gap_after"] = stage.gap()
+    return record, stage
+
+
+def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
+    stage.dmap = locate(grid, null, stage.problem.y_mes, stage.y_sim, stage.problem.noise_model.mean_, alpha)
+    stage.dmap.J = j_of_spectra(stage.problem, stage.y_sim)[0]
+
+
+def _with_effects(config: Config, effects: list[tuple[str, dict[str, Any]]]) -> Config:
+    """``config`` with ``effects`` appended to its simulator's effects (for fitting; nothing written)."""
+    if not effects:
+        return config
+    options = dict(config.simulator.options)
+    options["effects"] = list(options.get("effects") or []) + [{"name": n, **p} for n, p in effects]
+    return config.model_copy(update={"simulator": config.simulator.model_copy(update={"options": options})})
+
+
+def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], cand, current: Stage, step: int,
+                 grid: CellGrid, null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool,
+                 progress: bool, log: Callable[[str], None], fixed: set[str] = frozenset()
+                 ) -> tuple[Stage, dict[str, Any]]:
+    """Add the named effects to the model and fit them with the suspension: the alternating joint fit.
+
+    Round r: identify the suspension with the effects at their current parameters; refit each effect's
+    continuous parameters at the identified suspension (the others fixed); stop when no parameter moves by more
+    than ``joint_tol`` of its range. ``named`` is updated in place. Returns the final stage and the trace.
+    """
+    opts = config.diagnose
+    if not opts.reidentify:
+        aug = load_config(write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
+                                          path=out_dir / "steps" / f"augmented-{step}.yaml"))
+        stage = Stage(f"after-{step}", aug, current.problem, current.w, cand.y_sim, None)
+        _locate(stage, grid, null, opts.alpha)
+        return stage, {"mode": "none (reidentify: false)", "rounds": 0, "converged": None, "trace": []}
+    trace: list[dict[str, Any]] = []
+    converged = False
+    stage = current
+    for r in range(1, opts.joint_rounds + 1):
+        run_dir = out_dir / "steps" / f"{step}-{r}"
+        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
+                               path=out_dir / "steps" / f"augmented-{step}-{r}.yaml", run_dir=run_dir)
+        stage = make_stage(f"after-{step}-{r}", load_config(path), True, run_dir, fresh=fresh, progress=progress,
+                           log=log)
+        _locate(stage, grid, null, opts.alpha)
+        moved, refits = 0.0, []
+        for i, (name, params, n_par) in enumerate(named):
+            if name in fixed:
+                continue
+            cls = registry.get("effect", name)
+            others = [(n, p) for j, (n, p, _) in enumerate(named) if j != i]
+            cfg_i = _with_effects(config, others)
+            disc = Discrepancy(grid, null, stage.problem.y_mes, stage.problem.noise_model, stage.dmap.flagged,
+                               stage.y_sim)
+            fitter = EffectFitter(cfg_i, stage.problem, stage.w, disc, stage.dmap.flagged_cells(), opts, log)
+            refit = fitter.refit(cls, params, n_par)
+            if refit.status != "fitted":
+                refits.append({"effect": name, "status": refit.status})
+                continue
+            move = max((abs(_Transform(cls, p).to_unit(refit.parameters[p]) - _Transform(cls, p).to_unit(params[p]))
+                        for p in cls.fitted), default=0.0)
+            moved = max(moved, move)
+            refits.append({"effect": name, "refitted": canonical({p: refit.parameters[p] for p in cls.fitted}),
+                           "move": round(move, 5)})
+            named[i] = (name, {**params, **{p: refit.parameters[p] for p in cls.fitted}}, n_par)
+        trace.append({"round": r, "w": {k: float(v) for k, v in stage.w.items()},
+                      "errors_percent": (stage.result or {}).get("errors_percent"),
+                      "share_flagged": stage.dmap.share_flagged, "refits": refits})
+        log(f"joint fit, round {r}: largest effect-parameter move {moved:.4f} of its range")
+        if moved <= opts.joint_tol:
+            converged = True
+            break
+    if not converged and opts.joint_rounds > 1:
+        # the last refit moved the effects: identify once more so that the stage matches the parameters
+        run_dir = out_dir / "steps" / f"{step}-final"
+        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
+                               path=out_dir / "steps" / f"augmented-{step}-final.yaml", run_dir=run_dir)
+        stage = make_stage(f"after-{step}-final", load_config(path), True, run_dir, fresh=fresh, progress=progress,
+                           log=log)
+        _locate(stage, grid, null, opts.alpha)
+    return stage, {"mode": "alternating", "rounds": len(trace), "converged": converged, "trace": trace}

@@ -1,0 +1,212 @@
+"""``suspid diagnose`` on hidden effects written by code that is not suspid's (``independent/effects.py``).
+
+The independent train (``tests/independent``) makes the measurements of both
+dates; the hidden effects are filters and inputs of its own (a bending mode of
+its own modal model, a bracket resonance, a calibration gain, a tilted sensor,
+polygonal wheels with their own phases), under its measurement process (fixed
+per-channel and per-segment gains, a sensor-noise floor, anti-alias filter).
+suspid's rigid exudyn model, identified on these files, is the base model.
+
+Fast tests check the generator and the pieces of the naming rule; the
+experiments are slow (each identifies the suspension before and after).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import suspid
+from independent import effects as HE
+from independent import train as TR
+
+KMH = 1 / 3.6
+
+
+# ------------------------------------------------------------------------------------------ the generator
+def _spectrum(recs, channel: str) -> tuple[np.ndarray, np.ndarray]:
+    from scipy.signal import welch
+
+    k = TR.CHANNELS.index(channel)
+    f, p = welch(np.array([r.accelerations[k] for r in recs]), fs=recs[0].fs, nperseg=256, axis=-1)
+    return f, p.mean(axis=0)
+
+
+def test_generator_uses_no_suspid_effect_code():
+    text = Path(HE.__file__).read_text()
+    code = text.split("def prepare", 1)[0]          # prepare() is the consumer side (noise model, config)
+    assert "suspid" not in code.replace("suspid's", "").replace("``suspid diagnose``", "")
+
+
+def test_hidden_effects_show_where_they_should():
+    common = dict(seed=1, n_segments=3, speed_mps=300 * KMH, length_m=300.0)
+    base = HE.simulate(None, (), **common)
+    f, p0 = _spectrum(base, "carbody_middle_vertical")
+    _, p1 = _spectrum(HE.simulate(None, (HE.BracketResonance("carbody_middle_vertical", 14.0, 0.05),), **common),
+                      "carbody_middle_vertical")
+    ratio = 10 * np.log10(p1 / p0)
+    assert ratio[np.argmin(np.abs(f - 14.0))] > 10.0 and abs(ratio[np.argmin(np.abs(f - 2.0))]) < 0.5
+    _, g1 = _spectrum(HE.simulate(None, (HE.CalibrationGain(("bogie_front_vertical",), 1.25),), **common),
+                      "bogie_front_vertical")
+    _, g0 = _spectrum(base, "bogie_front_vertical")
+    assert np.median(10 * np.log10(g1 / g0)) == pytest.approx(20 * math.log10(1.25), abs=0.05)
+    _, t1 = _spectrum(HE.simulate(None, (HE.SensorTilt("bogie_front_lateral", 10.0),), **common),
+                      "bogie_front_lateral")
+    _, t0 = _spectrum(base, "bogie_front_lateral")
+    assert np.max(10 * np.log10(t1 / t0)) > 1.0                   # vertical mixed into lateral
+    poly = HE.simulate(None, (HE.WheelPolygon(1, 1e-4, (2, 3)),), **common)
+    _, q1 = _spectrum(poly, "bogie_front_vertical")
+    j = np.argmin(np.abs(f - 300 * KMH / (math.pi * 0.92)))
+    assert 10 * np.log10(q1[j] / g0[j]) > 5.0                     # the 28.8 Hz line
+
+
+def test_flexible_carbody_is_the_trains_own_mode():
+    common = dict(seed=2, n_segments=3, speed_mps=300 * KMH, length_m=300.0)
+    f, p0 = _spectrum(HE.simulate(None, (), **common), "carbody_middle_vertical")
+    _, p1 = _spectrum(HE.simulate(None, (HE.FlexibleCarbody(9.5, 0.02),), **common), "carbody_middle_vertical")
+    r = 10 * np.log10(p1 / p0)
+    assert f[np.argmax(r)] == pytest.approx(9.5, abs=0.8) and r.max() > 6.0
+
+
+# ------------------------------------------------------------------------------------------ pieces of the rule
+def test_local_model_takes_a_one_channel_bump_and_a_flat_gain():
+    from suspid.workflows.diagnose import fit_local, make_cells
+    from suspid.workflows.diagnose.fit import Discrepancy
+
+    class Null:
+        pass
+
+    f = np.geomspace(0.5, 30, 120)
+    grid = make_cells(["a", "b", "c"], f, [80.0] * 4)
+    null = Null()
+    null.bin_sd = np.full((1, 3, f.size), 0.2)
+    nm = type("NM", (), {"mean_": np.zeros((3, f.size))})()
+    y_mes = np.zeros((4, 3, f.size))
+    y_mes[:, 0] += 6.0 * np.exp(-0.5 * (np.log2(f / 14.0) / (1 / 6)) ** 2)   # a bracket on a
+    y_mes[:, 2] += 1.9                                                        # a gain on c
+    flagged = np.zeros(grid.n_cells, bool)
+    flagged[:] = True
+    disc = Discrepancy(grid, null, y_mes, nm, flagged, np.zeros_like(y_mes))
+    fit = fit_local(disc, flagged, disc.base_means, math.log(disc.n_terms))
+    assert fit.D < 0.05 * disc.D0
+    (a, fc, w, _), (c, _, wc, _) = fit.bumps[(0, 0)], fit.bumps[(0, 2)]
+    assert fc == pytest.approx(14.0, rel=0.1) and a == pytest.approx(6.0, rel=0.1)
+    assert math.isinf(wc) and c == pytest.approx(1.9, rel=0.01) and (0, 1) not in fit.bumps
+
+
+def test_tilt_start_from_the_vertical_into_lateral_coupling():
+    from suspid.plugins.effects.catalogue import SensorTilt
+
+    f = np.geomspace(0.5, 40, 100)
+    lat = -30 + 5 * np.sin(np.log(f))                      # dB, model lateral
+    vert = -10 + 10 * np.log10(1 + (f / 20) ** 2)          # dB, measured vertical of the point
+    alpha = math.radians(6.0)
+    mes_lat = 10 * np.log10(math.cos(alpha) ** 2 * 10 ** (lat / 10) + math.sin(alpha) ** 2 * 10 ** (vert / 10))
+    channels = ["bogie_front_vertical", "bogie_front_lateral"]
+    spectra = {"freqs": f, "channels": channels, "measured": np.array([[vert, mes_lat]]),
+               "model": np.array([[vert, lat]])}
+    starts = SensorTilt().starts_from_spectra([80.0], [("bogie_front_lateral", 10.0, 40.0, 80.0)], channels, spectra)
+    assert len(starts) == 1 and starts[0]["gravity_roll"] is False
+    assert starts[0]["angle_deg"] == pytest.approx(6.0, rel=0.03) and starts[0]["coupling_r2"] > 0.99
+
+
+def test_polygon_candidates_cover_sets_of_wheelsets():
+    from suspid.plugins.effects.catalogue import WheelPolygon
+
+    starts = WheelPolygon().candidates([300 * KMH], [("bogie_front_vertical", 25.0, 32.0, 300 * KMH)], [])
+    sets = {tuple(s["wheelsets"]) for s in starts}
+    assert {(1,), (2, 3), (1, 2), (3, 4), (1, 2, 3, 4)} <= sets
+
+
+# ------------------------------------------------------------------------------------------ experiments
+def run_case(tmp_path: Path, case: str, seed: int, **kw) -> tuple[dict, dict]:
+    hidden, speeds = HE.CASES[case]
+    path = HE.prepare(tmp_path / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds, **kw)
+    d = suspid.diagnose(path).diagnosis
+    errors = HE.parameter_errors(d, path.parent / "measurement" / "truth.json",
+                                 path.parent / "runs" / "config" / "before" / "result.json")
+    return d, errors
+
+
+def _main(d: dict, name: str) -> float:
+    effect = next(e for e in d["effects"] if e["name"] == name)
+    from suspid import registry
+
+    return effect["parameters"][registry.get("effect", name).main_parameter]
+
+
+SEEDS = [3, 4, 5]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("case, effect, truth, tol", [
+    ("bending", "carbody-bending", 9.5, 0.05),
+    ("tilt", "sensor-tilt", 6.0, 0.10),
+    ("polygon", "wheel-polygon", 1, 0.0),
+])
+def test_independent_hidden_effect_is_named(tmp_path, case, effect, truth, tol, seed):
+    d, errors = run_case(tmp_path, case, seed)
+    assert effect in d["named_effects"], d["reason"]
+    assert abs(_main(d, effect) - truth) <= tol * truth, d["effects"]
+    assert max(abs(e) for e in errors["gap_after_interval"].values()) < 3.0, errors   # % of the interval
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("case, channel, band", [
+    ("bracket", "carbody_middle_vertical", 14.0),
+    ("gain", "bogie_front_vertical", None),
+])
+def test_independent_out_of_catalogue_is_reported_unexplained(tmp_path, case, channel, band, seed):
+    d, _ = run_case(tmp_path, case, seed)
+    assert d["named_effects"] == [], d["reason"]
+    hits = [u for u in d["unexplained"] if u["channel"] == channel
+            and (band is None or u["f_low_hz"] <= band <= u["f_high_hz"])]
+    assert hits and "no catalogue effect fits" in hits[0]["text"], d["unexplained"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+@pytest.mark.parametrize("case", ["none", "two-speeds"])
+def test_independent_null_names_nothing(tmp_path, case, seed):
+    d, _ = run_case(tmp_path, case, seed)
+    assert d["named_effects"] == [], d["reason"]
+    assert d["gap_before"]["share_flagged"] <= 0.02
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_bending_and_tilt_named_in_two_steps(tmp_path, seed):
+    d, _ = run_case(tmp_path, "bending+tilt", seed)
+    assert sorted(d["named_effects"]) == ["carbody-bending", "sensor-tilt"], [s["reason"] for s in d["steps"]]
+    assert len([s for s in d["steps"] if s["named"]]) == 2
+    assert d["gap_after"]["share_flagged"] < 0.03
+
+
+def test_coupling_test_reads_the_tilt_from_the_cross_spectrum():
+    from types import SimpleNamespace
+
+    from suspid.workflows.diagnose.coupling import coupling_test
+
+    rng = np.random.default_rng(0)
+    channels = ["bogie_front_vertical", "bogie_front_lateral"]
+
+    def records(angle_deg):
+        a = math.radians(angle_deg)
+        out = []
+        for _ in range(24):
+            v = np.convolve(rng.standard_normal(800), np.ones(5) / 5, "same")
+            lat = 0.5 * rng.standard_normal(800)                  # lateral above vertical: power hardly changes
+            x = math.cos(a) * lat + math.sin(a) * v
+            out.append(SimpleNamespace(accelerations=np.array([v, x]), fs=100.0))
+        return out
+
+    tilted = coupling_test(records(6.0), channels, (0.4, 40.0))[0]
+    assert tilted["significant"] and tilted["angle_deg"] == pytest.approx(6.0, rel=0.15)
+    null = coupling_test(records(0.0), channels, (0.4, 40.0))[0]
+    assert not null["significant"]
