@@ -29,6 +29,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from suspid.errors import SuspidError
+from suspid.infra.ledger import Ledger, stable_hash
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.problem import Problem, simulate_spectra
 
@@ -76,10 +77,19 @@ class GroupEstimates:
 
 
 def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_group_share: float,
-                    max_evaluations: int, initial_step: float) -> GroupEstimates:
-    """Re-identify the free parameters of every group from ``u_opt`` (see the module docstring)."""
+                    max_evaluations: int, initial_step: float, ledger: Ledger | None = None) -> GroupEstimates:
+    """Re-identify the free parameters of every group from ``u_opt`` (see the module docstring).
+
+    With a ``ledger`` the estimates are cached there (keyed by the run's data, w_opt and the
+    options), so that a resumed run does not simulate them again.
+    """
     groups = data_groups(problem.channels, problem.freqs)
     share = group_information(S, problem.noise_model.variance_, problem.weights, groups)
+    key = stable_hash("data-groups", problem.simulator_identity, problem.data_identity, np.asarray(u_opt).tolist(),
+                      min_group_share, max_evaluations, initial_step)
+    cached = ledger.get_array(key) if ledger is not None else None
+    if cached is not None:
+        return GroupEstimates(groups, share, cached[:, :-1], int(cached[0, -1]))
     u_hat = np.full((len(groups), problem.q), np.nan)
     spectra: dict[bytes, np.ndarray | None] = {}
     n_sims = 0
@@ -118,4 +128,6 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
                        options={"initial_simplex": simplex, "maxfev": max_evaluations * free.size,
                                 "xatol": 2e-3, "fatol": 1e-7})
         u_hat[gi, free] = np.clip(res.x, 0, 1)
+    if ledger is not None:
+        ledger.put_array(key, np.column_stack([u_hat, np.full(len(groups), n_sims)]))
     return GroupEstimates(groups, share, u_hat, n_sims)

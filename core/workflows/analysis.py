@@ -302,7 +302,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                   f"lies in bands the model does not reproduce at w_opt ({where})")
         if ad_opt.groups:
             ge = group_estimates(problem, u_opt, S, ad_opt.min_group_share, ad_opt.group_evaluations,
-                                 options.self_check.initial_step)
+                                 options.self_check.initial_step, ledger)
             informed = np.isfinite(ge.u)
             spread = np.array([np.ptp(ge.u[informed[:, k], k]) if informed[:, k].sum() >= 2 else 0.0
                                for k in range(q)])

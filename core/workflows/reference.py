@@ -40,6 +40,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize
 
+from suspid.errors import SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.method.identifiability import SelfCheckOptions
@@ -123,7 +124,7 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
                 try:
                     y, _ = simulate_spectra(problem.simulator, w, seg_b, config.spectra)
                     cache[k] = -float(fn.evaluate(y)[0])
-                except Exception:  # noqa: BLE001 - an unstable point is simply a bad one for the search
+                except SuspidError:  # an unstable point is simply a bad one for the search
                     cache[k] = np.inf
                 n_sims += 1
             return cache[k]
