@@ -90,10 +90,34 @@ class DataSection(Section):
         return value
 
 
+class MeasuredReference(Section):
+    """``noise.reference``: the reference date's measured data (two-date protocol on measured data).
+
+    The train ran at the nominal parameters w0 on that date; ``suspid run`` reads
+    these files, simulates w0 on their track and identifies B from eq. 3
+    (cached in the run ledger), then identifies w on ``data.measurements``.
+    The files have the layout of ``data.measurements`` and ``data.track_file``.
+    """
+
+    measurements: ConfigPath = Field(description="reference-date acceleration file or folder")
+    track_file: ConfigPath = Field(description="track geometry measured on the reference date, file or folder")
+
+    @field_validator("measurements", "track_file")
+    @classmethod
+    def _exists(cls, value: Path) -> Path:
+        if not value.exists():
+            raise ValueError(f"file not found: {value}")
+        return value
+
+
 class NoiseSection(NoiseOptions):
     """``noise:``: how B is identified at the reference date (eq. 3), or the file of a B identified before."""
 
     path: ConfigPath | None = Field(default=None, description="noise model written by a reference-date run")
+    reference: MeasuredReference | None = Field(
+        default=None, description="reference-date measured data (data.source: measured): B is identified "
+        "from them at w0, unless noise.path gives a B identified before; they also serve the "
+        "reference-date self-check")
 
 
 class OutputSection(Section):

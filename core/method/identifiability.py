@@ -47,6 +47,46 @@ from suspid.method.sensitivity import surrogate_sensitivity
 from suspid.options import Section
 
 
+class SelfCheckOptions(Section):
+    """``identifiability.model_error.self_check``: the reference-date self-check (:mod:`suspid.workflows.reference`)."""
+
+    enabled: bool = Field(default=True, description="run it when the reference date's data are part of the run")
+    n_splits: int = Field(default=8, ge=1, le=64, description="random halves: B fitted on one, w identified on the other")
+    max_evaluations: int = Field(default=0, ge=0, description="simulations per split (Nelder-Mead); 0: 30 q")
+    initial_step: float = Field(default=0.1, gt=0, le=0.5, description="initial simplex size in [0, 1]^q")
+
+
+class AdequacyOptions(Section):
+    """``identifiability.model_error.adequacy``: residuals at w_opt against B (:mod:`suspid.method.adequacy`)."""
+
+    enabled: bool = True
+    bands_per_octave: float = Field(default=1.0, gt=0, le=12, description="band width: 1/bands_per_octave octave")
+    z_threshold: float = Field(default=3.0, gt=0, description="|mean residual| / its standard error above which "
+                               "a band is inadequate")
+    min_db: float = Field(default=0.5, ge=0, description="... and |mean residual| above this many dB")
+    max_share: float = Field(default=0.5, gt=0, le=1, description="a parameter with more of its information in "
+                             "inadequate bands is not trustworthy")
+    groups: bool = Field(default=True, description="re-identify on data groups (directions, frequency halves)")
+    min_group_share: float = Field(default=0.2, gt=0, le=1, description="a parameter is free in a group holding "
+                                   "at least this share of its information")
+    max_spread: float = Field(default=0.06, ge=0, le=1, description="largest spread of a parameter's group "
+                              "estimates, fraction of the admissible interval, of a trustworthy component")
+    group_evaluations: int = Field(default=20, ge=2, description="simulations per free parameter and group")
+
+
+class ModelErrorOptions(Section):
+    """``identifiability.model_error``: when a component is *not trustworthy under model error*."""
+
+    run: Literal["measured", "always", "never"] = Field(
+        default="measured", description="when to run the checks: on measured data only (the numerical "
+        "experiment's model is the truth's, so it has no model-form error to find), always, or never")
+    max_bias: float = Field(default=0.03, ge=0, le=1, description="largest self-check bias beyond 2 standard "
+                            "errors of the splits' mean, fraction of the admissible interval, of a trustworthy component")
+    widen: bool = Field(default=True, description="widen the intervals by the self-check bias (in quadrature)")
+    self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
+    adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)
+
+
 class IdentifiabilityOptions(Section):
     """Thresholds of the identifiability verdict (config section ``identifiability:``)."""
 
@@ -60,6 +100,7 @@ class IdentifiabilityOptions(Section):
     bootstrap: Literal["paired", "independent"] = Field(
         default="paired", description="resample the segments as (measured, simulated) pairs, which share the "
         "segment's track, or the two sets independently")
+    model_error: ModelErrorOptions = Field(default_factory=ModelErrorOptions)
 
 
 @dataclass

@@ -17,10 +17,31 @@ from suspid.config import Config
 from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
-from suspid.method.identifiability import assess
+from suspid.method.adequacy import band_residuals, frequency_bands, information_share
+from suspid.method.identifiability import ModelErrorOptions, assess
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem, _cached_spectra, simulate_spectra
+from suspid.workflows.adequacy import group_estimates
+from suspid.workflows.reference import self_check
+
+
+def cached_y_sim(problem: Problem, ledger: Ledger, u: np.ndarray, retry_failed: bool = False) -> np.ndarray:
+    """Spectra ``(v, n_channels, n_freqs)`` dB at ``u`` ([0, 1]^q) on the measurement date's segments.
+
+    Cached in the ledger; a failure is cached too, and raised again (unless ``retry_failed``).
+    """
+    w = problem.w_of(problem.from_unit(u))
+    key = stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest)
+    known = ledger.get(key)
+    if known is not None and not known.ok and not retry_failed:
+        raise SimulatorError(known.error)
+    try:
+        return _cached_spectra(ledger, key, lambda: simulate_spectra(problem.simulator, w, problem.segments,
+                                                                      problem.config.spectra))[0]
+    except SimulatorError as exc:
+        ledger.put(Evaluation(key, w, None, None, status="failed", error=str(exc)))
+        raise
 
 
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
@@ -50,19 +71,7 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     config = problem.config
     q = problem.q
 
-    def y_sim_at(u: np.ndarray) -> np.ndarray:
-        """Spectra at ``u``, cached in the ledger; a failure is cached too, and raised again."""
-        w = problem.w_of(problem.from_unit(u))
-        key = stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest)
-        known = ledger.get(key)
-        if known is not None and not known.ok and not retry_failed:
-            raise SimulatorError(known.error)
-        try:
-            return _cached_spectra(ledger, key, lambda: simulate_spectra(problem.simulator, w, problem.segments,
-                                                                          config.spectra))[0]
-        except SimulatorError as exc:
-            ledger.put(Evaluation(key, w, None, None, status="failed", error=str(exc)))
-            raise
+    y_sim_at = lambda u: cached_y_sim(problem, ledger, u, retry_failed)  # noqa: E731
 
     y_opt = y_sim_at(u_opt)  # w_opt was simulated by EGO: it cannot fail here
 
@@ -117,7 +126,16 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
                                                  retry_failed=retry_failed)
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
-    interval_si = problem.from_unit(verdict.interval_unit.T).T  # (q, 2): lower and upper ends, SI
+    sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
+    trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd)
+    interval_unit = verdict.interval_unit
+    if opts.model_error.widen and trust["widen"] is not None:
+        # each side widened in quadrature (an interval clipped at a bound is not centred on w_opt)
+        below = np.sqrt((u_opt - interval_unit[:, 0]).clip(0) ** 2 + trust["widen"] ** 2)
+        above = np.sqrt((interval_unit[:, 1] - u_opt).clip(0) ** 2 + trust["widen"] ** 2)
+        interval_unit = np.stack([np.clip(u_opt - below, 0, 1), np.clip(u_opt + above, 0, 1)], axis=1)
+    interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
+    sampling_si = problem.from_unit(verdict.interval_unit.T).T
     units = {p.name: p.unit for p in problem.simulator.parameters()}
     result: dict[str, Any] = {
         "name": config.name,
@@ -130,9 +148,14 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         "non_identifiable_reasons": {n: r for n, r in zip(names, verdict.reasons) if r},
         "correlated_with": {n: c for n, c in zip(names, verdict.correlated_with) if c},
         "interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_si)},
-        "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, verdict.interval_unit)},
+        "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_unit)},
+        "interval_sampling": {n: [float(a), float(b)] for n, (a, b) in zip(names, sampling_si)},
+        "trustworthy": trust["trustworthy"],
+        "untrustworthy_reasons": trust["reasons"],
+        "model_error": trust["report"],
         "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
                             "bootstrap": opts.bootstrap,
+                            "widened_by_model_error": bool(opts.model_error.widen and trust["widen"] is not None),
                             "n_sigmas": opts.n_sigmas,
                             "covariance_normalized": verdict.covariance.tolist()},
         "sensitivity": {
@@ -177,3 +200,136 @@ def errors_percent(problem: Problem, x_si: np.ndarray) -> dict[str, float]:
     """|w - w_ref| per component in % of its admissible interval; ``x_si (q,)`` SI."""
     lo, hi = problem.bounds[:, 0], problem.bounds[:, 1]
     return {n: float(100 * abs(a - problem.w_ref[n]) / (h - l)) for n, a, l, h in zip(problem.names, x_si, lo, hi)}
+
+
+def local_sensitivity(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float,
+                      retry_failed: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Spectra at w_opt and their sensitivity, from the simulations of :func:`gradient_noise` (ledger cache).
+
+    :returns: ``(y_opt (v, n_channels, n_freqs) dB, S (q, n_channels, n_freqs))`` with
+        S_k = ∂ mean_i y_sim_i / ∂u_k (dB per unit of the normalised parameter),
+        by central differences at w_opt ± h e_k (one-sided where a side fails or is clipped).
+    """
+    y_opt = cached_y_sim(problem, ledger, u_opt, retry_failed)
+    mean_opt = y_opt.mean(axis=0)
+    S = np.zeros((problem.q,) + mean_opt.shape)
+    for k, e in enumerate(np.eye(problem.q)):
+        sides = []
+        for u in (np.clip(u_opt + h * e, 0, 1), np.clip(u_opt - h * e, 0, 1)):
+            try:
+                sides.append((u[k], cached_y_sim(problem, ledger, u, retry_failed).mean(axis=0)))
+            except SimulatorError:
+                sides.append((u_opt[k], mean_opt))
+        (up, yp), (um, ym) = sides
+        if up > um:
+            S[k] = (yp - ym) / (up - um)
+    return y_opt, S
+
+
+def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, options: ModelErrorOptions,
+                retry_failed: bool = False, sd: np.ndarray | None = None) -> dict[str, Any]:
+    """Trust under model error: the reference-date self-check and the adequacy test at w_opt.
+
+    A component is **not trustworthy under model error** when
+
+    - the self-check (:func:`suspid.workflows.reference.self_check`) moves it by more than
+      ``max_bias`` of its admissible interval at the reference date, where the truth is w0; or
+    - more than ``adequacy.max_share`` of its information (S_k² / Var B, weighted by α) lies in
+      channel bands where the model at w_opt does not reproduce the measurements after B's mean
+      (:mod:`suspid.method.adequacy`); or
+    - the data groups that inform it (channel directions, frequency halves) give estimates more
+      than ``adequacy.max_spread`` apart, and further apart than 2√2 sampling standard deviations
+      ``sd`` (:mod:`suspid.workflows.adequacy`).
+
+    :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
+    :returns: ``{"trustworthy": name -> bool, "reasons": name -> [str], "widen": (q,) or None, the
+        model-error part of the intervals' half-widths in [0, 1] (self-check bias and half the group
+        spread), "report": the JSON-able details for result.json}``.
+    """
+    names = problem.names
+    q = problem.q
+    reasons: list[list[str]] = [[] for _ in range(q)]
+    if options.run == "never" or (options.run == "measured" and problem.config.data.source != "measured"):
+        return {"trustworthy": {n: True for n in names}, "reasons": {}, "widen": None,
+                "report": {"status": f"not run (identifiability.model_error.run: {options.run}, "
+                                     f"data.source: {problem.config.data.source})"}}
+    report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
+    bias = widen = None
+    sc_opt = options.self_check
+    if not sc_opt.enabled:
+        report["self_check"] = {"status": "disabled"}
+    else:
+        check = self_check(problem, ledger, sc_opt)
+        if check is None:
+            report["self_check"] = {"status": "not run: the reference date's data are not part of this run "
+                                              "(give noise.reference, or use at least 8 reference segments)"}
+        else:
+            bias = np.abs(check.bias)
+            widen = bias
+            n_splits = check.shifts.shape[0]
+            se = check.scatter / np.sqrt(n_splits)
+            excess = np.maximum(bias - 2 * se, 0.0)  # what the scatter of the splits does not explain
+            report["self_check"] = {"status": "done", **check.to_dict(names),
+                                    "standard_error_percent": {n: float(100 * v) for n, v in zip(names, se)},
+                                    "excess_bias_percent": {n: float(100 * v) for n, v in zip(names, excess)}}
+            for k in range(q):
+                if excess[k] > options.max_bias:
+                    reasons[k].append(
+                        f"reference-date self-check: w_opt moves by {100 * check.bias[k]:+.1f} ± "
+                        f"{100 * se[k]:.1f} % of the interval where the truth is w0 (B fitted on half the "
+                        f"segments, w identified on the other half, {n_splits} splits; threshold "
+                        f"{100 * options.max_bias:.0f} % beyond 2 standard errors)")
+    ad_opt = options.adequacy
+    if not ad_opt.enabled:
+        report["adequacy"] = {"status": "disabled"}
+    else:
+        y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed)
+        bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
+        res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db)
+        share, info = information_share(S, problem.noise_model.variance_, problem.weights, res)
+        f = problem.freqs
+        labels = [f"{f[idx[0]]:.3g}-{f[idx[-1]]:.3g} Hz" for idx in bands]
+        flagged = [{"channel": problem.channels[c], "band": labels[j], "residual_db": float(res.mean_db[c, j]),
+                    "z": float(res.z[c, j])} for c, j in zip(*np.nonzero(res.inadequate))]
+        report["adequacy"] = {
+            "status": "done", "bands_per_octave": ad_opt.bands_per_octave, "z_threshold": ad_opt.z_threshold,
+            "min_db": ad_opt.min_db, "max_share": ad_opt.max_share,
+            "n_bands": int(res.inadequate.size), "n_inadequate": int(res.inadequate.sum()),
+            "inadequate_bands": flagged,
+            "inadequate_share": {n: float(v) for n, v in zip(names, share)},
+            "residual_rms_db": {c: float(np.sqrt(np.mean(res.mean_db[i] ** 2)))
+                                for i, c in enumerate(problem.channels)}}
+        for k in range(q):
+            if share[k] > ad_opt.max_share:
+                cells = sorted(zip(*np.nonzero(res.inadequate)), key=lambda cj: -info[k][cj])[:3]
+                where = ", ".join(f"{problem.channels[c]} {labels[j]} ({res.mean_db[c, j]:+.1f} dB)"
+                                  for c, j in cells)
+                reasons[k].append(f"model inadequate where it is read: {100 * share[k]:.0f} % of its information "
+                                  f"lies in bands the model does not reproduce at w_opt ({where})")
+        if ad_opt.groups:
+            ge = group_estimates(problem, u_opt, S, ad_opt.min_group_share, ad_opt.group_evaluations,
+                                 options.self_check.initial_step, ledger)
+            informed = np.isfinite(ge.u)
+            spread = np.array([np.ptp(ge.u[informed[:, k], k]) if informed[:, k].sum() >= 2 else 0.0
+                               for k in range(q)])
+            sd_ = np.zeros(q) if sd is None else np.asarray(sd, float)
+            report["adequacy"]["groups"] = {
+                "min_group_share": ad_opt.min_group_share, "max_spread_percent": 100 * ad_opt.max_spread,
+                "n_simulations": ge.n_simulations,
+                "estimates_percent": {g.name: {n: (None if not np.isfinite(ge.u[i, k]) else float(100 * ge.u[i, k]))
+                                               for k, n in enumerate(names)} for i, g in enumerate(ge.groups)},
+                "information_share": {g.name: {n: float(ge.share[i, k]) for k, n in enumerate(names)}
+                                      for i, g in enumerate(ge.groups)},
+                "spread_percent": {n: float(100 * v) for n, v in zip(names, spread)}}
+            group_widen = spread / 2
+            widen = group_widen if widen is None else np.sqrt(widen ** 2 + group_widen ** 2)
+            for k in range(q):
+                if spread[k] > ad_opt.max_spread and spread[k] > 2 * np.sqrt(2) * sd_[k]:
+                    parts = ", ".join(f"{g.name} {100 * ge.u[i, k]:.0f} %" for i, g in enumerate(ge.groups)
+                                      if informed[i, k])
+                    reasons[k].append(f"the parts of the data disagree: re-identified on each data group it is "
+                                      f"read from, it lies at {parts} of its interval (spread "
+                                      f"{100 * spread[k]:.0f} %, threshold {100 * ad_opt.max_spread:.0f} %): "
+                                      f"the model's sensitivity to it differs from the vehicle's")
+    return {"trustworthy": {n: not r for n, r in zip(names, reasons)},
+            "reasons": {n: r for n, r in zip(names, reasons) if r}, "widen": widen, "report": report}

@@ -68,6 +68,9 @@ class Problem:
     :ivar y_mes: ``(v, n_channels, n_freqs)`` dB measured spectra.
     :ivar b: ``(v, n_channels, n_freqs)`` dB noise paths for Y_mod.
     :ivar freqs: ``(n_freqs,)`` Hz.
+    :ivar reference: ``y_mes0``, ``y_sim0`` ``(v0, n_channels, n_freqs)`` dB at the reference date, when
+        its data are part of the run (numerical experiment, or ``noise.reference``); empty otherwise.
+    :ivar reference_segments: the reference date's track segments, in the order of ``reference``.
     """
 
     config: Config
@@ -85,6 +88,8 @@ class Problem:
     w_ref: dict[str, float] | None = None
     reference: dict[str, np.ndarray] = field(default_factory=dict)  # y_mes0, y_sim0 at the reference date
     noise_model: NoiseModel | None = None
+    reference_segments: list[TrackSegment] = field(default_factory=list)  # the reference date's track
+    w0: dict[str, float] = field(default_factory=dict)  # nominal values of the identified parameters (SI)
 
     @property
     def q(self) -> int:
@@ -202,8 +207,43 @@ def validate_data(config: Config) -> int:
         raise config.error("measured data need data.measurements", "data.measurements")
     segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                             simulator.channels(), strict=config.data.strict)
-    compute_spectra(responses, config.spectra)
+    _, freqs = compute_spectra(responses, config.spectra)
+    if config.noise.reference is not None:
+        ref = config.noise.reference
+        ref_segments, ref_responses = read_measurements(ref.measurements, ref.track_file, simulator.channels(),
+                                                         strict=config.data.strict)
+        _, ref_freqs = compute_spectra(ref_responses, config.spectra)
+        if len(ref_segments) < 2:
+            raise config.error(f"{ref.measurements}: the noise model needs at least 2 reference-date segments, "
+                               f"found {len(ref_segments)}", "noise.reference.measurements")
+        if ref_freqs.shape != freqs.shape or not np.allclose(ref_freqs, freqs):
+            raise config.error(f"{ref.measurements}: the reference-date records give another frequency grid "
+                               f"than data.measurements (sampling rate or duration differ)",
+                               "noise.reference.measurements")
+    if config.noise.path is not None:
+        NoiseModel.load(config.noise.path).check_grid(freqs, simulator.channels())
     return len(segments)
+
+
+def measured_reference(config: Config, simulator: Simulator, ledger: Ledger, log: Callable[[str], None]
+                       ) -> tuple[list[TrackSegment], np.ndarray, np.ndarray, np.ndarray]:
+    """The reference date's measured spectra and the simulator's at w0 on its measured track (eq. 3).
+
+    The simulation at w0 is cached in the run ledger (keyed by the simulator,
+    the reference track and the spectra options).
+
+    :returns: ``(segments, y_mes0, y_sim0, freqs)``, spectra ``(v0, n_channels, n_freqs)`` dB.
+    """
+    ref = config.noise.reference
+    segments, responses = read_measurements(ref.measurements, ref.track_file, channels=simulator.channels(),
+                                            strict=config.data.strict)
+    y_mes0, freqs = compute_spectra(responses, config.spectra)
+    key = stable_hash("measured-reference", simulator.identity(), segments_digest(segments),
+                      config.spectra.model_dump())
+    if ledger.get_array(key + ":y") is None:
+        log(f"reference date: simulating w0 on the {len(segments)} measured segments of {ref.measurements}")
+    y_sim0, _ = _cached_spectra(ledger, key, lambda: simulate_spectra(simulator, {}, segments, config.spectra))
+    return segments, y_mes0, y_sim0, freqs
 
 
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
@@ -215,9 +255,11 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     spectra_options = config.spectra
     sim_id = simulator.identity()
     channels = simulator.channels()
-    noise_options = config.noise.model_dump(exclude={"path"})
+    noise_options = config.noise.model_dump(exclude={"path", "reference"})
     noise_path = config.noise.path
     reference: dict[str, np.ndarray] = {}
+    reference_segments: list[TrackSegment] = []
+    w0 = {p.name: float(p.nominal) for p in simulator.parameters() if p.name in names}
 
     if config.data.source == "experiment":
         w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
@@ -241,6 +283,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             noise_model = fit_noise_model(y_mes0, y_sim0, noise_options,
                                           freqs=freqs, channels=channels)
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
+            reference_segments = ref_segments
         log("measurement date: simulating w_ref (eq. 10)")
         meas_opt = config.data.measurement
         meas_sim, meas_id = simulator, sim_id
@@ -263,10 +306,22 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                                 channels=channels, strict=config.data.strict)
         y_mes, freqs = compute_spectra(responses, spectra_options)
-        if not noise_path:
-            raise config.error("measured data need a noise model identified at the reference date "
-                               "(noise.path: a file written by a reference-date run)", "noise.path")
-        noise_model = NoiseModel.load(noise_path)
+        if config.noise.reference is not None:
+            reference_segments, y_mes0, y_sim0, freqs0 = measured_reference(config, simulator, ledger, log)
+            if freqs0.shape != freqs.shape or not np.allclose(freqs0, freqs):
+                raise config.error("the reference-date records give another frequency grid than "
+                                   "data.measurements (sampling rate or duration differ)",
+                                   "noise.reference.measurements")
+            reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
+        if noise_path:
+            noise_model = NoiseModel.load(noise_path)
+        elif reference:
+            log("reference date: identifying the noise model B (eq. 3) from the measured reference date")
+            noise_model = fit_noise_model(reference["y_mes0"], reference["y_sim0"], noise_options,
+                                          freqs=freqs, channels=channels)
+        else:
+            raise config.error("measured data need the noise model of the reference date: noise.reference "
+                               "(the reference date's measured data) or noise.path (a noise model file)", "noise")
     noise_model.check_grid(freqs, channels)
     b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"))
 
@@ -278,4 +333,5 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                 spectra_options.model_dump())
     return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
                    channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
-                   data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model)
+                   data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model,
+                   reference_segments=reference_segments, w0=w0)

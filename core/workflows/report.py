@@ -124,6 +124,54 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     return "\n".join(lines)
 
 
+def model_error_section(result: dict[str, Any]) -> str:
+    """The report's "Model error" section: the self-check and the adequacy test (empty without them)."""
+    me = result.get("model_error")
+    if not me:
+        return ""
+    names = result["parameters"]
+    out = ["", "## Model error", ""]
+    sc = me.get("self_check", {})
+    if sc.get("status") == "done":
+        out.append(f"Reference-date self-check ({sc['n_splits']} random halves: B fitted on {sc['segments_fit']} "
+                   f"segments, w identified on the other {sc['segments_identify']} by a local search from w0, "
+                   f"where the truth is w0). A component whose mean shift exceeds 2 standard errors of the splits' "
+                   f"mean by more than {me['max_bias_percent']:.0f} % of its interval is not trustworthy.\n")
+        out.append(markdown_table(["parameter", "bias (% of interval)", "scatter over splits (%)",
+                                   "beyond 2 standard errors (%)"],
+                                  [[n, f"{sc['bias_percent'][n]:+.2f}", f"{sc['scatter_percent'][n]:.2f}",
+                                    f"{sc['excess_bias_percent'][n]:.2f}"] for n in names]))
+    else:
+        out.append(f"Reference-date self-check: {sc.get('status', 'not run')}.")
+    ad = me.get("adequacy", {})
+    out.append("")
+    if ad.get("status") == "done":
+        out.append(f"Adequacy at w_opt: {ad['n_inadequate']} of {ad['n_bands']} channel bands (1/"
+                   f"{ad['bands_per_octave']:g} octave) where the mean residual y_mes − y_sim(w_opt) − μ_B exceeds "
+                   f"{ad['z_threshold']:g} standard errors and {ad['min_db']:g} dB. A parameter with more than "
+                   f"{100 * ad['max_share']:.0f} % of its information there is not trustworthy.\n")
+        out.append(markdown_table(["parameter", "share of information in inadequate bands"],
+                                  [[n, f"{100 * ad['inadequate_share'][n]:.0f} %"] for n in names]))
+        if ad["inadequate_bands"]:
+            out += ["", markdown_table(["channel", "band", "residual (dB)", "z"],
+                                       [[b["channel"], b["band"], f"{b['residual_db']:+.2f}", f"{b['z']:+.1f}"]
+                                        for b in ad["inadequate_bands"]])]
+        groups = ad.get("groups")
+        if groups:
+            gnames = list(groups["estimates_percent"])
+            out += ["", f"Re-identification on data groups, from w_opt (a parameter is free where the group holds "
+                        f"≥ {100 * groups['min_group_share']:.0f} % of its information; values in % of the "
+                        f"interval). A spread above {groups['max_spread_percent']:.0f} % means the parts of the data "
+                        f"disagree.", "",
+                    markdown_table(["parameter"] + gnames + ["spread (%)"],
+                                   [[n] + ["-" if groups["estimates_percent"][g][n] is None
+                                           else f"{groups['estimates_percent'][g][n]:.1f}" for g in gnames]
+                                    + [f"{groups['spread_percent'][n]:.1f}"] for n in names])]
+    else:
+        out.append(f"Adequacy at w_opt: {ad.get('status', 'not run')}.")
+    return "\n".join(out) + "\n"
+
+
 def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
                  ei_history: list[float]) -> Path:
     """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot."""
@@ -152,16 +200,21 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
         if "w_ref" in result:
             row += [result["w_ref"][n], f"{result['errors_percent'][n]:.2f}"]
         lo_i, hi_i = result["interval"][n]
+        trusted = result.get("trustworthy", {}).get(n, True)
         row += [f"[{lo_i:.4g}, {hi_i:.4g}]", "yes" if result["identifiable"][n] else
                 "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
+                "yes" if trusted else "**no**: " + "; ".join(result.get("untrustworthy_reasons", {}).get(n, [])),
                 f"{result['sensitivity']['total_sobol'][n]:.3f}"]
         rows.append(row)
     header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
-        + ["interval", "identifiable", "total Sobol index"]
+        + ["interval", "identifiable", "trustworthy under model error", "total Sobol index"]
     refine = ""
     if result.get("refine_stop_reason"):
         refine = (f" (the last {result['n_refine_iterations']} in the local refinement, stop: "
                   f"`{result['refine_stop_reason']}`)")
+    widened = (", combined in quadrature with the model-error terms (reference-date self-check bias, half the "
+               "spread of the data groups' estimates)"
+               if result.get("interval_method", {}).get("widened_by_model_error") else "")
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
@@ -171,11 +224,12 @@ J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 
 {markdown_table(header, rows)}
 
-Components marked **no** are not identifiable from these data: their value is not a finding.
+Components marked **no** (not identifiable, or not trustworthy under model error) are not findings:
+their value is not to be reported.
 Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
-bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths), clipped to the admissible box.
-
+bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths){widened}, clipped to the admissible box.
+{model_error_section(result)}
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
 
 ![figure 1](figure1_spectra.png)

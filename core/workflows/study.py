@@ -119,7 +119,11 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
         cells = []
         for n in names:
             cell = f"{values['errors_percent'][n]:.2f}" if has_ref else f"{values['w_opt'][n]:.4g}"
-            cells.append(cell if r["identifiable"][n] else f"({cell}) n.i.")
+            if not r["identifiable"][n]:
+                cell = f"({cell}) n.i."
+            elif not r.get("trustworthy", {}).get(n, True):
+                cell = f"({cell}) n.t."  # not trustworthy under model error: not a finding either
+            cells.append(cell)
         return cells
 
     for label, r in rows:
@@ -134,7 +138,7 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
         refined = ("Variants with `ego.refine` show two rows: where the paper's EGO loop stopped (EI < eps), "
                    "and the same run after the local refinement (its iterations and calls include the loop's); "
                    "the identifiability flags are those of the final analysis.\n\n")
-    text = (f"# Study\n\nPer component: {what}; `n.i.` marks a component flagged not identifiable "
+    text = (f"# Study\n\nPer component: {what}; `n.i.` marks a component flagged not identifiable, `n.t.` one not trustworthy under model error "
             f"(its value is shown in brackets and is not a finding).\n\n{refined}{markdown_table(header, table)}"
             f"\n\n![parameters](study_parameters.png)\n")
     write_text(study_dir / "study.md", text)

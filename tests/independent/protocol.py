@@ -74,7 +74,7 @@ def write_config(path: Path, measurement_dir: Path, noise_path: Path, *, seed: i
     cfg = {
         "name": path.stem,
         "seed": seed,
-        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0}},
+        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": "manchester-coach"}},
         "parameters": {n: {} for n in identified},
         "data": {"source": "measured",
                  "measurements": str(Path(measurement_dir, "accelerations").relative_to(base)),

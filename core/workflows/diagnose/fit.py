@@ -347,7 +347,6 @@ def fit_local(disc: Discrepancy, flagged: np.ndarray, means: np.ndarray, penalty
     :param flagged: ``(n_cells,)`` bool, the cells whose (group, channel) get a bump.
     """
     grid = disc.grid
-    G, K = len(grid.speeds), len(grid.channels)
     r = disc.target - means                                               # (G, K, F)
     wgt = 1.0 / disc.scale ** 2
     D = float((r ** 2 * wgt).sum())

@@ -1,0 +1,158 @@
+"""Model-form error: the two-date protocol on the independent train, with suspid's trust flags.
+
+For every seed and measurement-date suspension w_ref (the quickstart's damaged
+one, another one, and w0 itself) the independent train of ``tests/independent``
+writes a reference date at w0 and a measurement date at w_ref; a config with
+``noise.reference`` is run by ``suspid run`` for each objective (in parallel
+subprocesses). Printed per run and component: the signed error in % of the
+admissible interval, identifiable / trustworthy, whether the reported
+interval contains the truth; then the acceptance summary:
+
+- every component reported identifiable AND trustworthy within 5 % of its interval;
+- its interval containing the truth in >= 90 % of cases;
+- the flagged components;
+- with w_ref = w0, no trustworthy component moving by more than 3 %.
+
+Usage (from the repository root)::
+
+    python benchmarks/bench_model_form.py OUT_DIR [--seeds 7 8 11] [--w-refs quickstart other w0]
+        [--objectives overlap likelihood] [--jobs 2] [--segments 24] [--summary]
+
+A finished run (its result.json) is kept: running again completes a cut grid;
+``--summary`` prints the table of the runs finished so far.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+
+from independent import train as TR  # noqa: E402
+
+W_REFS = {
+    "quickstart": {"k_sec_z": 340.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.30e6, "c_sec_y": 11.0e3, "c_yaw": 560.0e3},
+    "other": {"k_sec_z": 500.0e3, "c_sec_z": 26.0e3, "k_prim_z": 1.00e6, "c_sec_y": 20.0e3, "c_yaw": 1000.0e3},
+    "w0": {},
+}
+"""Measurement-date suspensions (SI): the quickstart's damaged one, a stiffer/more damped one, and w0."""
+
+
+def write_config(case: Path, seed: int, objective: str) -> Path:
+    cfg = {"name": objective, "seed": seed,
+           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": "manchester-coach"}},
+           "parameters": {n: {} for n in W_REFS["quickstart"]},
+           "data": {"source": "measured", "measurements": "measurement/accelerations",
+                    "track_file": "measurement/track"},
+           "noise": {"reference": {"measurements": "reference/accelerations", "track_file": "reference/track"}},
+           "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200},
+           "objective": {"plugin": objective}, "surrogate": {"plugin": "gpy-kriging"},
+           "design": {"method": "maximin-lhs", "n_initial": 30}, "ego": {"max_iter": 40, "tol": 1.0e-4}}
+    path = case / f"{objective}.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
+    return path
+
+
+def prepare(out: Path, seed: int, w_ref: str, segments: int) -> Path:
+    case = out / f"seed{seed}-{w_ref}"
+    if not (case / "measurement" / "truth.json").exists():
+        TR.generate_two_dates(case, {}, W_REFS[w_ref], seed=seed, n_segments=segments, speed_mps=300.0 / 3.6)
+    return case
+
+
+def run_one(cfg: Path) -> tuple[Path, float, str]:
+    t0 = time.time()
+    if (cfg.parent / "runs" / cfg.stem / "result.json").exists():   # a finished run: kept (delete to redo)
+        return cfg, 0.0, ""
+    proc = subprocess.run([sys.executable, "-m", "suspid", "run", str(cfg), "--quiet"], capture_output=True,
+                          text=True)
+    return cfg, time.time() - t0, proc.stderr.strip()[-300:] if proc.returncode else ""
+
+
+def summarise(cfg: Path) -> dict:
+    case = cfg.parent
+    res = json.loads((case / "runs" / cfg.stem / "result.json").read_text())
+    truth = json.loads((case / "measurement" / "truth.json").read_text())["parameters"]
+    rows = {}
+    for n in res["parameters"]:
+        lo, hi = res["bounds"][n]
+        t = truth[n]
+        iv = res["interval"][n]
+        rows[n] = {"error": 100 * (res["w_opt"][n] - t) / (hi - lo), "identifiable": res["identifiable"][n],
+                   "trustworthy": res.get("trustworthy", {}).get(n, True), "in_interval": iv[0] <= t <= iv[1],
+                   "in_sampling_interval": res["interval_sampling"][n][0] <= t <= res["interval_sampling"][n][1],
+                   "half_width": 50 * (iv[1] - iv[0]) / (hi - lo),
+                   "reasons": res["non_identifiable_reasons"].get(n, []) + res.get("untrustworthy_reasons", {}).get(n, [])}
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 11])
+    ap.add_argument("--w-refs", nargs="+", default=["w0", "other", "quickstart"], choices=list(W_REFS))
+    ap.add_argument("--objectives", nargs="+", default=["overlap", "likelihood"])
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--segments", type=int, default=24)
+    ap.add_argument("--summary", action="store_true", help="only summarise the runs already finished")
+    a = ap.parse_args(argv)
+    a.out.mkdir(parents=True, exist_ok=True)
+    cfgs = []
+    for obj in a.objectives:       # the runs most needed first: a cut grid still covers every w_ref
+        for seed in a.seeds:
+            for w_ref in a.w_refs:
+                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj))
+    with ThreadPoolExecutor(a.jobs) as pool:
+        for cfg, wall, err in ([] if a.summary else pool.map(run_one, cfgs)):
+            print(f"{cfg.parent.name}/{cfg.stem}: {wall:.0f} s{' FAILED: ' + err if err else ''}", flush=True)
+    names = list(W_REFS["quickstart"])
+    print("\n| case | objective | " + " | ".join(names) + " | in interval |")
+    print("|---|---|" + "---|" * (len(names) + 1))
+    all_rows = []
+    for cfg in cfgs:
+        try:
+            rows = summarise(cfg)
+        except FileNotFoundError:
+            continue
+        w_ref = cfg.parent.name.split("-", 1)[1]
+        cells = []
+        for n in names:
+            r = rows[n]
+            mark = "" if r["identifiable"] and r["trustworthy"] else (" n.i." if not r["identifiable"] else " n.t.")
+            cells.append(f"{r['error']:+.1f}{'' if r['in_interval'] else '*'}{mark}")
+            all_rows.append((w_ref, cfg.parent.name, cfg.stem, n, r))
+        n_in = sum(rows[n]["in_interval"] for n in names)
+        print(f"| {cfg.parent.name} | {cfg.stem} | " + " | ".join(cells) + f" | {n_in}/{len(names)} |")
+    print("\n(* truth outside the reported interval; n.i. not identifiable; n.t. not trustworthy under model error)")
+    reported = [x for x in all_rows if x[4]["identifiable"] and x[4]["trustworthy"]]
+    within = [x for x in reported if abs(x[4]["error"]) <= 5.0]
+    covered = [x for x in reported if x[4]["in_interval"]]
+    flagged = [x for x in all_rows if not (x[4]["identifiable"] and x[4]["trustworthy"])]
+    w0_moves = [x for x in reported if x[0] == "w0" and abs(x[4]["error"]) > 3.0]
+    print(f"\nreported (identifiable and trustworthy): {len(reported)} of {len(all_rows)} components")
+    print(f"  within 5 % of the interval: {len(within)}/{len(reported)}"
+          f"{' (all)' if len(within) == len(reported) else ''}; worst "
+          + (f"{max(abs(x[4]['error']) for x in reported):.1f} %" if reported else "-"))
+    print(f"  interval contains the truth: {len(covered)}/{len(reported)} "
+          f"({100 * len(covered) / max(len(reported), 1):.0f} %)")
+    print(f"  with w_ref = w0, trustworthy components moving > 3 %: {len(w0_moves)} "
+          + ", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in w0_moves))
+    print(f"flagged: {len(flagged)}")
+    for _, c, o, n, r in flagged:
+        print(f"  {c}/{o} {n}: error {r['error']:+.1f} %; " + "; ".join(x[:140] for x in r["reasons"]))
+    missed = [x for x in reported if abs(x[4]["error"]) > 5.0]
+    print(f"reported but off by > 5 %: " + (", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in missed)
+                                         or "none"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,141 @@
+"""The reference-date self-check: how far model-form error alone moves w_opt (beyond the paper).
+
+At the reference date the truth is known: the train ran at w0. The noise model
+B is identified there (eq. 3) and then taken to another date, where it is
+supposed to hold for every w. The self-check makes that step on data whose
+answer is known:
+
+1. the v0 reference segments are split at random into two halves, A and B
+   (``n_splits`` repetitions, seeded by the run's seed);
+2. a noise model is fitted on half A (eq. 3, the run's ``noise:`` options);
+3. w is identified on half B with the run's objective, weights and the
+   noise paths of that model, by a bounded Nelder-Mead search started at w0
+   (the simulator is cheap next to a whole EGO run, and the search stays
+   near w0, where the answer should be);
+4. per component, the shift u_opt − u0 (in [0, 1], i.e. in fractions of the
+   admissible interval) is averaged over the splits: its mean is the
+   **self-check bias**, its scatter over the splits the sampling part.
+
+Why random halves rather than k-fold: the check imitates the two-date
+protocol, which fits B on one set of segments and identifies on another of
+comparable size; a k-fold split with k > 2 would identify on v0/k segments,
+too few for the kernel densities of the objective, and halves repeated with
+new draws average the sampling scatter out of the bias.
+
+With the same model on both sides the shift is sampling scatter only; with a
+model that differs from the vehicle (another damper law, another creep model,
+a flexible carbody) the discrepancy depends on the track of each segment, B
+cannot absorb it, and w_opt moves: that is the bias a measurement at w0 would
+show. What the check cannot see is a model whose *sensitivity* to a parameter
+is wrong (the response of the real vehicle changes less, or otherwise, with
+that parameter): at w0 nothing changes. That is what the adequacy test at
+w_opt looks for (:mod:`suspid.method.adequacy`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import minimize
+
+from suspid.errors import SuspidError
+from suspid.infra.ledger import Ledger, stable_hash
+from suspid.infra.seeds import rng as named_rng
+from suspid.method.identifiability import SelfCheckOptions
+from suspid.method.noise import fit_noise_model
+from suspid.method.objective import ObjectiveFunction
+from suspid.workflows.problem import Problem, segments_digest, simulate_spectra
+
+
+@dataclass
+class SelfCheck:
+    """Result of the self-check; arrays ``(q,)`` in fractions of the admissible interval.
+
+    :ivar bias: mean over the splits of u_opt − u0.
+    :ivar scatter: standard deviation over the splits (0 with one split).
+    :ivar shifts: ``(n_splits, q)`` every split's u_opt − u0.
+    :ivar n_evaluations: simulations made (all splits).
+    """
+
+    bias: np.ndarray
+    scatter: np.ndarray
+    shifts: np.ndarray
+    n_fit: int
+    n_identify: int
+    n_evaluations: int
+
+    def to_dict(self, names: list[str]) -> dict:
+        return {"bias_percent": {n: float(100 * b) for n, b in zip(names, self.bias)},
+                "scatter_percent": {n: float(100 * s) for n, s in zip(names, self.scatter)},
+                "shifts_percent": [{n: float(100 * s) for n, s in zip(names, row)} for row in self.shifts],
+                "n_splits": int(self.shifts.shape[0]), "segments_fit": self.n_fit,
+                "segments_identify": self.n_identify, "n_simulations": self.n_evaluations}
+
+
+def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
+               log: Callable[[str], None] = lambda s: None) -> SelfCheck | None:
+    """The self-check of the module docstring, or None without reference-date data (or fewer than 8 segments).
+
+    The result is cached in the run ledger (keyed by the reference data, the
+    simulator, the objective and the options), so a resumed run does not redo it.
+    """
+    ref = problem.reference
+    segments = problem.reference_segments
+    if not ref or not segments or len(segments) < 8:
+        return None
+    config = problem.config
+    y_mes0 = ref["y_mes0"]
+    v0, q = y_mes0.shape[0], problem.q
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in problem.names]))
+    max_eval = options.max_evaluations or 30 * q
+    key = stable_hash("self-check", problem.simulator_identity, segments_digest(segments), problem.names,
+                      problem.bounds.tolist(), options.model_dump(), config.noise.model_dump(mode="json"),
+                      config.objective.plugin, config.objective.options, problem.weights.tolist(),
+                      config.spectra.model_dump(), config.seed)
+    cached = ledger.get_array(key)
+    n_fit = v0 // 2
+    if cached is not None:
+        shifts = cached[:, :q]
+        return SelfCheck(shifts.mean(axis=0), shifts.std(axis=0, ddof=1) if len(shifts) > 1 else 0 * u0,
+                         shifts, n_fit, v0 - n_fit, int(cached[0, q]))
+    rng = named_rng(config.seed, "self-check")
+    noise_options = config.noise.model_dump(exclude={"path", "reference"})
+    n_sims = 0
+    shifts = np.empty((options.n_splits, q))
+    for s in range(options.n_splits):
+        perm = rng.permutation(v0)
+        a, b = np.sort(perm[:n_fit]), np.sort(perm[n_fit:])
+        model = fit_noise_model(y_mes0[a], ref["y_sim0"][a], noise_options, freqs=problem.freqs,
+                                channels=problem.channels)
+        paths = model.sample(b.size, rng)
+        fn = ObjectiveFunction(problem.objective, y_mes0[b], problem.freqs, paths, weights=problem.weights,
+                               channels=problem.channels)
+        seg_b = [segments[i] for i in b]
+        cache: dict[bytes, float] = {}
+
+        def neg_j(u: np.ndarray) -> float:
+            nonlocal n_sims
+            u = np.clip(u, 0.0, 1.0)
+            k = np.round(u, 6).tobytes()
+            if k not in cache:
+                w = problem.w_of(problem.from_unit(u))
+                try:
+                    y, _ = simulate_spectra(problem.simulator, w, seg_b, config.spectra)
+                    cache[k] = -float(fn.evaluate(y)[0])
+                except SuspidError:  # an unstable point is simply a bad one for the search
+                    cache[k] = np.inf
+                n_sims += 1
+            return cache[k]
+
+        simplex = np.vstack([u0] + [np.clip(u0 + options.initial_step * e * (1 if u0[i] < 0.5 else -1), 0, 1)
+                                    for i, e in enumerate(np.eye(q))])
+        res = minimize(neg_j, u0, method="Nelder-Mead",
+                       options={"initial_simplex": simplex, "maxfev": max_eval, "xatol": 2e-3, "fatol": 1e-6})
+        shifts[s] = np.clip(res.x, 0, 1) - u0
+        log(f"self-check split {s + 1}/{options.n_splits}: shift "
+            + ", ".join(f"{n} {100 * d:+.1f} %" for n, d in zip(problem.names, shifts[s])))
+    ledger.put_array(key, np.column_stack([shifts, np.full(options.n_splits, n_sims)]))
+    return SelfCheck(shifts.mean(axis=0), shifts.std(axis=0, ddof=1) if options.n_splits > 1 else 0 * u0,
+                     shifts, n_fit, v0 - n_fit, n_sims)

@@ -1,0 +1,119 @@
+"""The two-date protocol on measured files, as a new user runs it: generate, write a config, `suspid run`.
+
+The files come from the independent train (tests/independent), not from
+suspid's model; the reference date runs at w0, the measurement date with a
+damaged yaw damper and lateral damper. Sizes are cut to seconds.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from independent import train as TR
+from suspid import cli
+from suspid.method.adequacy import band_residuals, frequency_bands, information_share
+from suspid.method.noise import fit_noise_model
+from suspid.workflows.adequacy import data_groups
+
+W_DAMAGED = {"c_yaw": 560.0e3, "c_sec_y": 11.0e3}
+
+
+def _cli(*args: str) -> int:
+    with pytest.raises(SystemExit) as exit_:
+        cli.main(list(args))
+    return exit_.value.code
+
+
+@pytest.fixture(scope="module")
+def two_dates(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("two-dates")
+    TR.generate_two_dates(out, {}, W_DAMAGED, seed=3, n_segments=8, speed_mps=300 / 3.6, length_m=600.0)
+    return out
+
+
+def _config(out: Path, **extra) -> Path:
+    cfg = {"name": "two-dates", "seed": 3,
+           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0,
+                                                                "vehicle": "manchester-coach"}},
+           "parameters": {"c_sec_y": {}, "c_yaw": {}},
+           "data": {"source": "measured", "measurements": "measurement/accelerations",
+                    "track_file": "measurement/track"},
+           "noise": {"reference": {"measurements": "reference/accelerations", "track_file": "reference/track"}},
+           "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
+           "design": {"n_initial": 6}, "ego": {"max_iter": 2},
+           "identifiability": {"n_redraws": 6, "model_error": {
+               "self_check": {"n_splits": 2, "max_evaluations": 8},
+               "adequacy": {"group_evaluations": 4}}}} | extra
+    path = out / "config.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return path
+
+
+def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model_error(two_dates):
+    cfg = _config(two_dates)
+    assert _cli("validate", str(cfg)) == 0
+    assert _cli("run", str(cfg), "--quiet") == 0
+    run = two_dates / "runs" / "two-dates"
+    result = json.loads((run / "result.json").read_text())
+    assert (run / "noise_model.npz").exists()
+    assert set(result["trustworthy"]) == {"c_sec_y", "c_yaw"}
+    assert all(isinstance(v, bool) for v in result["trustworthy"].values())
+    for n, reasons in result["untrustworthy_reasons"].items():
+        assert not result["trustworthy"][n] and reasons
+    sc = result["model_error"]["self_check"]
+    assert sc["status"] == "done" and sc["n_splits"] == 2 and sc["segments_fit"] == 4
+    assert result["model_error"]["adequacy"]["status"] == "done"
+    for n in result["parameters"]:        # the widened interval contains the sampling one
+        lo, hi = result["interval"][n]
+        slo, shi = result["interval_sampling"][n]
+        assert lo <= slo + 1e-9 and hi >= shi - 1e-9
+    report = (run / "report.md").read_text()
+    assert "## Model error" in report and "trustworthy under model error" in report
+    # a second run reuses the reference-date simulation and the self-check from the ledger
+    assert _cli("run", str(cfg), "--quiet") == 0
+    assert json.loads((run / "result.json").read_text())["w_opt"] == result["w_opt"]
+
+
+def test_validate_names_a_missing_reference_file(two_dates):
+    cfg = _config(two_dates, noise={"reference": {"measurements": "nowhere", "track_file": "reference/track"}})
+    assert _cli("validate", str(cfg)) == 2
+
+
+def test_validate_rejects_a_reference_date_on_another_grid(tmp_path, two_dates):
+    TR.generate_date(tmp_path / "short", {}, seed=9, n_segments=2, speed_mps=300 / 3.6, length_m=300.0)
+    cfg = _config(two_dates, noise={"reference": {"measurements": str(tmp_path / "short" / "accelerations"),
+                                                  "track_file": str(tmp_path / "short" / "track")}})
+    assert _cli("validate", str(cfg)) == 2
+
+
+def test_band_residuals_flag_a_shift_the_noise_cannot_explain():
+    rng = np.random.default_rng(0)
+    freqs = np.geomspace(0.5, 16, 60)
+    y_sim0 = rng.normal(0, 1, (30, 2, 60))
+    b0 = rng.normal(0, 0.5, (30, 2, 60))
+    noise = fit_noise_model(y_sim0 + b0, y_sim0)
+    y_sim = rng.normal(0, 1, (30, 2, 60))
+    y_mes = y_sim + rng.normal(0, 0.5, (30, 2, 60))
+    y_mes[:, 1, freqs > 8] += 2.0                       # channel 1 above 8 Hz: what the model misses
+    bands = frequency_bands(freqs, 1.0)
+    res = band_residuals(y_mes, y_sim, noise, bands)
+    high = np.array([freqs[b].min() >= 8 for b in bands])
+    assert res.inadequate[1, high].all() and not res.inadequate[0].any() and not res.inadequate[1, ~high].any()
+    S = np.zeros((2, 2, 60))
+    S[0, 1, freqs > 8] = 1.0                             # parameter 0 read where the model is wrong
+    S[1, 0] = 1.0                                        # parameter 1 elsewhere
+    share, _ = information_share(S, noise.variance_, np.array([0.5, 0.5]), res)
+    assert share[0] > 0.9 and share[1] < 0.05
+
+
+def test_data_groups_split_directions_and_frequencies():
+    groups = data_groups(["a_vertical", "a_lateral", "b_vertical"], np.geomspace(0.4, 20, 10))
+    names = [g.name for g in groups]
+    assert names[:2] == ["vertical channels", "lateral channels"] and len(groups) == 4
+    assert groups[0].channels.tolist() == [True, False, True]
+    assert (groups[2].freqs ^ groups[3].freqs).all()
