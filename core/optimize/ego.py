@@ -47,6 +47,10 @@ Using it in a pipeline
 (d) Failures: a point told with None, NaN or ±inf is kept out of the data
     (``EGOResult.X_failed``); it counts against the budget, and later fits
     see it with the worst J so far, so that EI does not return to it.
+(e) Budget mode (tol = 0), opt-in: with ``explore_tol`` or ``explore_distance``
+    set, a step whose EI maximiser teaches nothing (EI < explore_tol * (max J -
+    min J), or a point next to one already evaluated) evaluates a uniformly
+    random point instead (:meth:`suspid.optimize.loop.EIProposer.stalled`).
 
 Public API: :class:`EGO`, :func:`run_ego`, :func:`maximize`,
 :func:`make_surrogate`, and, re-exported, :class:`EGOOptions`,

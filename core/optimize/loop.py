@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from suspid.interfaces import Surrogate
-from suspid.optimize.acquisition import ei_from_log, maximize_ei
+from suspid.optimize.acquisition import ei_from_log, log_expected_improvement, maximize_ei
 from suspid.optimize.options import EGOOptions
 
 __all__ = ["IterationRecord", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
@@ -266,6 +266,32 @@ class EIProposer:
         self.surrogate = surrogate
         self.opts = opts
         self.fitted_on = 0  # number of evaluated points in the last fit on real data
+        self.n_explore = 0  # exploration steps taken (see :meth:`stalled`)
+
+    def stalled(self, u: np.ndarray, log_ei: float, U: np.ndarray, y: np.ndarray) -> bool:
+        """Whether the EI maximiser ``u (q,)`` is a step that teaches the model nothing.
+
+        Either EI < ``explore_tol`` * (max J - min J): the model is sure that no
+        point improves on J_max by more than that (the paper's stop with
+        tol = ``explore_tol``); or ``u`` is within ``explore_distance`` (in each
+        unit coordinate) of an evaluated point of ``U (n_points, q)``. In both
+        cases EI keeps returning to the incumbent, whose value is already known,
+        and the model, unchanged, proposes the same again: on Hartmann 6 (m0 =
+        30, tol = 0) about two thirds of the evaluations after the 100th were
+        such copies. Both tests are off by default (``explore_tol`` and
+        ``explore_distance`` 0): replacing these steps by random points stopped
+        the copies but did not free the loop from Hartmann 6's local maximum.
+        """
+        opts = self.opts
+        threshold = opts.explore_tol * float(y.max() - y.min())
+        if threshold > 0 and log_ei < math.log(threshold):
+            return True
+        return bool(np.min(np.max(np.abs(U - u), axis=1)) < opts.explore_distance)
+
+    def explore(self, model: Surrogate, j_max: float, rng: np.random.Generator, q: int) -> tuple[np.ndarray, float]:
+        """An exploration step: a uniformly random point of [0, 1]^q, and its log EI."""
+        u = rng.random(q)
+        return u, float(log_expected_improvement(*model.predict(u[None, :]), j_max)[0])
 
     def _data(self, state: LoopState) -> tuple[np.ndarray, np.ndarray]:
         U, y = state.U_array, state.y_array
@@ -298,6 +324,9 @@ class EIProposer:
         if stop.should_stop(log_ei, eps):
             rejected = (u_new, log_ei)
         else:
+            if self.stalled(u_new, log_ei, Ua, y_real):
+                u_new, log_ei = self.explore(model, j_max, rng, state.q)
+                self.n_explore += 1
             points.append((u_new, log_ei))
         U_b, y_b = list(Ua), list(ya)
         while rejected is None and len(points) < min(opts.batch, n_max):
