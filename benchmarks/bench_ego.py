@@ -135,7 +135,7 @@ def run_one(tool: str, name: str, seed: int) -> dict:
 def table(rows: list[dict], names: list[str], tools: list[str]) -> str:
     """The markdown table: per function and tool, n_1% per seed and the censored mean ± sd."""
     out = ["| function | q | m0 | budget | tool | n_1% per seed | mean ± sd (censored) | reached 1 % | "
-           "worst rel. error | s/run | published |",
+           "worst rel. error at the end | s/run | published |",
            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name in names:
         m0, budget = SETTINGS[name]

@@ -370,3 +370,19 @@ def test_budget_mode_never_evaluates_a_known_point_again():
     gaps = np.max(np.abs(U[:, None] - U[None]), axis=-1)[np.triu_indices(len(U), 1)]
     assert gaps.min() >= 1e-3
     assert res.y_opt > 1.0 - 1e-3
+
+
+def test_set_aside_searches_outside_the_incumbents_basin():
+    from suspid.optimize.loop import EIProposer
+
+    U = np.random.default_rng(0).random((12, 2))
+    y = np.array([bowl([3 * u[0] - 1, u[1]]) for u in U])
+    model = GPyKriging(seed=0).fit(U, y)
+    p = EIProposer(model, EGOOptions())
+    p._set_aside(U, y, model)
+    centre, ls = p.basins[0]
+    np.testing.assert_array_equal(centre, U[np.argmax(y)])
+    np.testing.assert_allclose(ls, model.hyperparameters_["lengthscales"])
+    p.basins = [(centre, np.full(2, 0.2))]  # a basin that leaves part of the box to search
+    u, _ = p._search(model, U, y, y, float(y.max()), np.random.default_rng(1))
+    assert p._outside(u[None, :])[0] and np.sqrt(np.sum(((u - centre) / 0.2) ** 2)) >= 1.0
