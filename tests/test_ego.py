@@ -345,3 +345,44 @@ def test_hartmann6_minimum_within_one_percent():
     res = solve_to_one_percent("hartmann6", budget=130, seed=0)
     assert res.stop_reason == "callback"
     assert relative_error("hartmann6", res.X) <= 0.01
+
+
+# -- exploration instead of a step that teaches nothing (budget mode) ------------------------
+
+def test_stalled_steps_are_recognised():
+    from suspid.optimize.loop import EIProposer
+
+    p = EIProposer(None, EGOOptions(explore_tol=1e-4, explore_distance=1e-3))
+    U, y = np.array([[0.2, 0.2], [0.8, 0.5]]), np.array([0.0, 2.0])
+    assert p.stalled(np.array([0.8005, 0.5]), 0.0, U, y)  # next to an evaluated point
+    assert p.stalled(np.array([0.5, 0.5]), math.log(1e-4 * 2.0) - 0.1, U, y)  # EI < 1e-4 (max J - min J)
+    assert not p.stalled(np.array([0.5, 0.5]), math.log(1e-4 * 2.0) + 0.1, U, y)
+    off = EIProposer(None, EGOOptions(explore_tol=0.0, explore_distance=0.0))
+    assert not off.stalled(np.array([0.8, 0.5]), -1e3, U, y)
+
+
+def test_budget_mode_never_evaluates_a_known_point_again():
+    # tol = 0 runs to max_iter: once the bowl's maximum is found EI keeps pointing at it;
+    # with the exploration options on, those steps become random points instead of copies
+    res = maximize(bowl, BOX, n_initial=5, max_iter=25, tol=0.0, seed=0, n_candidates=256, n_starts=3,
+                   explore_tol=1e-4, explore_distance=1e-3)
+    U = res.X_unit
+    gaps = np.max(np.abs(U[:, None] - U[None]), axis=-1)[np.triu_indices(len(U), 1)]
+    assert gaps.min() >= 1e-3
+    assert res.y_opt > 1.0 - 1e-3
+
+
+def test_set_aside_searches_outside_the_incumbents_basin():
+    from suspid.optimize.loop import EIProposer
+
+    U = np.random.default_rng(0).random((12, 2))
+    y = np.array([bowl([3 * u[0] - 1, u[1]]) for u in U])
+    model = GPyKriging(seed=0).fit(U, y)
+    p = EIProposer(model, EGOOptions())
+    p._set_aside(U, y, model)
+    centre, ls = p.basins[0]
+    np.testing.assert_array_equal(centre, U[np.argmax(y)])
+    np.testing.assert_allclose(ls, model.hyperparameters_["lengthscales"])
+    p.basins = [(centre, np.full(2, 0.2))]  # a basin that leaves part of the box to search
+    u, _ = p._search(model, U, y, y, float(y.max()), np.random.default_rng(1))
+    assert p._outside(u[None, :])[0] and np.sqrt(np.sum(((u - centre) / 0.2) ** 2)) >= 1.0

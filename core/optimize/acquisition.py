@@ -139,11 +139,14 @@ def candidates(U: np.ndarray, y: np.ndarray, opts: EGOOptions, rng: np.random.Ge
 
 def maximize_ei(surrogate: Surrogate, U: np.ndarray, y: np.ndarray, j_max: float, opts: EGOOptions,
                 rng: np.random.Generator, lo: np.ndarray | None = None,
-                hi: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                hi: np.ndarray | None = None,
+                allowed: Callable[[np.ndarray], np.ndarray] | None = None) -> tuple[np.ndarray, float]:
     """argmax of EI over the box [lo, hi] (default [0, 1]^q), see the module docstring.
 
     :param U: ``(n_points, q)`` the data in [0, 1]^q (for the local candidates);
         :param y: ``(n_points,)`` their J.
+    :param allowed: ``allowed(X (n, q)) -> (n,) bool``, the part of the box to search
+        (default all); the result is an allowed point when some candidate is.
     :returns: ``(u (q,), log EI there)``.
     """
     q = U.shape[1]
@@ -153,6 +156,10 @@ def maximize_ei(surrogate: Surrogate, U: np.ndarray, y: np.ndarray, j_max: float
     mean, var = surrogate.predict(cand)
     log_ei = log_expected_improvement(mean, var, j_max)
     log_ei = np.where(np.isfinite(log_ei), log_ei, -np.inf)
+    if allowed is not None:
+        ok = allowed(cand)
+        if np.any(ok):
+            cand, log_ei = cand[ok], log_ei[ok]
     order = np.argsort(-log_ei, kind="stable")
     starts: list[np.ndarray] = []
     for i in order:  # best distinct candidates
@@ -170,7 +177,10 @@ def maximize_ei(surrogate: Surrogate, U: np.ndarray, y: np.ndarray, j_max: float
     def score(u: np.ndarray) -> float:
         return float(log_expected_improvement(*surrogate.predict(u[None, :]), j_max)[0])
 
-    return _climb(objective, score, starts, lo, hi, with_grad, opts.search_maxiter, best_u, best_val)
+    u, val = _climb(objective, score, starts, lo, hi, with_grad, opts.search_maxiter, best_u, best_val)
+    if allowed is not None and not allowed(u[None, :])[0]:
+        return best_u, best_val  # the climb left the allowed part: its best candidate
+    return u, val
 
 
 def maximize_mean(surrogate: Surrogate, centre: np.ndarray, lo: np.ndarray, hi: np.ndarray,

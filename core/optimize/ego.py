@@ -47,6 +47,11 @@ Using it in a pipeline
 (d) Failures: a point told with None, NaN or ±inf is kept out of the data
     (``EGOResult.X_failed``); it counts against the budget, and later fits
     see it with the worst J so far, so that EI does not return to it.
+(e) Budget mode (``tol`` < ``explore_tol`` = 1e-4, e.g. tol = 0): when EI
+    falls below explore_tol * (max J - min J) the loop sets the incumbent's
+    basin aside and goes on against the best J outside it, so that it does not
+    spend the budget at a local maximum (:class:`suspid.optimize.loop.EIProposer`).
+    With the default tol the paper's stop fires first: the paper's loop is unchanged.
 
 Public API: :class:`EGO`, :func:`run_ego`, :func:`maximize`,
 :func:`make_surrogate`, and, re-exported, :class:`EGOOptions`,

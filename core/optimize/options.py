@@ -5,7 +5,7 @@ Public API: :class:`EGOOptions`, :class:`RefineOptions`, :func:`validated`, :fun
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -82,6 +82,16 @@ class EGOOptions(BaseModel):
     :ivar search_maxiter: iterations of each L-BFGS-B run.
     :ivar refit_final: refit the surrogate on every point at the end (for
         the sensitivity report) when the last point was not yet in it.
+    :ivar explore_tol: budget mode (tol below it, e.g. tol = 0): when the EI
+        maximiser's EI is below ``explore_tol`` * (max J - min J), the step
+        explores instead (0: never). With the default tol = 1e-4 the paper's
+        stop fires first, so the paper's loop is unchanged.
+    :ivar explore_distance: ... or when the EI maximiser lies within this
+        distance (each unit coordinate) of an evaluated point (default 0: never).
+    :ivar explore: how it explores: ``"set-aside"`` (default) sets the
+        incumbent's basin aside and maximises EI over the rest of the box
+        against the best J there; ``"random"`` evaluates a uniformly random
+        point. See :class:`suspid.optimize.loop.EIProposer`.
     :ivar batch: points per iteration (kriging believer, see :class:`suspid.optimize.loop.EIProposer`).
     :ivar refine: the local refinement after the loop (:class:`RefineOptions`, off by default).
     """
@@ -97,6 +107,9 @@ class EGOOptions(BaseModel):
     n_starts: int = Field(default=8, ge=1)
     search_maxiter: int = Field(default=200, ge=1)
     refit_final: bool = True
+    explore_tol: float = Field(default=1e-4, ge=0)
+    explore_distance: float = Field(default=0.0, ge=0, le=1)
+    explore: Literal["set-aside", "random"] = "set-aside"
     batch: int = Field(default=1, ge=1, description="points per iteration (kriging believer); 1 = the paper's loop")
     refine: RefineOptions = Field(default_factory=RefineOptions)
 
