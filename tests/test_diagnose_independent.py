@@ -143,6 +143,7 @@ SEEDS = [3, 4, 5]
 
 
 @pytest.mark.slow
+@pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("case, effect, truth, tol", [
     ("bending", "carbody-bending", 9.5, 0.05),
@@ -157,6 +158,7 @@ def test_independent_hidden_effect_is_named(tmp_path, case, effect, truth, tol, 
 
 
 @pytest.mark.slow
+@pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("case, channel, band", [
     ("bracket", "carbody_middle_vertical", 14.0),
@@ -171,6 +173,7 @@ def test_independent_out_of_catalogue_is_reported_unexplained(tmp_path, case, ch
 
 
 @pytest.mark.slow
+@pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("case", ["none", "two-speeds"])
 def test_independent_null_names_nothing(tmp_path, case, seed):
@@ -180,6 +183,7 @@ def test_independent_null_names_nothing(tmp_path, case, seed):
 
 
 @pytest.mark.slow
+@pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
 def test_independent_bending_and_tilt_named_in_two_steps(tmp_path, seed):
     d, _ = run_case(tmp_path, "bending+tilt", seed)

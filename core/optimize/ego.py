@@ -76,7 +76,8 @@ from suspid.optimize.acquisition import (ei_from_log, expected_improvement, log_
 from suspid.optimize.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
 from suspid.optimize.loop import (EGOResult, EIBelowTolerance, EIProposer, IterationRecord, LoopState,
                                   MaxIterations)
-from suspid.optimize.options import EGOOptions, RefineOptions, make_surrogate, validated
+from suspid.optimize.options import EGOOptions, RefineOptions, make_surrogate
+from suspid.options import parse_options
 from suspid.optimize.refine import RefineStep, TrustRegionRefiner
 
 __all__ = ["EGO", "EGOOptions", "RefineOptions", "IterationRecord", "EGOResult", "run_ego", "maximize",
@@ -503,6 +504,6 @@ def options_for(*, n_initial: int | None = None, max_iter: int = 50, tol: float 
 
     :raises ConfigError: invalid options.
     """
-    ego = validated(EGOOptions, "ego", dict(max_iter=max_iter, tol=tol, seed=seed, **search))
-    design_opts = validated(DesignOptions, "design", dict(method=design, n_initial=n_initial, seed=seed))
+    ego = parse_options(EGOOptions, dict(max_iter=max_iter, tol=tol, seed=seed, **search), "ego")
+    design_opts = parse_options(DesignOptions, dict(method=design, n_initial=n_initial, seed=seed), "design")
     return ego, design_opts, make_surrogate(surrogate, surrogate_options, seed)

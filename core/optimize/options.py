@@ -1,19 +1,19 @@
 """The ``ego:`` config section (options of the EGO loop and of its local refinement) and the surrogate.
 
-Public API: :class:`EGOOptions`, :class:`RefineOptions`, :func:`validated`, :func:`make_surrogate`.
+Public API: :class:`EGOOptions`, :class:`RefineOptions`, :func:`make_surrogate`.
 """
 
 from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
 from suspid import registry
-from suspid.errors import ConfigError
 from suspid.interfaces import Surrogate
+from suspid.options import parse_options
 
-__all__ = ["EGOOptions", "RefineOptions", "validated", "make_surrogate"]
+__all__ = ["EGOOptions", "RefineOptions", "make_surrogate"]
 
 
 class RefineOptions(BaseModel):
@@ -100,7 +100,7 @@ class EGOOptions(BaseModel):
 
     max_iter: int = Field(default=50, ge=0)
     tol: float = Field(default=1e-4, ge=0)
-    seed: int = 0
+    seed: int = Field(default=0, ge=0, lt=2**63, description="seed of the EI search's random draws")
     n_candidates: int = Field(default=2000, ge=1)
     n_best: int = Field(default=3, ge=0)
     n_local: int = Field(default=30, ge=0)
@@ -112,16 +112,6 @@ class EGOOptions(BaseModel):
     explore: Literal["set-aside", "random"] = "set-aside"
     batch: int = Field(default=1, ge=1, description="points per iteration (kriging believer); 1 = the paper's loop")
     refine: RefineOptions = Field(default_factory=RefineOptions)
-
-
-def validated(model: type[BaseModel], section: str, values: dict[str, Any]) -> BaseModel:
-    """``model(**values)``, a validation error turned into a :class:`ConfigError` keyed ``section.field``."""
-    try:
-        return model(**values)
-    except ValidationError as exc:
-        first = exc.errors()[0]
-        key = ".".join([section, *(str(p) for p in first["loc"])])
-        raise ConfigError(first["msg"], key=key) from None
 
 
 def make_surrogate(surrogate: str | Surrogate = "gpy-kriging",
@@ -140,5 +130,5 @@ def make_surrogate(surrogate: str | Surrogate = "gpy-kriging",
     if seed is not None and "seed" in fields and "seed" not in options:
         options["seed"] = seed
     if getattr(cls, "Options", None) is not None:
-        validated(cls.Options, "surrogate.options", options)
+        parse_options(cls.Options, options, "surrogate.options")
     return cls(**options)
