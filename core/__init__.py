@@ -39,9 +39,9 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 # The API comes last: its modules import the markers above.
 from suspid.api import (Validation, diagnose, identify, ingest, load_config, modes, monitor,  # noqa: E402
-                        segments, simulate, study, validate)
+                        segments, simulate, stability, study, validate)
 from suspid.workflows.identify import IdentificationResult  # noqa: E402
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
-           "diagnose", "identify", "ingest", "load_config", "modes", "monitor", "segments", "simulate", "study",
-           "validate"]
+           "diagnose", "identify", "ingest", "load_config", "modes", "monitor", "segments", "simulate", "stability",
+           "study", "validate"]

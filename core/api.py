@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, Union
 
-from suspid.config import Config, build_simulator, load_config as _load, override_arguments
+from suspid.config import Config, build_simulator, identified_bounds, load_config as _load, override_arguments
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
@@ -184,6 +184,21 @@ def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[st
     out = Path(out_dir) if out_dir is not None else cfg.run_dir() / "simulation"
     return _simulate.write_simulation(sim, segments(cfg), dict(w or {}), out,
                                       lambda rs: compute_spectra(rs, cfg.spectra))
+
+
+def stability(config: ConfigSource, overrides: Overrides = None, *, n_points: int = 3,
+              out_dir: str | Path | None = None) -> dict[str, Any]:
+    """Linear critical speed of the train model and its sweep over conicity and each identified parameter
+    over its bounds (``suspid stability``); writes ``stability.json``.
+
+    :param n_points: values per parameter between its bounds.
+    :param out_dir: where ``stability.json`` goes (default: the run directory).
+    """
+    cfg = load_config(config, overrides)
+    simulator = build_simulator(cfg)
+    names = [n for n in identified_bounds(cfg, simulator) if "/" not in n]
+    out = Path(out_dir) if out_dir is not None else cfg.run_dir()
+    return _simulate.stability_report(simulator, out, parameters=names, n_points=n_points)
 
 
 def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float | None = None,

@@ -22,7 +22,7 @@ from rich.table import Table
 import suspid
 from suspid import api, registry
 from suspid.errors import ConfigError, SuspidError
-from suspid.workflows.simulate import format_modes
+from suspid.workflows.simulate import format_modes, format_stability
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
@@ -162,6 +162,16 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
     console.print(format_modes(report, max_hz), markup=False, highlight=False)
     where = out if out is not None else api.load_config(config, set_ or []).run_dir()
     console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")
+
+
+@app.command()
+def stability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+              n_points: int = typer.Option(3, "--points", min=2, help="Values per parameter over its bounds."),
+              out: Optional[Path] = typer.Option(None, "--out", help="Folder of stability.json (default: the run dir).")
+              ) -> None:
+    """Linear critical speed of the train model, against conicity and each identified parameter over its bounds."""
+    report = api.stability(config, set_ or [], n_points=n_points, out_dir=out)
+    console.print(format_stability(report), markup=False, highlight=False)
 
 
 @app.command()

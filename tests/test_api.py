@@ -82,3 +82,20 @@ def test_readme_api_line_on_the_quickstart(tmp_path, monkeypatch):
     r = suspid.identify("configs/quickstart.yaml")
     assert r.to_dict() == json.loads((r.run_dir / "result.json").read_text())
     assert r.max_error_percent is not None and r.max_error_percent < 5.0, r.errors_percent
+
+
+def test_stability_command_gives_a_realistic_critical_speed(tmp_path, capsys):
+    """``suspid stability``: the conventional car's linear critical speed lies in 450-650 km/h and falls with
+    conicity and with the yaw damper rate; stability.json holds the same figures."""
+    from suspid.cli import main
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["stability", str(ROOT / "configs" / "quickstart.yaml"), "--points", "2", "--out", str(tmp_path)])
+    assert exit_.value.code == 0
+    assert "linear critical speed" in capsys.readouterr().out
+    report = json.loads((tmp_path / "stability.json").read_text())
+    assert 450 <= report["nominal_kmh"] <= 650
+    by_conicity = [v for _, v in report["conicity"]]
+    assert all(a > b for a, b in zip(by_conicity, by_conicity[1:]))
+    low, high = report["parameters"]["c_yaw"]
+    assert low[1] < high[1]
