@@ -1,4 +1,4 @@
-"""Executors and batch EGO (issue 9).
+"""Executors and batch EGO.
 
 1. Design evaluation with the exudyn *time* solver: the same parameter
    vectors simulated by the ``serial`` executor and by ``processes`` (2

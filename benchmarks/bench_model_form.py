@@ -37,6 +37,7 @@ import yaml
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
+from independent import protocol  # noqa: E402
 from independent import train as TR  # noqa: E402
 
 W_REFS = {
@@ -49,7 +50,7 @@ W_REFS = {
 
 def write_config(case: Path, seed: int, objective: str) -> Path:
     cfg = {"name": objective, "seed": seed,
-           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": "manchester-coach"}},
+           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": protocol.VEHICLE}},
            "parameters": {n: {} for n in W_REFS["quickstart"]},
            "data": {"source": "measured", "measurements": "measurement/accelerations",
                     "track_file": "measurement/track"},
@@ -150,7 +151,7 @@ def main(argv: list[str] | None = None) -> None:
     for _, c, o, n, r in flagged:
         print(f"  {c}/{o} {n}: error {r['error']:+.1f} %; " + "; ".join(x[:140] for x in r["reasons"]))
     missed = [x for x in reported if abs(x[4]["error"]) > 5.0]
-    print(f"reported but off by > 5 %: " + (", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in missed)
+    print("reported but off by > 5 %: " + (", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in missed)
                                          or "none"))
 
 

@@ -1,4 +1,4 @@
-"""Batch EGO and parallel executors inside a run (issue 9)."""
+"""Batch EGO and parallel executors inside a run."""
 
 from __future__ import annotations
 

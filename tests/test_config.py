@@ -1,4 +1,4 @@
-"""Config validation: every mistake is one line naming file, key path and what was expected (issue 2)."""
+"""Config validation: every mistake is one line naming file, key path and what was expected."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Initial designs (issue 4, part 2): maximin LHS yardstick, named designs, scaling."""
+"""Initial designs: maximin LHS yardstick, named designs, scaling."""
 
 import numpy as np
 import pytest

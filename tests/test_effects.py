@@ -1,4 +1,4 @@
-"""Effects (issue 8): the plugin kind, the built-in catalogue and the exudyn model's implementations.
+"""Effects: the plugin kind, the built-in catalogue and the exudyn model's implementations.
 
 The exudyn tests run the real model with both solvers: every effect must act
 the same in the time solver (exudyn integration) and the frequency solver

@@ -1,4 +1,4 @@
-"""EGO loop (issue 4, part 3): EI in closed form, the paper's stop rule, determinism, quality."""
+"""EGO loop: EI in closed form, the paper's stop rule, determinism, quality."""
 
 import math
 

@@ -1,4 +1,4 @@
-"""Executors (issue 9): serial, processes and dask give the same results; dead workers; no process left.
+"""Executors: serial, processes and dask give the same results; dead workers; no process left.
 
 Task functions live at module level (here or in ``suspid.testing``) so that
 worker processes can import them by reference: spawned workers, the pool's and

@@ -1,4 +1,4 @@
-"""The ``gpy-kriging`` surrogate plugin (issue 4, part 1)."""
+"""The ``gpy-kriging`` surrogate plugin."""
 
 import warnings
 

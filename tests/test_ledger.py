@@ -1,4 +1,4 @@
-"""The SQLite run ledger: durability under SIGKILL, reuse, concurrent writers (issue 2)."""
+"""The SQLite run ledger: durability under SIGKILL, reuse, concurrent writers."""
 
 from __future__ import annotations
 

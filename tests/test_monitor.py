@@ -1,4 +1,4 @@
-"""Maintenance monitoring across dates (issue 10): config, status rules, the degradation scenario, the CLI."""
+"""Maintenance monitoring across dates: config, status rules, the degradation scenario, the CLI."""
 
 from __future__ import annotations
 

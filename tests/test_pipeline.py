@@ -1,4 +1,4 @@
-"""End-to-end identification (issue 6): recovery, resumption after SIGKILL, measured data checks."""
+"""End-to-end identification: recovery, resumption after SIGKILL, measured data checks."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""A third-party plugin package, installed for real, is discovered with no change to the core (issue 2)."""
+"""A third-party plugin package, installed for real, is discovered with no change to the core."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The README's two commands and CI stay in step (issue 2, point 9)."""
+"""The README's two commands and CI stay in step."""
 
 from pathlib import Path
 

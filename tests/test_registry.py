@@ -1,4 +1,4 @@
-"""Plugin discovery and registration (issue 2: discovery, isolation, duplicates)."""
+"""Plugin discovery and registration (discovery, isolation, duplicates)."""
 
 from __future__ import annotations
 

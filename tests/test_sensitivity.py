@@ -1,4 +1,4 @@
-"""Sensitivity from the metamodel (issue 4, part 5): Sobol' indices and length-scales."""
+"""Sensitivity from the metamodel: Sobol' indices and length-scales."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""`suspid study`: variants of one config, Table 1 / Figure 2 analogues (issue 6, point 6)."""
+"""`suspid study`: variants of one config, Table 1 / Figure 2 analogues."""
 
 from __future__ import annotations
 

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from independent import train as TR
+from independent.protocol import VEHICLE
 from suspid import cli
 from suspid.method.adequacy import band_residuals, frequency_bands, information_share
 from suspid.method.noise import fit_noise_model
@@ -39,7 +40,7 @@ def two_dates(tmp_path_factory) -> Path:
 def _config(out: Path, **extra) -> Path:
     cfg = {"name": "two-dates", "seed": 3,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0,
-                                                                "vehicle": "manchester-coach"}},
+                                                                "vehicle": VEHICLE}},
            "parameters": {"c_sec_y": {}, "c_yaw": {}},
            "data": {"source": "measured", "measurements": "measurement/accelerations",
                     "track_file": "measurement/track"},

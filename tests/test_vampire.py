@@ -1,4 +1,4 @@
-"""The ``vampire`` simulator plugin, driven through its test double (issue 7).
+"""The ``vampire`` simulator plugin, driven through its test double.
 
 Every run here starts ``tests/vampire_double/vampire_double.py`` as the
 external program. The environment carries a token unique to this test

@@ -1,4 +1,4 @@
-"""`suspid run` through the vampire adapter with the test double (issue 7, point 6)."""
+"""`suspid run` through the vampire adapter with the test double."""
 
 from __future__ import annotations
 

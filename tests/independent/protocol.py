@@ -44,6 +44,10 @@ TABLE1_W_REF = {"k_sec_z": 340.0e3, "k_prim_z": 1.00e6, "c_sec_z": 14.0e3, "k_se
                 "c_sec_y": 11.0e3, "c_yaw": 560.0e3, "k_prim_y": 3.2e6}
 """The damaged suspension of suspid's Table 1 config (q = 7, SI)."""
 
+VEHICLE = {"preset": "manchester-coach", "k_prim_x": 14.68e6, "c_sec_y": 16.0e3, "c_yaw": 800.0e3, "conicity": 0.25}
+"""suspid's car for the independent train's data: the Manchester coach preset with the values where the
+independent train's nominal (w0) differs (its ``SHARED`` parameters), so that w0 is the same vehicle."""
+
 SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200}
 """The quickstart's ``spectra:`` section."""
 
@@ -57,7 +61,8 @@ def fit_reference_noise(reference_dir: Path, out_path: Path, simulator_options: 
     from suspid.method.spectra import compute_spectra
 
     sim = registry.get("simulator", "exudyn-train")(**dict(simulator_options or {"solver": "frequency",
-                                                                                 "fs_hz": 100.0}))
+                                                                                 "fs_hz": 100.0,
+                                                                                 "vehicle": VEHICLE}))
     channels = sim.channels()
     segments, records = read_measurements(reference_dir / "accelerations", reference_dir / "track", channels)
     y_mes0, freqs = compute_spectra(records, spectra or SPECTRA)
@@ -74,7 +79,7 @@ def write_config(path: Path, measurement_dir: Path, noise_path: Path, *, seed: i
     cfg = {
         "name": path.stem,
         "seed": seed,
-        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": "manchester-coach"}},
+        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": VEHICLE}},
         "parameters": {n: {} for n in identified},
         "data": {"source": "measured",
                  "measurements": str(Path(measurement_dir, "accelerations").relative_to(base)),
