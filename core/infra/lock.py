@@ -148,6 +148,11 @@ class RunLock:
         if not _try_lock(fd):
             os.close(fd)
             info = self.holder(self.run_dir)
+            for _ in range(20):  # the holder writes its record just after taking the lock: wait up to 1 s
+                if "pid" in info:
+                    break
+                time.sleep(0.05)
+                info = self.holder(self.run_dir)
             who = f"process {info['pid']}" if "pid" in info else "another process"
             if info.get("host") and info.get("host") != socket.gethostname():
                 who += f" on {info['host']}"
