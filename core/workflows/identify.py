@@ -64,6 +64,8 @@ class IdentificationResult:
     :ivar identifiable: ``name -> bool``; :ivar reasons: why a component is not identifiable.
     :ivar w_ref: the known parameters of a numerical experiment, else None.
     :ivar errors_percent: ``|w_opt - w_ref|`` in % of the interval (numerical experiment), else None.
+    :ivar trustworthy: ``name -> bool``: False where the model-error checks (measured data) say the
+        value is not a finding (reasons in ``result["untrustworthy_reasons"]``).
     :ivar J_max: J(w_opt).
     :ivar n_initial, n_iterations, n_simulator_calls: m0, EGO iterations, evaluations of J.
     :ivar stop_reason, refine_stop_reason: why the EGO loop (and the refinement) stopped.
@@ -88,6 +90,7 @@ class IdentificationResult:
     run_dir: Path
     w_ref: dict[str, float] | None = None
     errors_percent: dict[str, float] | None = None
+    trustworthy: dict[str, bool] | None = None
     problem: Problem | None = field(default=None, repr=False, compare=False)
     ego: EGOResult | None = field(default=None, repr=False, compare=False)
     _data: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -105,7 +108,8 @@ class IdentificationResult:
                    n_iterations=int(data["n_iterations"]), n_simulator_calls=int(data["n_simulator_calls"]),
                    stop_reason=data["stop_reason"], refine_stop_reason=data.get("refine_stop_reason"),
                    wall_time_s=float(data["wall_time_s"]), run_dir=Path(run_dir), w_ref=data.get("w_ref"),
-                   errors_percent=data.get("errors_percent"), problem=problem, ego=ego, _data=data)
+                   errors_percent=data.get("errors_percent"), trustworthy=data.get("trustworthy"),
+                   problem=problem, ego=ego, _data=data)
 
     @classmethod
     def load(cls, run_dir: str | Path) -> "IdentificationResult":
