@@ -301,16 +301,21 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], c
         stage = Stage(f"after-{step}", aug, current.problem, current.w, cand.y_sim, None)
         _locate(stage, grid, null, opts.alpha)
         return stage, {"mode": "none (reidentify: false)", "rounds": 0, "converged": None, "trace": []}
+    def identified(suffix: str) -> Stage:
+        """The model with the effects as they stand, identified in ``steps/<step>-<suffix>``, and its map."""
+        run_dir = out_dir / "steps" / f"{step}-{suffix}"
+        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
+                               path=out_dir / "steps" / f"augmented-{step}-{suffix}.yaml", run_dir=run_dir)
+        identified_stage = make_stage(f"after-{step}-{suffix}", load_config(path), True, run_dir, fresh=fresh,
+                                      progress=progress, log=log)
+        _locate(identified_stage, grid, null, opts.alpha)
+        return identified_stage
+
     trace: list[dict[str, Any]] = []
     converged = False
     stage = current
     for r in range(1, opts.joint_rounds + 1):
-        run_dir = out_dir / "steps" / f"{step}-{r}"
-        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
-                               path=out_dir / "steps" / f"augmented-{step}-{r}.yaml", run_dir=run_dir)
-        stage = make_stage(f"after-{step}-{r}", load_config(path), True, run_dir, fresh=fresh, progress=progress,
-                           log=log)
-        _locate(stage, grid, null, opts.alpha)
+        stage = identified(str(r))
         moved, refits = 0.0, []
         for i, (name, params, n_par) in enumerate(named):
             if name in fixed:
@@ -339,11 +344,5 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], c
             converged = True
             break
     if not converged and opts.joint_rounds > 1:
-        # the last refit moved the effects: identify once more so that the stage matches the parameters
-        run_dir = out_dir / "steps" / f"{step}-final"
-        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
-                               path=out_dir / "steps" / f"augmented-{step}-final.yaml", run_dir=run_dir)
-        stage = make_stage(f"after-{step}-final", load_config(path), True, run_dir, fresh=fresh, progress=progress,
-                           log=log)
-        _locate(stage, grid, null, opts.alpha)
+        stage = identified("final")  # the last refit moved the effects: the stage must match their parameters
     return stage, {"mode": "alternating", "rounds": len(trace), "converged": converged, "trace": trace}
