@@ -94,7 +94,7 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
     """
     cfg = load_config(config, overrides)
     n = dry_run(cfg)
-    source, extra = _source(cfg if not overrides else config), _override_list(overrides)
+    source, extra = _source(config), _override_list(overrides)  # as study and monitor will reload them
     if cfg.study is not None:
         _study.study_variants(source, extra, cfg)
     if cfg.monitor is not None:
