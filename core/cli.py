@@ -7,6 +7,7 @@ with code 130 and keeps what is already in the run ledger.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import sqlite3
 import sys
@@ -258,6 +259,23 @@ def _one_line(exc: BaseException) -> tuple[str, int]:
     return f"internal error: {what} (a bug in suspid; --debug shows the traceback)", 1
 
 
+def _kept() -> str:
+    """What an interrupted command leaves: the finished simulations in the ledgers it opened."""
+    from suspid.infra.lock import OPENED_LEDGERS
+
+    counts = []
+    for path in OPENED_LEDGERS:
+        try:
+            with contextlib.closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as db:
+                counts.append(db.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0])
+        except sqlite3.Error:
+            pass
+    if not counts:
+        return "every finished simulation is kept in the run ledger"
+    where = OPENED_LEDGERS[0] if len(OPENED_LEDGERS) == 1 else f"{len(OPENED_LEDGERS)} run ledgers"
+    return f"{sum(counts)} finished simulations are kept in {where}"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point; returns (and exits with) the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -282,8 +300,7 @@ def main(argv: list[str] | None = None) -> int:
         message, code = _one_line(exc)
         print(f"error: {message}", file=sys.stderr)
     if interrupted:
-        print("interrupted: every finished simulation is kept in the run ledger; run the same command to resume",
-              file=sys.stderr)
+        print(f"interrupted: {_kept()}; run the same command to resume", file=sys.stderr)
     sys.exit(code)
 
 

@@ -68,6 +68,7 @@ def test_ctrl_c_on_the_command_exits_130_keeps_the_ledger_and_resumes(tmp_path):
     assert "interrupted" in err and "run the same command to resume" in err and "Traceback" not in err, err
     kept = _evaluations(ledger)
     assert kept >= 3
+    assert f"{kept} finished simulations are kept in {ledger}" in err, err   # the count the user can resume from
     again = _suspid("run", str(path), "--quiet")
     assert again.returncode == 0, again.stderr
     result = json.loads((tmp_path / "runs" / "faults" / "result.json").read_text())

@@ -71,6 +71,10 @@ else:
 LOCK_FILE = ".lock"
 """Name of the lock file in a run directory."""
 OWNER_FILE = "run_owner.json"
+
+OPENED_LEDGERS: list[Path] = []
+"""The ledgers this process has opened through :func:`open_run_dir`, in order (the CLI counts
+what they keep when a run is interrupted)."""
 """Name of the file that records which config owns a run directory."""
 
 _HELD: dict[str, list[Any]] = {}
@@ -259,6 +263,8 @@ def open_run_dir(run_dir: str | Path, *, config_name: str, config_file: str | Pa
         path = Path(run_dir) / "ledger.sqlite"
         ledger = Ledger.fresh(path, log=log) if fresh else Ledger(path)
         ledger.count()   # open and check it now, before any work
+        if path not in OPENED_LEDGERS:
+            OPENED_LEDGERS.append(path)
         try:
             yield ledger
         finally:
