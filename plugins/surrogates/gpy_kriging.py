@@ -70,7 +70,6 @@ from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.spatial.distance import cdist, pdist, squareform
 
 from suspid import hookimpl
-from suspid.errors import ConfigError
 from suspid.options import parse_options
 from suspid.interfaces import Surrogate
 from suspid.infra.threads import single_blas_thread
