@@ -18,7 +18,7 @@ import datetime as dt
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from suspid.data.experiment import MeasurementOptions, ReferenceOptions
 from suspid.data.track import TrackOptions
@@ -162,17 +162,18 @@ class StudyOptions(Section):
             raise ValueError(f"checkpoints must be numbers of simulator calls >= 1, got {checkpoints}")
         return sorted(set(checkpoints))
 
-    @model_validator(mode="after")
-    def _compare_known_variants(self) -> "StudyOptions":
-        if self.compare is None:
-            return self
-        names = [v.name for v in self.variants]
-        if len(self.compare) != 2 or self.compare[0] == self.compare[1]:
-            raise ValueError(f"compare needs two different variant names, got {self.compare}")
-        unknown = [c for c in self.compare if c not in names]
+    @field_validator("compare")
+    @classmethod
+    def _compare_known_variants(cls, compare: list[str] | None, info: ValidationInfo) -> list[str] | None:
+        if compare is None:
+            return compare
+        if len(compare) != 2 or compare[0] == compare[1]:
+            raise ValueError(f"compare needs two different variant names, got {compare}")
+        names = [v.name for v in info.data.get("variants", [])]
+        unknown = [c for c in compare if c not in names]
         if unknown:
             raise ValueError(f"compare names unknown variant(s) {', '.join(unknown)}; variants are: {', '.join(names)}")
-        return self
+        return compare
 
 
 # -- monitor -----------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ import suspid
 from suspid.errors import ConfigError
 from suspid.infra.ledger import Ledger
 from suspid.workflows.study_stats import anytime_errors, error_at, paired_test, summarize
+from conftest import run_cli
 from test_study import STUDY
 
 BASE = yaml.safe_load(STUDY.split("study:")[0])
@@ -112,3 +113,11 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
     assert "## Over seeds" in text and "## Worst identifiable error at N simulator calls" in text
     assert "## Paired comparison: likelihood against mean-spectrum" in text and "Exact sign test (two-sided): p = 1" in text
     assert "| N = 7 | N = 1000 |" in text and (out / "study_anytime.png").stat().st_size > 0
+
+
+def test_a_bad_compare_is_one_line_naming_the_key(tmp_path):
+    cfg = tmp_path / "study.yaml"
+    cfg.write_text(STUDY + "  compare: [likelihood, overlapp]\n")
+    res = run_cli("validate", str(cfg))
+    assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "key 'study.compare'" in res.stderr and "unknown variant(s) overlapp" in res.stderr
