@@ -137,7 +137,7 @@ class StudyOptions(Section):
     variants: list[Variant] = Field(min_length=1)
     seeds: list[int] | None = None
     compare: list[str] | None = Field(default=None, description="two variant names: a paired test over the seeds")
-    checkpoints: list[int] = Field(default=[100, 300], description="simulator calls N at which the worst "
+    checkpoints: list[int] = Field(default=[100, 300], min_length=1, description="simulator calls N at which the worst "
                                    "identifiable error is reported")
 
     @field_validator("variants")

@@ -111,7 +111,13 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
         assert float(r["error_at_7"]) == pytest.approx(curve[6], rel=1e-12)
     text = (out / "study.md").read_text()
     assert "## Over seeds" in text and "## Worst identifiable error at N simulator calls" in text
-    assert "## Paired comparison: likelihood against mean-spectrum" in text and "Exact sign test (two-sided): p = 1" in text
+    assert "## Paired comparison: likelihood against mean-spectrum" in text
+    d = [expected_measures(results["likelihood", s])["worst_error"]
+         - expected_measures(results["mean-spectrum", s])["worst_error"] for s in (1, 2)]
+    n_up, n_down = sum(x > 0 for x in d), sum(x < 0 for x in d)  # 2 pairs: always the sign test
+    p = stats.binomtest(n_up, n_up + n_down).pvalue if n_up + n_down else 1.0
+    assert f"likelihood lower on {n_down}, mean-spectrum lower on {n_up}" in text
+    assert f"Exact sign test (two-sided): p = {p:.3g}." in text
     assert "| N = 7 | N = 1000 |" in text and (out / "study_anytime.png").stat().st_size > 0
 
 

@@ -146,7 +146,8 @@ class ObjectiveFunction:
         if y_sim.shape != np.shape(self.noise_paths):
             raise DataError(f"simulated spectra have shape {y_sim.shape}; this objective function holds "
                             f"noise paths of shape {np.shape(self.noise_paths)} (v, n_channels, n_freqs)")
-        extra = {"noise_variance": self.noise_variance} if getattr(self.objective, "uses_noise_variance", False) else {}
+        wants_variance = getattr(self.objective, "uses_noise_variance", False)
+        extra = {"noise_variance": self.noise_variance} if wants_variance else {}
         psi = np.asarray(self.objective.psi(self.y_mes, y_sim + self.noise_paths, self.freqs, **extra), dtype=float)
         if psi.shape != self.alpha.shape:
             raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "

@@ -89,7 +89,8 @@ def statistics_markdown(runs: list[RunStats], checkpoints: list[int], compare: l
     """The markdown sections: measures over seeds, errors at the checkpoints, the paired comparison."""
     table = summaries(runs, checkpoints)
     keys = [k for k in METRICS if k in next(iter(table.values()))]
-    rows = [[v, max(s.n for s in summary.values()), *(_cell(summary[k], METRICS[k][1]) for k in keys)] for v, summary in table.items()]
+    rows = [[v, max(s.n for s in summary.values()), *(_cell(summary[k], METRICS[k][1]) for k in keys)]
+            for v, summary in table.items()]
     text = ("## Over seeds\n\nPer variant: mean ± standard deviation [95 % t-interval] over its seeds. "
             "Errors in % of the admissible interval, over the identifiable components; coverage: the "
             "fraction of them whose interval contains w_ref.\n\n"

@@ -90,7 +90,8 @@ class SklearnGP(Surrogate):
 
     def _record(self) -> None:
         k = self.model_.kernel_
-        variance, ls, noise = float(k.k1.k1.constant_value), np.atleast_1d(k.k1.k2.length_scale), float(k.k2.noise_level)
+        variance, noise = float(k.k1.k1.constant_value), float(k.k2.noise_level)
+        ls = np.atleast_1d(k.k1.k2.length_scale)
         self.noise_level_ = noise
         self.lengthscales_ = ls * self.x_range_
         self.hyperparameters_: dict[str, Any] = {
