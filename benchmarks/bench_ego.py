@@ -13,6 +13,7 @@ Peers (optional benchmark dependencies, not dependencies of suspid)::
 
 - ``suspid``: :func:`suspid.optimize.ego.maximize` with its defaults
   (``gpy-kriging``, maximin LHS, the EI search of ``EGOOptions``) and tol = 0;
+- ``suspid-sklearn``: the same with the ``sklearn-gp`` surrogate;
 - ``optuna-gp``: Optuna's ``GPSampler`` (log EI on a Matérn 5/2 GP with
   priors), ``n_startup_trials = m0`` random points;
 - ``skopt``: scikit-optimize's ``gp_minimize`` (``gp_hedge``),
@@ -60,7 +61,7 @@ SETTINGS = {"branin": (10, 60), "goldstein-price": (10, 100), "hartmann3": (10, 
 PUBLISHED = {"branin": (21, 25), "goldstein-price": (44, 46), "hartmann3": (23, 48), "hartmann6": (131, 170)}
 """Evaluations to 1 %, range over six Kriging-based methods (Int. J. Aerospace Eng. 2023, Table 4)."""
 
-TOOLS = {"suspid": "suspid", "optuna-gp": "optuna", "skopt": "skopt"}
+TOOLS = {"suspid": "suspid", "suspid-sklearn": "sklearn", "optuna-gp": "optuna", "skopt": "skopt"}
 """Tool -> the module it needs."""
 
 CENSOR = 100
@@ -86,11 +87,15 @@ class _Tracker:
         return math.log(value) if self.log else value
 
 
-def _suspid(track: _Tracker, m0: int, budget: int, seed: int) -> None:
+def _suspid(track: _Tracker, m0: int, budget: int, seed: int, surrogate: str = "gpy-kriging") -> None:
     from suspid.optimize.ego import maximize
 
     maximize(lambda x: -track(x), track.f.bounds, n_initial=m0, max_iter=budget - m0, tol=0.0, seed=seed,
-             callback=lambda record: track.n_hit is not None)
+             surrogate=surrogate, callback=lambda record: track.n_hit is not None)
+
+
+def _suspid_sklearn(track: _Tracker, m0: int, budget: int, seed: int) -> None:
+    _suspid(track, m0, budget, seed, surrogate="sklearn-gp")
 
 
 def _optuna(track: _Tracker, m0: int, budget: int, seed: int) -> None:
@@ -117,7 +122,7 @@ def _skopt(track: _Tracker, m0: int, budget: int, seed: int) -> None:
                 n_initial_points=m0, random_state=seed, callback=lambda res: track.n_hit is not None)
 
 
-RUNNERS = {"suspid": _suspid, "optuna-gp": _optuna, "skopt": _skopt}
+RUNNERS = {"suspid": _suspid, "suspid-sklearn": _suspid_sklearn, "optuna-gp": _optuna, "skopt": _skopt}
 
 
 def run_one(tool: str, name: str, seed: int) -> dict:

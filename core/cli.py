@@ -179,7 +179,7 @@ def stability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           fresh: bool = typer.Option(False, "--fresh", help="Start every variant over."),
           quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
-    """Run the variants of the config's study: section; writes study.csv, study.md and a Figure 2 plot."""
+    """Run the variants of the config's study: section, once per seed; study.csv (over seeds), study_runs.csv, study.md."""
     out = api.study(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
     console.print((out.study_dir / "study.md").read_text(encoding="utf-8"))
 

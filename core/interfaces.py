@@ -178,6 +178,10 @@ class Objective(ABC):
 
     name: ClassVar[str]
     Options: ClassVar[type | None] = None
+    #: Optional capability: when True, :class:`~suspid.method.objective.ObjectiveFunction`
+    #: also passes ``noise_variance`` ``(n_channels, n_freqs)`` dB², the variance of the
+    #: run's noise paths b_i, as a keyword argument of :meth:`psi`.
+    uses_noise_variance: ClassVar[bool] = False
 
     def __init__(self, **options: Any) -> None:
         self.options = options

@@ -18,7 +18,7 @@ import datetime as dt
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, ValidationInfo, field_validator
 
 from suspid.data.experiment import MeasurementOptions, ReferenceOptions
 from suspid.data.track import TrackOptions
@@ -136,6 +136,9 @@ class StudyOptions(Section):
 
     variants: list[Variant] = Field(min_length=1)
     seeds: list[int] | None = None
+    compare: list[str] | None = Field(default=None, description="two variant names: a paired test over the seeds")
+    checkpoints: list[int] = Field(default=[100, 300], min_length=1, description="simulator calls N at which the worst "
+                                   "identifiable error is reported")
 
     @field_validator("variants")
     @classmethod
@@ -144,6 +147,33 @@ class StudyOptions(Section):
         if len(set(names)) != len(names):
             raise ValueError(f"variant names must be unique, got {names}")
         return variants
+
+    @field_validator("seeds")
+    @classmethod
+    def _unique_seeds(cls, seeds: list[int] | None) -> list[int] | None:
+        if seeds is not None and len(set(seeds)) != len(seeds):
+            raise ValueError(f"seeds must be unique, got {seeds}")
+        return seeds
+
+    @field_validator("checkpoints")
+    @classmethod
+    def _positive(cls, checkpoints: list[int]) -> list[int]:
+        if any(n < 1 for n in checkpoints):
+            raise ValueError(f"checkpoints must be numbers of simulator calls >= 1, got {checkpoints}")
+        return sorted(set(checkpoints))
+
+    @field_validator("compare")
+    @classmethod
+    def _compare_known_variants(cls, compare: list[str] | None, info: ValidationInfo) -> list[str] | None:
+        if compare is None:
+            return compare
+        if len(compare) != 2 or compare[0] == compare[1]:
+            raise ValueError(f"compare needs two different variant names, got {compare}")
+        names = [v.name for v in info.data.get("variants", [])]
+        unknown = [c for c in compare if c not in names]
+        if unknown:
+            raise ValueError(f"compare names unknown variant(s) {', '.join(unknown)}; variants are: {', '.join(names)}")
+        return compare
 
 
 # -- monitor -----------------------------------------------------------------------------------

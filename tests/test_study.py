@@ -34,8 +34,9 @@ def test_study_runs_both_objectives_from_one_design(tmp_path):
     res = run_cli("study", str(cfg), "--quiet")
     assert res.returncode == 0, res.stderr
     out = tmp_path / "runs" / "st"
-    rows = list(csv.DictReader(open(out / "study.csv")))
-    assert [r["variant"] for r in rows] == ["likelihood", "overlap", "refined"]
+    rows = list(csv.DictReader(open(out / "study_runs.csv")))
+    assert [r["run"] for r in rows] == ["likelihood", "overlap", "refined"]
+    assert [r["variant"] for r in csv.DictReader(open(out / "study.csv"))] == ["likelihood", "overlap", "refined"]
     assert {r["objective"] for r in rows} == {"likelihood", "overlap"}
     for r in rows:
         assert float(r["error_k_sec_z"]) >= 0 and r["identifiable_c_sec_z"] in ("True", "False")

@@ -69,7 +69,8 @@ SECTIONS = [
     (("diagnose",), "alpha", "small", None),
 ]
 PLUGIN_OPTIONS = [  # every built-in plugin's options: (section, plugin)
-    ("objective", "likelihood"), ("objective", "overlap"), ("surrogate", "gpy-kriging"),
+    ("objective", "likelihood"), ("objective", "overlap"), ("objective", "mean-spectrum"),
+    ("objective", "wasserstein"), ("surrogate", "gpy-kriging"), ("surrogate", "sklearn-gp"),
     ("executor", "serial"), ("executor", "processes"), ("executor", "dask"), ("simulator", "exudyn-train"),
 ]
 

@@ -374,6 +374,11 @@ class Ledger:
         rows = self._read("SELECT record FROM iterations WHERE run = ? ORDER BY iteration", (run,))
         return [json.loads(r[0]) for r in rows]
 
+    def all_iterations(self) -> list[tuple[str, int, dict[str, Any]]]:
+        """Every recorded iteration as ``(run, iteration, record)``, ordered by run name, then iteration."""
+        rows = self._read("SELECT run, iteration, record FROM iterations ORDER BY run, iteration")
+        return [(run, int(i), json.loads(record)) for run, i, record in rows]
+
     # -- artifacts (arrays, small files) -------------------------------------------
     def put_array(self, key: str, array: np.ndarray) -> None:
         """Store an array (e.g. reference-date spectra) under ``key``."""

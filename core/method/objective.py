@@ -125,6 +125,16 @@ class ObjectiveFunction:
             raise ConfigError("weights given by channel name need the channel names", key="objective.weights")
         return validate_weights(self.weights, channels)
 
+    @cached_property
+    def noise_variance(self) -> np.ndarray:
+        """``(n_channels, n_freqs)`` dB²: the sample variance of the noise paths b_i (ddof = 1), the
+        noise model's variance as this run draws it; passed to objectives with ``uses_noise_variance``."""
+        paths = np.asarray(self.noise_paths, dtype=float)
+        if paths.shape[0] < 2:
+            raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' needs the noise variance, "
+                            f"which takes at least 2 noise paths; got {paths.shape[0]}")
+        return paths.var(axis=0, ddof=1)
+
     def evaluate(self, y_sim: np.ndarray) -> tuple[float, np.ndarray]:
         """J and Ψ for simulated spectra (eq. 5).
 
@@ -136,7 +146,9 @@ class ObjectiveFunction:
         if y_sim.shape != np.shape(self.noise_paths):
             raise DataError(f"simulated spectra have shape {y_sim.shape}; this objective function holds "
                             f"noise paths of shape {np.shape(self.noise_paths)} (v, n_channels, n_freqs)")
-        psi = np.asarray(self.objective.psi(self.y_mes, y_sim + self.noise_paths, self.freqs), dtype=float)
+        wants_variance = getattr(self.objective, "uses_noise_variance", False)
+        extra = {"noise_variance": self.noise_variance} if wants_variance else {}
+        psi = np.asarray(self.objective.psi(self.y_mes, y_sim + self.noise_paths, self.freqs, **extra), dtype=float)
         if psi.shape != self.alpha.shape:
             raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "
                             f"{psi.shape}, expected {self.alpha.shape}")

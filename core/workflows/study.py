@@ -13,9 +13,19 @@ a run)::
 
 Variants that differ only by their objective share the seed, hence the same
 initial design and the same noise paths, as in the paper ("starting with the
-same initial experimental design"). Outputs: ``study.csv`` (one row per
-variant), ``study.md`` (the Table 1 analogue) and ``study_parameters.png``
-(the Figure 2 analogue, every variant).
+same initial experimental design"). With ``seeds``, ``compare: [a, b]`` adds a
+paired test of two variants over the seeds, and ``checkpoints`` (default
+``[100, 300]``) the numbers of simulator calls at which the worst identifiable
+error is reported. Outputs (statistics in :mod:`suspid.workflows.study_stats`):
+
+- ``study.csv``: one row per variant, mean, sd and 95 % t-interval over its
+  seeds of the worst and mean identifiable error, simulator calls, coverage of
+  w_ref, wall time and the error at each checkpoint;
+- ``study_runs.csv``: one row per run (variant and seed);
+- ``study.md``: those tables, the paired comparison, and the Table 1 analogue
+  (every run);
+- ``study_anytime.png``: error against simulator calls, per variant (mean and
+  range over seeds); ``study_parameters.png``: the Figure 2 analogue.
 """
 
 from __future__ import annotations
@@ -30,7 +40,11 @@ import numpy as np
 from suspid.config import Config, load_config, override_arguments
 from suspid.infra.files import atomic_open, write_json, write_text
 from suspid.workflows.identify import IdentificationResult, run
+from suspid.sections import StudyOptions
 from suspid.workflows.report import figure_parameters, markdown_table
+from suspid.workflows.study_report import (RunStats, figure_anytime, run_stats, statistics_markdown, summaries,
+                                           write_variants_csv)
+from suspid.workflows.study_stats import anytime_errors
 
 
 @dataclass
@@ -44,8 +58,18 @@ class StudyResult:
     variants: dict[str, IdentificationResult]
 
 
+@dataclass
+class StudyRun:
+    """One run of a study: ``label`` (its folder under ``variants/``), its variant's name and seed, its config."""
+
+    label: str
+    variant: str
+    seed: int | None
+    config: Config
+
+
 def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[str],
-                   config: Config) -> list[tuple[str, Config]]:
+                   config: Config) -> list[StudyRun]:
     """The configs of every variant (each validated), in order.
 
     :param source: the config file (or mapping) the variants are derived from.
@@ -62,8 +86,8 @@ def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[s
             extra = {"output.dir": str(base_dir / "variants" / label), "name": f"{config.name}-{label}"}
             if seed is not None:
                 extra["seed"] = seed
-            out.append((label, load_config(source, [*overrides, *override_arguments(v.set),
-                                                    *override_arguments(extra)])))
+            out.append(StudyRun(label, v.name, seed, load_config(source, [*overrides, *override_arguments(v.set),
+                                                                          *override_arguments(extra)])))
     return out
 
 
@@ -75,30 +99,45 @@ def run_study(source: str | Path | Mapping[str, Any], overrides: Sequence[str], 
     :param config: the study's own config, loaded from ``source`` with ``overrides``.
     """
     results: dict[str, IdentificationResult] = {}
-    for label, cfg in study_variants(source, overrides, config):
-        log(f"variant {label}")
-        results[label] = run(cfg, fresh=fresh, progress=progress, log=log)
+    runs = study_variants(source, overrides, config)
+    for r in runs:
+        log(f"variant {r.label}")
+        results[r.label] = run(r.config, fresh=fresh, progress=progress, log=log)
     study_dir = config.run_dir()
     study_dir.mkdir(parents=True, exist_ok=True)
-    write_study(study_dir, [(label, r.to_dict()) for label, r in results.items()])
+    stats = []
+    for r in runs:
+        result = results[r.label].to_dict()
+        curve = anytime_errors(r.config.run_dir() / "ledger.sqlite", result) if "w_ref" in result else None
+        stats.append(run_stats(r.label, r.variant, r.seed, result, np.zeros(0) if curve is None else curve))
+    write_study(study_dir, [(label, r.to_dict()) for label, r in results.items()], stats, config.study)
     return StudyResult(study_dir, results)
 
 
-def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None:
-    """study.csv, study.md and study_parameters.png from the variants' results."""
+def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]], stats: list[RunStats],
+                options: StudyOptions) -> None:
+    """study.csv, study_runs.csv, study.md and the figures from the runs' results (``rows``, in run
+    order) and their measures (``stats``, the same order)."""
+    checkpoints = options.checkpoints
+    write_variants_csv(study_dir / "study.csv", summaries(stats, checkpoints))
+    if any(s.curve.size for s in stats):
+        figure_anytime(study_dir / "study_anytime.png", stats)
+    statistics = statistics_markdown(stats, checkpoints, options.compare)
     names = rows[0][1]["parameters"]
     has_ref = "w_ref" in rows[0][1]
-    fields = ["variant", "objective", "surrogate", "seed", "n_initial", "n_iterations", "n_simulator_calls",
-              "J_max", "stop_reason", "wall_time_s"]
+    measures = ["worst_error", "mean_error", "coverage", *(f"error_at_{n}" for n in checkpoints)] if has_ref else []
+    fields = ["run", "variant", "objective", "surrogate", "seed", "n_initial", "n_iterations", "n_simulator_calls",
+              "J_max", "stop_reason", "wall_time_s", *measures]
     fields += [f"error_{n}" for n in names] if has_ref else []
     fields += [f"identifiable_{n}" for n in names] + [f"w_opt_{n}" for n in names]
     fields += ["paper_loop_n_iterations", "paper_loop_n_simulator_calls"]  # empty without ego.refine
     fields += [f"paper_loop_error_{n}" for n in names] if has_ref else []
-    with atomic_open(study_dir / "study.csv", "w", newline="") as fh:
+    with atomic_open(study_dir / "study_runs.csv", "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=fields)
         writer.writeheader()
-        for label, r in rows:
-            row = {"variant": label, **{k: r[k] for k in ("objective", "surrogate", "seed", "n_initial",
+        for (label, r), st in zip(rows, stats):
+            row = {"run": label, **{m: st.metrics[m] for m in measures[:3]}, **st.at(checkpoints),
+                   "variant": st.variant, **{k: r[k] for k in ("objective", "surrogate", "seed", "n_initial",
                                                           "n_iterations", "n_simulator_calls", "J_max",
                                                           "stop_reason", "wall_time_s")}}
             for n in names:
@@ -138,8 +177,9 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]]) -> None
         refined = ("Variants with `ego.refine` show two rows: where the paper's EGO loop stopped (EI < eps), "
                    "and the same run after the local refinement (its iterations and calls include the loop's); "
                    "the identifiability flags are those of the final analysis.\n\n")
-    text = (f"# Study\n\nPer component: {what}; `n.i.` marks a component flagged not identifiable, `n.t.` one not trustworthy under model error "
-            f"(its value is shown in brackets and is not a finding).\n\n{refined}{markdown_table(header, table)}"
+    text = (f"# Study\n\n{statistics}\n## Runs\n\nPer component: {what}; `n.i.` marks a component flagged "
+            f"not identifiable, `n.t.` one not trustworthy under model error (its value is shown in brackets "
+            f"and is not a finding).\n\n{refined}{markdown_table(header, table)}"
             f"\n\n![parameters](study_parameters.png)\n")
     write_text(study_dir / "study.md", text)
     variants = {label: np.array([r["w_opt_normalized"][n] for n in names]) for label, r in rows}

@@ -70,10 +70,10 @@ from scipy.linalg import cho_solve, cholesky, solve_triangular
 from scipy.spatial.distance import cdist, pdist, squareform
 
 from suspid import hookimpl
-from suspid.errors import ConfigError
 from suspid.options import parse_options
 from suspid.interfaces import Surrogate
 from suspid.infra.threads import single_blas_thread
+from suspid.plugins.surrogates._common import check_data, scaling
 
 __all__ = ["GPyKriging", "GPyKrigingOptions", "ConditioningWarning", "suspid_register_surrogates"]
 
@@ -161,33 +161,8 @@ class GPyKriging(Surrogate):
         import GPy  # imported here so that listing plugins does not pay for it
 
         opts = self._opts()
-        X = np.asarray(X, dtype=float)
-        y = np.asarray(y, dtype=float)
-        if X.ndim != 2:
-            raise ValueError(f"gpy-kriging: X must have shape (n_points, q), got {X.shape}")
-        y = y.reshape(-1) if y.ndim == 2 and y.shape[1] == 1 else y
-        if y.ndim != 1 or y.shape[0] != X.shape[0]:
-            raise ValueError(f"gpy-kriging: y must have shape ({X.shape[0]},), got {y.shape}")
-        if X.shape[0] < 2:
-            raise ValueError("gpy-kriging: at least 2 points are needed to fit")
-        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(y))):
-            raise ValueError("gpy-kriging: X and y must be finite")
-        n, q = X.shape
-        if opts.bounds is not None and len(opts.bounds) != q:
-            raise ConfigError(f"gpy-kriging: bounds has {len(opts.bounds)} rows for q={q} inputs",
-                              key="surrogate.options.bounds")
-
-        # scaling of inputs and outputs
-        if opts.bounds is not None:
-            b = np.asarray(opts.bounds, dtype=float)
-            self.x_lower_, self.x_range_ = b[:, 0], b[:, 1] - b[:, 0]
-        else:
-            lo, hi = X.min(axis=0), X.max(axis=0)
-            rng_ = hi - lo
-            self.x_lower_, self.x_range_ = lo, np.where(rng_ > 0, rng_, 1.0)
-        self.y_mean_ = float(y.mean())
-        std = float(y.std())
-        self.y_std_ = std if std > 0 else 1.0
+        X, y = check_data(self.name, X, y)
+        self.x_lower_, self.x_range_, self.y_mean_, self.y_std_ = scaling(self.name, X, y, opts.bounds)
         Xs = (X - self.x_lower_) / self.x_range_
         ys = ((y - self.y_mean_) / self.y_std_)[:, None]
         # small matrices: OpenBLAS threads only contend (suspid.infra.threads)
