@@ -53,7 +53,7 @@ from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
 from suspid.infra.threads import single_blas_thread
-from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
+from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
 
@@ -146,7 +146,7 @@ def simulate_time(model: TrainModel, segment: TrackSegment, settings: TimeSettin
     table = track_table(segment, settings.taper_m)
     n_t = output_samples(segment, fs)
     T = n_t / fs
-    a = wheelset_positions(model.values)
+    a = model.layout.wheelset_x(model.values)
     a_max = float(np.max(a))
     t_post = 0.05 + 12.0 / fs          # margin for the decimation filter (half length 10 k fine samples = 10 / fs)
 
