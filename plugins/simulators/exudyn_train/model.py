@@ -183,10 +183,12 @@ def default_sensors(values: dict[str, float], layout: Layout = SINGLE) -> list[S
     """The default channels, vertical and lateral each, carbody ones at floor level.
 
     One car (10 channels): carbody above each bogie and mid-car, bogie frames at
-    their centre. Articulated (4 n + 10 channels for n carbodies): each carbody
-    above its front pivot and mid-car, the last one also above its rear pivot
-    (``carbody_<c>_front|middle|rear_<direction>``), and every bogie frame at its
-    centre (``bogie_<b>_<direction>``).
+    their centre. Articulated (n carbodies, 4 n + 2 channels): every carbody
+    mid-car, the inner carbodies (2 .. n - 1) also above their front and rear
+    pivots (``carbody_<c>_front|middle|rear_<direction>``), and the Jacobs bogie
+    frames at their centre (``bogie_<b>_<direction>``, b = 2 .. n). The ends of
+    the section stand for the rest of the trainset (its end bogies carry one
+    carbody end, where a real rake has the next carbody): no sensor there.
     """
     z = FLOOR_HEIGHT - values["h_car"]
     a = values["a_bogie"]
@@ -202,11 +204,12 @@ def default_sensors(values: dict[str, float], layout: Layout = SINGLE) -> list[S
         return out
     last = len(layout.carbodies) - 1
     for c, car in enumerate(layout.carbodies):
-        places = (("front", a), ("middle", 0.0)) + ((("rear", -a),) if c == last else ())
+        inner = 0 < c < last
+        places = (("front", a), ("middle", 0.0), ("rear", -a)) if inner else (("middle", 0.0),)
         for where, x in places:
             for d in directions:
                 out.append(Sensor(f"{car}_{where}_{d}", car, d, (x, 0.0, z)))
-    for bogie in layout.bogies:
+    for bogie in layout.bogies[1:-1]:
         for d in directions:
             out.append(Sensor(f"{bogie}_{d}", bogie, d, (0.0, 0.0, 0.0)))
     return out
