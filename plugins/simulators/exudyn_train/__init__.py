@@ -12,9 +12,10 @@ gravitational stiffness and Hertzian vertical contact; creep saturation and
 lateral bump stops as options of the time solver. Lateral accelerometers see
 g × roll (option ``gravity_roll``).
 Parameters (:mod:`.parameters`): vehicle presets (``vehicle:
-conventional-hs``, the default, an ICE3/CRH-class car; ``manchester-coach``),
-every value with its source; the default identified set is q = 7 suspension
-parameters.
+conventional-hs``, the default, an ICE3/CRH-class car; ``manchester-coach``;
+``tgv-articulated``, three carbodies on Jacobs bogies, built on the layout of
+:mod:`.layout`), every value with its source; the default identified set is
+q = 7 suspension parameters.
 Solvers (:mod:`.solvers`): ``solver: time`` integrates the exudyn system
 (generalised-alpha, symbolic user functions, no Python on the hot path);
 ``solver: frequency`` uses exudyn's linearisation (M, K, D) and a batched

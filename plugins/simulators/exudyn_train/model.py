@@ -11,7 +11,12 @@ solver, the frequency solver takes exudyn's linearisation
 Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
 x, y, z, roll, pitch, yaw relative to the reference position, small angles
 about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
-frame, wheelsets 1-4 (1 leads). Degrees of freedom: all six motions of
+frame, wheelsets 1-4 (1 leads); or, for an articulated layout
+(:class:`.layout.Layout`), carbodies 1 .. n on n + 1 bogies (Jacobs bogies
+between adjacent carbodies) and 2 (n + 1) wheelsets, with an articulation
+(springs and dampers k_art, c_art in x, y, z at the pivot, height h_art) and
+two longitudinal inter-car dampers c_ic between adjacent carbody ends. The
+counts below are those of one car. Degrees of freedom: all six motions of
 carbody and bogie frames (the longitudinal ones held only by the traction
 rods, the yaw dampers and the primary and secondary longitudinal springs),
 lateral, vertical, roll and yaw of the wheelsets (34 rigid-body coordinates),

@@ -7,8 +7,9 @@ naming it under ``parameters:`` in a config, or given another nominal value
 through the simulator option ``vehicle: {name: value}``; ``vehicle: <preset>``
 or ``vehicle: {preset: <preset>, name: value}`` selects a preset.
 
-Presets (:data:`PRESETS`; every preset has the same parameter names, the model
-is the same):
+Presets (:data:`PRESETS`; every preset has the same parameter names, the
+articulated one adds those of its articulations, :data:`ARTICULATED_ONLY`;
+the model is the same, built on the preset's layout, :mod:`.layout`):
 
 - ``conventional-hs`` (default): a high-speed trailer car on two conventional
   bogies, ICE3/CRH class, 15.5 t axle load. Masses, pitch inertias, geometry,
@@ -25,6 +26,19 @@ is the same):
   public code; the paper itself was not read), with the Maxwell yaw damper of
   the high-speed car above (the benchmark gives none) and the same contact
   and track. A benchmark, not a high-speed car.
+- ``tgv-articulated``: a power-car-free section of an articulated TGV-class
+  trainset, three carbodies on four bogies (two Jacobs bogies shared by
+  adjacent carbodies, an end bogie at each end), eight wheelsets; 17 t axle
+  load on the Jacobs bogies. Masses, pitch inertias, geometry and vertical
+  suspension of the Eurostar/TMST articulated (TGV-derived) intermediate
+  trailer after A. Domenech Monforte, thesis, Universitat Politecnica de
+  Valencia 2014 (2-D vehicle model; its values per wheelset and per carbody
+  end are halved per axlebox and per side here); the lateral and longitudinal
+  suspension as the conventional-hs car (no public TGV value); the
+  articulation (a spherical joint as stiff springs, inter-car dampers)
+  assumed. The same identified names apply to every suspension of a kind
+  (k_sec_z to every carbody end's air springs), as the paper identifies one
+  value per kind.
 
 Wheel-rail contact: the linear creep coefficients are Kalker's
 (:func:`creep_coefficients`): f11 = G a b C11, f22 = G a b C22 with the
