@@ -363,3 +363,23 @@ def test_articulated_only_parameters_belong_to_the_articulated_preset():
     with pytest.raises(ConfigError, match="unknown body 'carbody' for vehicle 'tgv-articulated'"):
         ExudynTrain(vehicle="tgv-articulated",
                     sensors=[{"name": "carbody_vertical", "body": "carbody"}]).channels()
+
+
+def test_effects_on_the_articulated_section():
+    """The effects that act per wheelset or per yaw damper extend the articulated section too (the same
+    response when they reproduce the built-in element); carbody bending is for one car and says so."""
+    from suspid.errors import SimulatorError
+
+    seg = track(n=1, length_m=400.0, seed=9)
+    base = ExudynTrain(vehicle="tgv-articulated").simulate({}, seg)[0].accelerations
+    # the effect's Maxwell yaw dampers at the model's series stiffness are the built-in ones
+    same = ExudynTrain(vehicle="tgv-articulated",
+                       effects=[{"name": "yaw-damper-series-stiffness", "stiffness_n_per_m": 10e6}])
+    assert np.max(np.abs(same.simulate({}, seg)[0].accelerations - base)) < 1e-6 * np.abs(base).max()
+    flexible = ExudynTrain(vehicle="tgv-articulated", effects=[{"name": "track-flexibility"},
+                                                               {"name": "wheel-polygon", "wheelsets": [8]}])
+    lin = flexible.linear_system({}, 80.0)
+    assert sum(1 for b, _ in lin.labels if b == "track-flexibility") == 8
+    assert np.all(np.isfinite(flexible.simulate({}, seg)[0].accelerations))
+    with pytest.raises(SimulatorError, match="carbody-bending effect is implemented for one car"):
+        ExudynTrain(vehicle="tgv-articulated", effects=[{"name": "carbody-bending"}]).simulate({}, seg)
