@@ -383,3 +383,19 @@ def test_effects_on_the_articulated_section():
     assert np.all(np.isfinite(flexible.simulate({}, seg)[0].accelerations))
     with pytest.raises(SimulatorError, match="carbody-bending effect is implemented for one car"):
         ExudynTrain(vehicle="tgv-articulated", effects=[{"name": "carbody-bending"}]).simulate({}, seg)
+
+
+def test_articulated_variable_speed_matches_constant_speed():
+    """The time solver's variable-speed path (odometer constraints of 8 wheelsets, a speed table that covers
+    the rake's run-in) with an almost constant speed record gives the constant-speed record."""
+    from suspid.interfaces import TrackSegment
+
+    seg = track(n=1, length_m=300.0, speed_kmh=180.0, seed=4)[0]
+    sim = ExudynTrain(solver="time", fs_hz=100.0, vehicle="tgv-articulated")
+    steady = TrackSegment("steady", seg.distance, seg.irregularities,
+                          50.0 * (1 + 1e-7 * np.sin(np.arange(seg.distance.size))))
+    const = TrackSegment("const", seg.distance, seg.irregularities, 50.0)
+    (rv,) = sim.simulate({}, [steady])
+    (rc,) = sim.simulate({}, [const])
+    assert np.std(rc.accelerations) > 0
+    assert np.allclose(rv.accelerations, rc.accelerations, rtol=0, atol=1e-3 * np.max(np.abs(rc.accelerations)))

@@ -33,6 +33,9 @@ and yaw modes 17-25 Hz (creep damped); wheelsets on the track support (P2)
 Default channels (``sensors`` option to change them): carbody vertical and
 lateral at floor level (1.2 m above rail) above the front bogie, mid-car and
 above the rear bogie; bogie frame vertical and lateral at the frame centre.
+``tgv-articulated`` (14 channels): every carbody mid-car, the middle carbody
+also above both its pivots, and the two Jacobs bogie frames
+(``carbody_<c>_<place>_<direction>``, ``bogie_<b>_<direction>``).
 """
 
 from suspid import hookimpl
