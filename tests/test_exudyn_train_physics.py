@@ -1,7 +1,9 @@
 """Acceptance checks of the exudyn-train physics against known or published answers.
 
 Each test asserts a physical fact about the default ``conventional-hs`` car
-(ICE3/CRH class), not a value this model happened to produce:
+(ICE3/CRH class) and, where marked by the ``sim`` fixture, also about the
+``tgv-articulated`` section (three carbodies on Jacobs bogies), not a value
+this model happened to produce:
 
 - linear critical speed 450-650 km/h (TGV/ICE-class sets: 430-500 km/h with
   worn wheels, record runs above 500 km/h on new profiles; acceptance tests
@@ -31,6 +33,7 @@ import yaml
 
 from suspid.plugins.simulators.exudyn_train import ExudynTrain
 from suspid.plugins.simulators.exudyn_train import parameters as P
+from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
 from suspid.plugins.simulators.exudyn_train.modes import SpeedDependentSystem, critical_speed
 from suspid.method.spectra import compute_spectra
 from suspid.data.track import synthetic_segments
@@ -44,9 +47,18 @@ def track(n=3, length_m=1500.0, speed_kmh=300.0, seed=2):
                                "speed_kmh": speed_kmh, "seed": seed})
 
 
-@pytest.fixture(scope="module")
-def sim():
-    return ExudynTrain(fs_hz=100.0)
+PRESETS = ("conventional-hs", "tgv-articulated")
+
+
+@pytest.fixture(scope="module", params=PRESETS)
+def sim(request):
+    return ExudynTrain(fs_hz=100.0, vehicle=request.param)
+
+
+def bounds(sim, name):
+    """(nominal, lower, upper) of a parameter of the simulator's preset."""
+    p = {q.name: q for q in sim.parameters()}[name]
+    return p.nominal, p.lower, p.upper
 
 
 # ------------------------------------------------------------------------------------------ contact
@@ -85,8 +97,8 @@ def test_critical_speed_falls_with_conicity_and_with_yaw_damping(sim):
     system = {lam: SpeedDependentSystem.from_simulator(sim, {"conicity": lam}) for lam in (0.1, 0.15, 0.2, 0.3, 0.4)}
     speeds = [system[lam].critical_speed() for lam in sorted(system)]
     assert all(a > b for a, b in zip(speeds, speeds[1:])), speeds
-    lo = P.BY_NAME["c_yaw"].lower
-    yaw = [critical_speed(sim, {"c_yaw": c}) for c in (P.BY_NAME["c_yaw"].nominal, 0.5 * (P.BY_NAME["c_yaw"].nominal + lo), lo)]
+    nominal, lo, _ = bounds(sim, "c_yaw")
+    yaw = [critical_speed(sim, {"c_yaw": c}) for c in (nominal, 0.5 * (nominal + lo), lo)]
     assert all(a > b for a, b in zip(yaw, yaw[1:])), yaw
 
 
@@ -99,6 +111,7 @@ def test_speed_dependent_system_matches_a_linearisation(sim):
 
 @pytest.mark.parametrize("config", ["quickstart.yaml", "table1.yaml"])
 def test_stable_at_320_kmh_over_the_identification_box(sim, config):
+    """Every corner of the config's parameter names, with the bounds of the simulator's preset."""
     names = list(yaml.safe_load((CONFIGS / config).read_text())["parameters"])
     bounds = {p.name: (p.lower, p.upper) for p in sim.parameters()}
     worst = None
@@ -114,7 +127,7 @@ def test_stable_at_320_kmh_over_the_identification_box(sim, config):
 # ------------------------------------------------------------------------------------------ modes
 def _modes(sim, body, motion, kmh=300.0):
     return [m["frequency_hz"] for m in sim.modes(speed=kmh * KMH)["modes"]
-            if m["body"].startswith(body) and m["motion"] == motion]
+            if m["body"].startswith(body) and m["group"] == body and m["motion"] == motion]
 
 
 def test_carbody_and_bogie_modes_in_published_ranges(sim):
@@ -136,7 +149,7 @@ def test_no_lightly_damped_contact_or_track_mode(sim):
 def test_modes_list_carbody_and_bogie_first(sim):
     modes = sim.modes(speed=300 * KMH)["modes"]
     groups = [m["group"] for m in modes]
-    order = ["carbody", "bogie", "wheelset", "track/contact", "internal"]
+    order = ["carbody", "bogie", "wheelset", "articulation", "track/contact", "internal"]
     assert groups == sorted(groups, key=order.index)
     assert groups[0] == "carbody"
 
@@ -158,8 +171,9 @@ def test_yaw_damping_barely_moves_the_carbody_vertical_spectra(sim):
     ch = sim.channels()
     vertical = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("vertical")]
     lateral = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("lateral")]
+    assert vertical and lateral
     for factor in (0.7, 1.3):
-        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * P.BY_NAME["c_yaw"].nominal}, segs))
+        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * bounds(sim, "c_yaw")[0]}, segs))
         shift = np.abs(np.mean(y1 - y0, axis=0)).mean(axis=1)     # (n_channels,) dB
         assert np.all(shift[vertical] < 0.3), dict(zip(ch, shift))
         assert shift[lateral].max() > shift[vertical].max()
@@ -269,3 +283,119 @@ def test_free_rigid_bogie_runs_at_the_kinematic_frequency():
     nearest = min(bogie, key=lambda m: abs(m["damped_frequency_hz"] - expected))
     assert nearest["damped_frequency_hz"] == pytest.approx(expected, rel=0.01)
     assert abs(nearest["damping_ratio"]) < 0.01
+
+
+# ------------------------------------------------------------------------------------------ articulated
+@pytest.fixture(scope="module")
+def tgv():
+    return ExudynTrain(fs_hz=100.0, vehicle="tgv-articulated")
+
+
+def test_articulated_section_has_three_carbodies_on_jacobs_bogies(tgv):
+    """3 carbodies, 4 bogies (2 Jacobs), 8 wheelsets; every carbody end on its own secondary suspension,
+    so the static equilibrium holds with the Jacobs bogies carrying two carbody ends: 17 t axle load class."""
+    from suspid.plugins.simulators.exudyn_train.layout import layout_of
+
+    layout = layout_of("tgv-articulated")
+    assert layout.carbodies == ("carbody_1", "carbody_2", "carbody_3")
+    assert layout.bogies == ("bogie_1", "bogie_2", "bogie_3", "bogie_4") and layout.n_wheelsets == 8
+    assert [len(layout.bogie_cars(b)) for b in range(4)] == [1, 2, 2, 1]
+    p = {q.name: q.nominal for q in tgv.parameters()}
+    axle = [2 * layout.wheel_load(p, j) / P.GRAVITY for j in range(8)]
+    assert all(16.0e3 <= a <= 18.0e3 for a in axle[2:6]), axle          # Jacobs bogies
+    total = 3 * p["m_car"] + 4 * p["m_bogie"] + 8 * p["m_ws"]
+    assert sum(axle) == pytest.approx(total)                           # every kilogram reaches the rails
+    model = tgv._model(tgv.values({}), 80.0, TimeFeatures())
+    assert np.max(np.abs(model.static_residual())) < 1e-9 * P.GRAVITY * total
+    lin = tgv.linear_system({}, 80.0)
+    assert lin.G.shape[0] == 8 and np.allclose(lin.wheelset_x, layout.wheelset_x(p))
+    channels = tgv.channels()
+    assert all(any(b in c for b in ("carbody", "bogie")) and any(d in c for d in ("vertical", "lateral"))
+               for c in channels)
+    assert {c.split("_")[1] for c in channels if c.startswith("carbody")} == {"1", "2", "3"}
+
+
+def test_articulation_joins_the_carbody_ends(tgv):
+    """In every carbody mode below 2 Hz the ends of adjacent carbodies at the articulation move together
+    vertically (a spherical joint: relative motion below 2 % of the motion)."""
+    from suspid.plugins.simulators.exudyn_train.effects import point_jacobian
+    from suspid.plugins.simulators.exudyn_train.modes import state_matrix
+
+    lin = tgv.linear_system({}, 300 * KMH)
+    p = {q.name: q.nominal for q in tgv.parameters()}
+    lam, V = np.linalg.eig(state_matrix(lin))
+    n = lin.M.shape[0]
+    r = (p["a_bogie"], 0.0, p["h_art"] - p["h_car"])
+    J_front = point_jacobian(r)[2]
+    J_rear = point_jacobian((-r[0], r[1], r[2]))[2]
+    for i in np.where((lam.imag > 0) & (np.abs(lam) < 2 * np.pi * 2.0))[0]:
+        phi = V[:n, i]
+        def end(car, J):
+            cols = [lin.labels.index((car, m)) for m in ("longitudinal", "lateral", "vertical", "roll", "pitch", "yaw")]
+            return J @ phi[cols]
+        for ahead, behind in (("carbody_1", "carbody_2"), ("carbody_2", "carbody_3")):
+            a, b = end(ahead, J_rear), end(behind, J_front)
+            assert abs(a - b) <= 0.02 * max(abs(a), abs(b), 1e-12 * np.abs(phi).max()), (lam[i], a, b)
+
+
+def test_articulated_solvers_agree(tgv):
+    """Time (exudyn generalised-alpha) and frequency solver on a linear case: rms within 5 %, median 1 dB."""
+    seg = track(n=1, length_m=1000.0, seed=7)
+    (rf,) = tgv.simulate({}, seg)
+    (rt,) = ExudynTrain(fs_hz=100.0, vehicle="tgv-articulated", solver="time").simulate({}, seg)
+    yt, _ = compute_spectra([rt])
+    yf, _ = compute_spectra([rf])
+    rel = np.std(rt.accelerations, axis=1) / np.std(rf.accelerations, axis=1) - 1.0
+    db = np.median(np.abs(yt[0] - yf[0]), axis=1)
+    assert np.all(np.abs(rel) < 0.05), dict(zip(tgv.channels(), rel))
+    assert np.all(db < 1.0), dict(zip(tgv.channels(), db))
+
+
+def test_articulated_only_parameters_belong_to_the_articulated_preset():
+    from suspid.errors import ConfigError, SimulatorError
+
+    assert "k_art" in {p.name for p in ExudynTrain(vehicle="tgv-articulated").parameters()}
+    assert "k_art" not in {p.name for p in ExudynTrain().parameters()}
+    with pytest.raises(ConfigError, match="unknown parameter 'k_art'"):
+        ExudynTrain(vehicle={"k_art": 1e9}).parameters()
+    with pytest.raises(SimulatorError, match="unknown parameter"):
+        ExudynTrain().simulate({"c_ic": 1e4}, track(n=1, length_m=200.0))
+    with pytest.raises(ConfigError, match="unknown body 'carbody' for vehicle 'tgv-articulated'"):
+        ExudynTrain(vehicle="tgv-articulated",
+                    sensors=[{"name": "carbody_vertical", "body": "carbody"}]).channels()
+
+
+def test_effects_on_the_articulated_section():
+    """The effects that act per wheelset or per yaw damper extend the articulated section too (the same
+    response when they reproduce the built-in element); carbody bending is for one car and says so."""
+    from suspid.errors import SimulatorError
+
+    seg = track(n=1, length_m=400.0, seed=9)
+    base = ExudynTrain(vehicle="tgv-articulated").simulate({}, seg)[0].accelerations
+    # the effect's Maxwell yaw dampers at the model's series stiffness are the built-in ones
+    same = ExudynTrain(vehicle="tgv-articulated",
+                       effects=[{"name": "yaw-damper-series-stiffness", "stiffness_n_per_m": 10e6}])
+    assert np.max(np.abs(same.simulate({}, seg)[0].accelerations - base)) < 1e-6 * np.abs(base).max()
+    flexible = ExudynTrain(vehicle="tgv-articulated", effects=[{"name": "track-flexibility"},
+                                                               {"name": "wheel-polygon", "wheelsets": [8]}])
+    lin = flexible.linear_system({}, 80.0)
+    assert sum(1 for b, _ in lin.labels if b == "track-flexibility") == 8
+    assert np.all(np.isfinite(flexible.simulate({}, seg)[0].accelerations))
+    with pytest.raises(SimulatorError, match="carbody-bending effect is implemented for one car"):
+        ExudynTrain(vehicle="tgv-articulated", effects=[{"name": "carbody-bending"}]).simulate({}, seg)
+
+
+def test_articulated_variable_speed_matches_constant_speed():
+    """The time solver's variable-speed path (odometer constraints of 8 wheelsets, a speed table that covers
+    the rake's run-in) with an almost constant speed record gives the constant-speed record."""
+    from suspid.interfaces import TrackSegment
+
+    seg = track(n=1, length_m=300.0, speed_kmh=180.0, seed=4)[0]
+    sim = ExudynTrain(solver="time", fs_hz=100.0, vehicle="tgv-articulated")
+    steady = TrackSegment("steady", seg.distance, seg.irregularities,
+                          50.0 * (1 + 1e-7 * np.sin(np.arange(seg.distance.size))))
+    const = TrackSegment("const", seg.distance, seg.irregularities, 50.0)
+    (rv,) = sim.simulate({}, [steady])
+    (rc,) = sim.simulate({}, [const])
+    assert np.std(rc.accelerations) > 0
+    assert np.allclose(rv.accelerations, rc.accelerations, rtol=0, atol=1e-3 * np.max(np.abs(rc.accelerations)))

@@ -12,9 +12,10 @@ gravitational stiffness and Hertzian vertical contact; creep saturation and
 lateral bump stops as options of the time solver. Lateral accelerometers see
 g × roll (option ``gravity_roll``).
 Parameters (:mod:`.parameters`): vehicle presets (``vehicle:
-conventional-hs``, the default, an ICE3/CRH-class car; ``manchester-coach``),
-every value with its source; the default identified set is q = 7 suspension
-parameters.
+conventional-hs``, the default, an ICE3/CRH-class car; ``manchester-coach``;
+``tgv-articulated``, three carbodies on Jacobs bogies, built on the layout of
+:mod:`.layout`), every value with its source; the default identified set is
+q = 7 suspension parameters.
 Solvers (:mod:`.solvers`): ``solver: time`` integrates the exudyn system
 (generalised-alpha, symbolic user functions, no Python on the hot path);
 ``solver: frequency`` uses exudyn's linearisation (M, K, D) and a batched
@@ -32,6 +33,9 @@ and yaw modes 17-25 Hz (creep damped); wheelsets on the track support (P2)
 Default channels (``sensors`` option to change them): carbody vertical and
 lateral at floor level (1.2 m above rail) above the front bogie, mid-car and
 above the rear bogie; bogie frame vertical and lateral at the frame centre.
+``tgv-articulated`` (14 channels): every carbody mid-car, the middle carbody
+also above both its pivots, and the two Jacobs bogie frames
+(``carbody_<c>_<place>_<direction>``, ``bogie_<b>_<direction>``).
 """
 
 from suspid import hookimpl

@@ -128,9 +128,11 @@ class ExudynEffect:
         return []
 
 
-def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: float, damped: bool = True
+def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: float, damped: bool = True
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie b, carbody, internal coordinate u).
+    """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie, carbody, internal coordinate u).
+
+    ``end``: +1 for a bogie under the carbody's front pivot, -1 under its rear pivot; ``side``: +1 left, -1 right.
 
     Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
     longitudinal displacement of the attachment points; the internal mass
@@ -138,7 +140,7 @@ def maxwell_yaw_damper(q: dict[str, float], b: int, side: float, stiffness: floa
     damper out (the time solver's blow-off law then supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
     """
     n = 13
-    xb = q["a_bogie"] if b == 0 else -q["a_bogie"]
+    xb = end * q["a_bogie"]
     ws = np.zeros(n)
     ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
     ws[12] = 1.0
@@ -206,6 +208,9 @@ class CarbodyBending(ExudynEffect):
         return M, K, D
 
     def build(self, model) -> None:
+        if model.layout.articulated:
+            raise ValueError("the carbody-bending effect is implemented for one car on two bogies; the "
+                             "articulated preset has several carbodies")
         node = model.add_effect_node(self.name, ("bending",))
         nodes = [model.nodes["carbody"], model.nodes["bogie_front"], model.nodes["bogie_rear"], node]
         model.add_linear_element(nodes, 19, self.matrices)
@@ -234,14 +239,13 @@ class YawDamperSeriesStiffness(ExudynEffect):
     replaces = frozenset({"yaw_damper"})
 
     def build(self, model) -> None:
-        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
-            for side, side_name in ((1.0, "left"), (-1.0, "right")):
-                node = model.add_effect_node(self.name, (f"{bogie}_{side_name}",))
-                nodes = [model.nodes[bogie], model.nodes["carbody"], node]
-                model.add_linear_element(nodes, 13, lambda q, b=b, s=side: self.matrices(q, b, s))
+        for bogie, car, end, side, side_name in model.yaw_damper_places():
+            node = model.add_effect_node(self.name, (f"{bogie}_{side_name}",))
+            nodes = [model.nodes[bogie], model.nodes[car], node]
+            model.add_linear_element(nodes, 13, lambda q, e=end, s=side: self.matrices(q, e, s))
 
-    def matrices(self, q: Mapping[str, float], b: int, side: float):
-        return maxwell_yaw_damper(q, b, side, self.get(q, "stiffness_n_per_m"))
+    def matrices(self, q: Mapping[str, float], end: float, side: float):
+        return maxwell_yaw_damper(q, end, side, self.get(q, "stiffness_n_per_m"))
 
 
 # ------------------------------------------------------------------------------------------ sensor tilt
@@ -345,9 +349,9 @@ class TrackFlexibility(ExudynEffect):
         k_t = (2 * math.pi * self.get(q, "frequency_hz")) ** 2 * m
         return m_t, k_t, 2.0 * self.get(q, "damping") * math.sqrt(k_t * m)
 
-    def matrices(self, q: Mapping[str, float]):
+    def matrices(self, q: Mapping[str, float], wheel: float | None = None):
         m_t, k_t, c_t = self.support(q)
-        kh2 = 2.0 * P.hertz_stiffness(q)
+        kh2 = 2.0 * P.hertz_stiffness(q, wheel)
         M, K, D = np.zeros((7, 7)), np.zeros((7, 7)), np.zeros((7, 7))
         M[6, 6] = m_t
         K[2, 6] = K[6, 2] = -kh2
@@ -357,21 +361,24 @@ class TrackFlexibility(ExudynEffect):
 
     def build(self, model) -> None:
         self.nodes = []
-        for j in range(4):
+        for j in range(model.n_wheelsets):
             node = model.add_effect_node(self.name, (f"track_{j + 1}",))
             self.nodes.append(node)
-            model.add_linear_element([model.nodes[f"wheelset_{j + 1}"], node], 7, self.matrices)
+            model.add_linear_element([model.nodes[f"wheelset_{j + 1}"], node], 7,
+                                     lambda q, j=j: self.matrices(q, model.layout.wheel_load(q, j)))
 
     def build_time(self, model) -> None:
         from exudyn import itemInterface as ii
         from exudyn.advancedUtilities import CreateSymbolicUserFunction
 
         esym = model.exu.symbolic
-        kh2 = esym.Real(f"{self.name}_kh2", 0.0)
-        model._track(lambda v, r=kh2: r.SetValue(float(v)), lambda q: 2.0 * P.hertz_stiffness(q))
         zeros = np.zeros((2, 2))
         self._keep = []
         for j, node in enumerate(self.nodes):
+            kh2 = esym.Real(f"{self.name}_kh2_{j}", 0.0)
+            model._track(lambda v, r=kh2: r.SetValue(float(v)),
+                         lambda q, j=j: 2.0 * P.hertz_stiffness(q, model.layout.wheel_load(q, j)))
+            model._keep.append(kh2)
             element = model.mbs.AddObject(ii.ObjectGenericODE2(
                 nodeNumbers=[node, model.odometers[j]], massMatrix=zeros, stiffnessMatrix=zeros,
                 dampingMatrix=zeros, forceVector=[0.0, 0.0]))
@@ -380,7 +387,6 @@ class TrackFlexibility(ExudynEffect):
                                             element)
             model.mbs.SetObjectParameter(element, "forceUserFunction", uf)
             self._keep.append(uf)
-        model._keep.append(kh2)
 
     @staticmethod
     def _force_function(model, j: int, kh2):
@@ -393,8 +399,8 @@ class TrackFlexibility(ExudynEffect):
         return force
 
     def input_rows(self, model, G, values) -> None:
-        kh2 = 2.0 * P.hertz_stiffness(values)
-        for j in range(4):
+        for j in range(model.n_wheelsets):
+            kh2 = 2.0 * P.hertz_stiffness(values, model.layout.wheel_load(values, j))
             G[j, model.free_position[(self.name, f"track_{j + 1}")], 0] = -kh2
 
 

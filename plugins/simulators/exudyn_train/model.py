@@ -11,7 +11,12 @@ solver, the frequency solver takes exudyn's linearisation
 Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
 x, y, z, roll, pitch, yaw relative to the reference position, small angles
 about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
-frame, wheelsets 1-4 (1 leads). Degrees of freedom: all six motions of
+frame, wheelsets 1-4 (1 leads); or, for an articulated layout
+(:class:`.layout.Layout`), carbodies 1 .. n on n + 1 bogies (Jacobs bogies
+between adjacent carbodies) and 2 (n + 1) wheelsets, with an articulation
+(springs and dampers k_art, c_art in x, y, z at the pivot, height h_art) and
+two longitudinal inter-car dampers c_ic between adjacent carbody ends. The
+counts below are those of one car. Degrees of freedom: all six motions of
 carbody and bogie frames (the longitudinal ones held only by the traction
 rods, the yaw dampers and the primary and secondary longitudinal springs),
 lateral, vertical, roll and yaw of the wheelsets (34 rigid-body coordinates),
@@ -132,6 +137,7 @@ import numpy as np
 
 from . import parameters as P
 from .effects import maxwell_yaw_damper, point_jacobian
+from .layout import SINGLE, Layout
 from suspid.infra.threads import single_blas_thread
 
 TABLE_PAD = 2
@@ -145,8 +151,9 @@ RESTRAINED = {"wheelset": (0, 4)}
 longitudinal motion (held by the longitudinal creep forces and the train) and its spin perturbation."""
 
 
-BODIES = ("carbody", "bogie_front", "bogie_rear", "wheelset_1", "wheelset_2", "wheelset_3", "wheelset_4")
-"""Body names; wheelset 1 leads, wheelsets 1-2 are in the front bogie."""
+BODIES = SINGLE.bodies
+"""Body names of a conventional car (:data:`.layout.SINGLE`): carbody, bogie_front, bogie_rear, wheelset_1-4;
+wheelset 1 leads, wheelsets 1-2 are in the front bogie. Articulated layouts: :class:`.layout.Layout`."""
 
 COORDINATES = ("longitudinal", "lateral", "vertical", "roll", "pitch", "yaw")
 """Motions of one rigid-body node, in the order of its exudyn (Rxyz) coordinates."""
@@ -177,29 +184,50 @@ class Sensor:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
-def default_sensors(values: dict[str, float]) -> list[Sensor]:
-    """The default channels: carbody vertical and lateral above each bogie and mid-car, at floor
-    level, and bogie frame vertical and lateral at the frame centre (10 channels)."""
+def default_sensors(values: dict[str, float], layout: Layout = SINGLE) -> list[Sensor]:
+    """The default channels, vertical and lateral each, carbody ones at floor level.
+
+    One car (10 channels): carbody above each bogie and mid-car, bogie frames at
+    their centre. Articulated (n carbodies, 4 n + 2 channels): every carbody
+    mid-car, the inner carbodies (2 .. n - 1) also above their front and rear
+    pivots (``carbody_<c>_front|middle|rear_<direction>``), and the Jacobs bogie
+    frames at their centre (``bogie_<b>_<direction>``, b = 2 .. n). The ends of
+    the section stand for the rest of the trainset (its end bogies carry one
+    carbody end, where a real rake has the next carbody): no sensor there.
+    """
     z = FLOOR_HEIGHT - values["h_car"]
     a = values["a_bogie"]
     out = []
-    for where, x in (("front", a), ("middle", 0.0), ("rear", -a)):
-        for d in ("vertical", "lateral"):
-            out.append(Sensor(f"carbody_{where}_{d}", "carbody", d, (x, 0.0, z)))
-    for where in ("front", "rear"):
-        for d in ("vertical", "lateral"):
-            out.append(Sensor(f"bogie_{where}_{d}", f"bogie_{where}", d, (0.0, 0.0, 0.0)))
+    directions = ("vertical", "lateral")
+    if not layout.articulated:
+        for where, x in (("front", a), ("middle", 0.0), ("rear", -a)):
+            for d in directions:
+                out.append(Sensor(f"carbody_{where}_{d}", "carbody", d, (x, 0.0, z)))
+        for where in ("front", "rear"):
+            for d in directions:
+                out.append(Sensor(f"bogie_{where}_{d}", f"bogie_{where}", d, (0.0, 0.0, 0.0)))
+        return out
+    last = len(layout.carbodies) - 1
+    for c, car in enumerate(layout.carbodies):
+        inner = 0 < c < last
+        places = (("front", a), ("middle", 0.0), ("rear", -a)) if inner else (("middle", 0.0),)
+        for where, x in places:
+            for d in directions:
+                out.append(Sensor(f"{car}_{where}_{d}", car, d, (x, 0.0, z)))
+    for bogie in layout.bogies[1:-1]:
+        for d in directions:
+            out.append(Sensor(f"{bogie}_{d}", bogie, d, (0.0, 0.0, 0.0)))
     return out
 
 
-GEOMETRY = ("h_car", "h_bogie", "r0", "a_bogie", "a_ws", "b_prim", "b_sec", "h_sec", "b_yaw", "h_yaw")
+GEOMETRY = ("h_car", "h_bogie", "r0", "a_bogie", "a_ws", "b_prim", "b_sec", "h_sec", "b_yaw", "h_yaw", "h_trac",
+            "h_art", "b_ic", "h_ic")
 """Parameters that move bodies or attachment points: changing one rebuilds the exudyn system."""
 
 
-def wheelset_positions(values: dict[str, float]) -> np.ndarray:
-    """Longitudinal positions (m) of wheelsets 1-4 relative to the car centre, forward positive."""
-    a, w = values["a_bogie"], values["a_ws"]
-    return np.array([a + w, a - w, -a + w, -a - w])
+def wheelset_positions(values: dict[str, float], layout: Layout = SINGLE) -> np.ndarray:
+    """Longitudinal positions (m) of the wheelsets relative to the middle of the vehicle, forward positive."""
+    return layout.wheelset_x(values)
 
 
 @dataclass
@@ -272,8 +300,12 @@ class TrainModel:
     """The exudyn system of the car for given parameter values, sensors and time-solver features."""
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
-                 features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True) -> None:
+                 features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True,
+                 layout: Layout = SINGLE) -> None:
         self.features = features or TimeFeatures()
+        self.layout = layout
+        self.bodies = layout.bodies
+        self.n_wheelsets = layout.n_wheelsets
         self.gravity_roll = bool(gravity_roll)
         self.sensors = list(sensors)
         self.values = dict(values)
@@ -301,7 +333,7 @@ class TrainModel:
         ref = self._body_positions(p)
         self.nodes: dict[str, object] = {}
         self.objects: dict[str, object] = {}
-        for name in BODIES:
+        for name in self.bodies:
             node = mbs.AddNode(ii.NodeRigidBodyRxyz(referenceCoordinates=list(ref[name]) + [0.0, 0.0, 0.0]))
             obj = mbs.AddObject(ii.ObjectRigidBody(nodeNumber=node, mass=1.0,
                                                    inertia=[1.0, 1.0, 1.0, 0.0, 0.0, 0.0]))
@@ -317,11 +349,11 @@ class TrainModel:
         # GenericODE2 "ground" element: gravity -m g on each body's vertical coordinate (the nodes sit at
         # the centres of mass) and a sparse diagonal stiffness. One item instead of 7 loads and 11
         # connectors: exudyn's cost per item and step dominates this small model.
-        n_r = 6 * len(BODIES)
-        restrained = [(6 * i + k, name, k) for i, name in enumerate(BODIES)
+        n_r = 6 * len(self.bodies)
+        restrained = [(6 * i + k, name, k) for i, name in enumerate(self.bodies)
                       for k in RESTRAINED.get(name.split("_")[0], ())]
         self.restraint = mbs.AddObject(ii.ObjectGenericODE2(
-            nodeNumbers=[self.nodes[b] for b in BODIES], massMatrix=_sparse(n_r, []),
+            nodeNumbers=[self.nodes[b] for b in self.bodies], massMatrix=_sparse(n_r, []),
             stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i, _, _ in restrained]), dampingMatrix=_sparse(n_r, []),
             forceVector=[0.0] * n_r))
 
@@ -336,46 +368,54 @@ class TrainModel:
         def gravity(q):
             kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
             f = np.zeros(n_r)
-            for i, b in enumerate(BODIES):
+            for i, b in enumerate(self.bodies):
                 f[6 * i + 2] = -P.GRAVITY * q[f"m_{kind(b)}"]
             return f
 
         self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "forceVector", list(v)), gravity)
 
-        car = self.objects["carbody"]
-        xw = wheelset_positions(p)
+        lay = self.layout
+        xw = lay.wheelset_x(p)
+        xbogie = lay.bogie_x(p)
         self.effect_nodes: list[tuple[object, str, tuple[str, ...]]] = []
-        # --- primary suspension, per axlebox
-        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
-            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+        for b, bogie in enumerate(lay.bogies):
+            ends = lay.bogie_cars(b)
+            carrying = self.objects[lay.carbodies[ends[0][0]]]
+            xb = ends[0][1] * p["a_bogie"]           # pivot relative to the carrying carbody's centre
+            # --- primary suspension, per axlebox
             for w in range(2):
                 j = 2 * b + w
                 ws = self.objects[f"wheelset_{j + 1}"]
                 for side in (1.0, -1.0):
                     m0 = self._marker(ws, (0.0, side * p["b_prim"], 0.0))
-                    m1 = self._marker(self.objects[bogie], (xw[j] - xb, side * p["b_prim"], p["r0"] - p["h_bogie"]))
+                    m1 = self._marker(self.objects[bogie], (xw[j] - xbogie[b], side * p["b_prim"],
+                                                            p["r0"] - p["h_bogie"]))
                     self._cartesian(m0, m1,
                                     lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
                                     lambda q: (q["c_prim_x"], 0.0, q["c_prim_z"]),
-                                    lambda q: (0.0, 0.0, P.static_loads(q)["axlebox"] / q["k_prim_z"]))
-            # --- secondary suspension, per side (springs, vertical and lateral dampers)
-            for side in (1.0, -1.0):
-                m0 = self._marker(self.objects[bogie], (0.0, side * p["b_sec"], p["h_sec"] - p["h_bogie"]))
-                m1 = self._marker(car, (xb, side * p["b_sec"], p["h_sec"] - p["h_car"]))
-                self._cartesian(m0, m1,
-                                lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
-                                lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
-                                lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
-            # --- traction rod: longitudinal link bogie frame - carbody at the bogie centre
+                                    lambda q, b=b: (0.0, 0.0, lay.axlebox_load(q, b) / q["k_prim_z"]))
+            # --- secondary suspension, per carbody end and side (springs, vertical and lateral dampers)
+            for c, end in ends:
+                for side in (1.0, -1.0):
+                    m0 = self._marker(self.objects[bogie], (0.0, side * p["b_sec"], p["h_sec"] - p["h_bogie"]))
+                    m1 = self._marker(self.objects[lay.carbodies[c]],
+                                      (end * p["a_bogie"], side * p["b_sec"], p["h_sec"] - p["h_car"]))
+                    self._cartesian(m0, m1,
+                                    lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
+                                    lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
+                                    lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
+            # --- traction rod: longitudinal link bogie frame - carrying carbody at the bogie centre
             m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_trac"] - p["h_bogie"]))
-            m1 = self._marker(car, (xb, 0.0, p["h_trac"] - p["h_car"]))
+            m1 = self._marker(carrying, (xb, 0.0, p["h_trac"] - p["h_car"]))
             self._cartesian(m0, m1, lambda q: (q["k_trac"], 0.0, 0.0), lambda q: (0.0, 0.0, 0.0),
                             lambda q: (0.0, 0.0, 0.0))
-            # --- anti-roll bar: relative roll of carbody and bogie frame
+            # --- anti-roll bar: relative roll of the carrying carbody and the bogie frame
             mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
-            mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes["carbody"], coordinate=3))
+            mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[lay.carbodies[ends[0][0]]],
+                                                        coordinate=3))
             arb = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[mr0, mr1], stiffness=0.0))
             self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v), lambda q: q["k_arb"])
+        self._add_articulations()
 
         # --- wheel-rail contact: one force element per wheelset, on the wheelset's coordinates and its
         #     odometer (its distance along the track, in track samples). One element per wheelset because
@@ -385,7 +425,7 @@ class TrainModel:
         mass = np.zeros((7, 7))
         mass[6, 6] = 1.0  # the odometer's (unit) mass
         zeros = np.zeros((7, 7))
-        for j in range(4):
+        for j in range(self.n_wheelsets):
             odo = mbs.AddNode(ii.NodeGenericODE2(referenceCoordinates=[0.0], initialCoordinates=[0.0],
                                                  initialCoordinates_t=[0.0], numberOfODE2Coordinates=1))
             c = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=[self.nodes[f"wheelset_{j + 1}"], odo],
@@ -394,11 +434,11 @@ class TrainModel:
             self.odometers.append(odo)
             self.contacts.append(c)
             self._track(lambda v, o=c: mbs.SetObjectParameter(o, "stiffnessMatrix", v),
-                        lambda q: self.contact_matrices(q, self.speed)[0])
+                        lambda q, j=j: self.contact_matrices(q, self.speed, j)[0])
             self._track(lambda v, o=c: mbs.SetObjectParameter(o, "dampingMatrix", v),
-                        lambda q: self.contact_matrices(q, self.speed)[1])
+                        lambda q, j=j: self.contact_matrices(q, self.speed, j)[1])
             self._track(lambda v, o=c: mbs.SetObjectParameter(o, "forceVector", list(v)),
-                        lambda q: (0.0, 0.0, P.static_loads(q)["axle"], 0.0, 0.0, 0.0, 0.0))
+                        lambda q, j=j: (0.0, 0.0, 2.0 * lay.wheel_load(q, j), 0.0, 0.0, 0.0, 0.0))
 
         # --- sensors: accelerations of the nodes that carry accelerometers (C q'' gives the sensors)
         for s in self.sensors:
@@ -414,10 +454,10 @@ class TrainModel:
             self._add_track_support()
         # --- effects: extra nodes and linear elements
         for e in self.effects:
-            e.check(self.sensors, 4)
+            e.check(self.sensors, self.n_wheelsets)
             e.build(self)
 
-        self.sensor_bodies = sorted({s.body for s in self.sensors}, key=BODIES.index)
+        self.sensor_bodies = sorted({s.body for s in self.sensors}, key=self.bodies.index)
         recorded = [self.nodes[b] for b in self.sensor_bodies] + [n for n, _, _ in self.effect_nodes]
         self.sensor_items = [(node, "acceleration", mbs.AddSensor(ii.SensorNode(
             nodeNumber=node, storeInternal=True, writeToFile=False,
@@ -446,13 +486,40 @@ class TrainModel:
         (±a_bogie, ±b_yaw, h_yaw).
         """
         damped = not self.features.yaw_blow_off
-        self.yaw_nodes: list[tuple[int, float, object]] = []
-        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
+        self.yaw_nodes: list[tuple[str, float, float, object]] = []
+        for bogie, car, end, side, side_name in self.yaw_damper_places():
+            node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
+            self.yaw_nodes.append((car, end, side, node))
+            self.add_linear_element([self.nodes[bogie], self.nodes[car], node], 13,
+                                    lambda q, e=end, s=side: maxwell_yaw_damper(q, e, s, q["k_yaw_s"], damped))
+
+    def yaw_damper_places(self) -> list[tuple[str, str, float, float, str]]:
+        """``(bogie, carrying carbody, pivot side +1 front / -1 rear of that carbody, side +1 left / -1 right,
+        side name)`` of every yaw damper: one per side of each bogie."""
+        out = []
+        for b, bogie in enumerate(self.layout.bogies):
+            c, end = self.layout.bogie_cars(b)[0]
             for side, side_name in ((1.0, "left"), (-1.0, "right")):
-                node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
-                self.yaw_nodes.append((b, side, node))
-                self.add_linear_element([self.nodes[bogie], self.nodes["carbody"], node], 13,
-                                        lambda q, b=b, s=side: maxwell_yaw_damper(q, b, s, q["k_yaw_s"], damped))
+                out.append((bogie, self.layout.carbodies[c], end, side, side_name))
+        return out
+
+    def _add_articulations(self) -> None:
+        """Articulations between adjacent carbodies (articulated layouts): a spherical joint at the pivot,
+        height h_art, as springs k_art and dampers c_art in x, y, z; two longitudinal inter-car dampers c_ic at
+        (±b_ic, h_ic) between the same carbody ends."""
+        p = self.values
+        for ahead, behind in self.layout.articulations():
+            car0 = self.objects[self.layout.carbodies[ahead]]
+            car1 = self.objects[self.layout.carbodies[behind]]
+            m0 = self._marker(car0, (-p["a_bogie"], 0.0, p["h_art"] - p["h_car"]))
+            m1 = self._marker(car1, (p["a_bogie"], 0.0, p["h_art"] - p["h_car"]))
+            self._cartesian(m0, m1, lambda q: (q["k_art"],) * 3, lambda q: (q["c_art"],) * 3,
+                            lambda q: (0.0, 0.0, 0.0))
+            for side in (1.0, -1.0):
+                m0 = self._marker(car0, (-p["a_bogie"], side * p["b_ic"], p["h_ic"] - p["h_car"]))
+                m1 = self._marker(car1, (p["a_bogie"], side * p["b_ic"], p["h_ic"] - p["h_car"]))
+                self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0), lambda q: (q["c_ic"], 0.0, 0.0),
+                                lambda q: (0.0, 0.0, 0.0))
 
     def _add_track_support(self) -> None:
         """A rail mass under each wheel on the track support (pad and ballast), vertical.
@@ -468,10 +535,11 @@ class TrainModel:
         each rail (:meth:`input_matrix_track`). The static wheel load passes
         through the rail to the support (no preload: the rail's weight is left out).
         """
-        for j in range(4):
+        for j in range(self.n_wheelsets):
             node = self.add_effect_node("track", (f"wheelset_{j + 1}_left", f"wheelset_{j + 1}_right"))
             self.track_nodes.append(node)
-            self.add_linear_element([self.nodes[f"wheelset_{j + 1}"], node], 8, track_support_matrices)
+            self.add_linear_element([self.nodes[f"wheelset_{j + 1}"], node], 8,
+                                    lambda q, j=j: track_support_matrices(q, self.layout.wheel_load(q, j)))
 
     def _gravity_roll_sensors(self) -> list[int]:
         """Indices of the lateral sensors that see g × roll (all lateral ones when ``gravity_roll``)."""
@@ -528,14 +596,15 @@ class TrainModel:
         values = self.values if values is None else values
         return tuple(pi for e in self.effects for pi in e.periodic_inputs(values))
 
-    @staticmethod
-    def _body_positions(p: dict[str, float]) -> dict[str, np.ndarray]:
-        xw = wheelset_positions(p)
-        out = {"carbody": np.array([0.0, 0.0, p["h_car"]]),
-               "bogie_front": np.array([p["a_bogie"], 0.0, p["h_bogie"]]),
-               "bogie_rear": np.array([-p["a_bogie"], 0.0, p["h_bogie"]])}
-        for j in range(4):
-            out[f"wheelset_{j + 1}"] = np.array([xw[j], 0.0, p["r0"]])
+    def _body_positions(self, p: dict[str, float]) -> dict[str, np.ndarray]:
+        lay = self.layout
+        out = {}
+        for name, x in zip(lay.carbodies, lay.carbody_x(p)):
+            out[name] = np.array([x, 0.0, p["h_car"]])
+        for name, x in zip(lay.bogies, lay.bogie_x(p)):
+            out[name] = np.array([x, 0.0, p["h_bogie"]])
+        for name, x in zip(lay.wheelsets, lay.wheelset_x(p)):
+            out[name] = np.array([x, 0.0, p["r0"]])
         return out
 
     def _apply(self, values: dict[str, float], force: bool = False) -> None:
@@ -550,7 +619,7 @@ class TrainModel:
     def needs_rebuild(self, values: dict[str, float], sensors: Sequence[Sensor],
                       features: TimeFeatures) -> bool:
         """True when ``values``, ``sensors`` or ``features`` change the structure of the system."""
-        return (any(values[k] != self.values[k] for k in GEOMETRY) or list(sensors) != self.sensors
+        return (any(values.get(k) != self.values.get(k) for k in GEOMETRY) or list(sensors) != self.sensors
                 or features.key() != self.features.key())
 
     def update(self, values: dict[str, float], speed: float) -> None:
@@ -560,20 +629,22 @@ class TrainModel:
         self._apply(self.values)
 
     # ------------------------------------------------------------------ contact
-    def wheelset_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
+    def wheelset_matrices(self, p: dict[str, float], speed: float, wheel: float | None = None
+                          ) -> tuple[np.ndarray, np.ndarray]:
         """Stiffness and damping (6 x 6) of one wheelset's contact, coordinates x, y, z, roll, pitch, yaw.
 
         With creep computed by the symbolic function (saturation, variable
-        speed) only the Hertzian and gravitational terms stay here.
+        speed) only the Hertzian and gravitational terms stay here. ``wheel``:
+        the static wheel load, N (default: that of a conventional car's bogie).
         """
-        kh = P.hertz_stiffness(p)
-        f11, f22 = P.creep_coefficients(p)
+        kh = P.hertz_stiffness(p, wheel)
+        f11, f22 = P.creep_coefficients(p, wheel)
         lam, l0, r0 = p["conicity"], p["l0"], p["r0"]
         K = np.zeros((6, 6))
         D = np.zeros((6, 6))
         K[2, 2] = 2.0 * kh
         K[3, 3] = 2.0 * kh * l0 ** 2
-        K[1, 1] = P.gravitational_stiffness(p)
+        K[1, 1] = P.gravitational_stiffness(p, wheel)
         if not self.features.creep_in_user_function:
             K[1, 5] = -2.0 * f22
             K[5, 1] = 2.0 * f11 * l0 * lam / r0
@@ -581,9 +652,9 @@ class TrainModel:
             D[5, 5] = 2.0 * f11 * l0 ** 2 / speed
         return K, D
 
-    def contact_matrices(self, p: dict[str, float], speed: float) -> tuple[np.ndarray, np.ndarray]:
-        """Stiffness and damping (7 x 7) of one contact element: the wheelset's coordinates, the odometer."""
-        k6, d6 = self.wheelset_matrices(p, speed)
+    def contact_matrices(self, p: dict[str, float], speed: float, j: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Stiffness and damping (7 x 7) of the contact element of wheelset ``j``: its coordinates, the odometer."""
+        k6, d6 = self.wheelset_matrices(p, speed, self.layout.wheel_load(p, j))
         K = np.zeros((7, 7))
         D = np.zeros((7, 7))
         K[:6, :6] = k6
@@ -591,27 +662,27 @@ class TrainModel:
         return K, D
 
     @staticmethod
-    def input_matrix(p: dict[str, float]) -> np.ndarray:
+    def input_matrix(p: dict[str, float], wheel: float | None = None) -> np.ndarray:
         """G (6 x 3): generalised contact force on a wheelset per unit track input, columns :data:`TRACK_INPUTS`.
 
         The force on the wheelset is G @ (V, Y, C) at its position: the
         Hertzian springs pull towards the rail level V and cross-level C; the
-        gravitational stiffness and the conicity term act on y - Y.
+        gravitational stiffness and the conicity term act on y - Y. ``wheel``: the static wheel load, N.
         """
-        kh = P.hertz_stiffness(p)
-        f11 = P.creep_coefficients(p)[0]
+        kh = P.hertz_stiffness(p, wheel)
+        f11 = P.creep_coefficients(p, wheel)[0]
         G = np.zeros((6, 3))
         G[2, 0] = 2.0 * kh
         G[3, 2] = kh * p["l0"]
-        G[1, 1] = P.gravitational_stiffness(p)
+        G[1, 1] = P.gravitational_stiffness(p, wheel)
         G[5, 1] = 2.0 * f11 * p["l0"] * p["conicity"] / p["r0"]
         return G
 
     @staticmethod
-    def input_matrix_track(p: dict[str, float]) -> np.ndarray:
+    def input_matrix_track(p: dict[str, float], wheel: float | None = None) -> np.ndarray:
         """G (2 x 3): force on the left and right rail mass under a wheelset per unit track input
-        (columns :data:`TRACK_INPUTS`): -k_H (V ± C/2)."""
-        kh = P.hertz_stiffness(p)
+        (columns :data:`TRACK_INPUTS`): -k_H (V ± C/2); ``wheel``: the static wheel load, N."""
+        kh = P.hertz_stiffness(p, wheel)
         return np.array([[-kh, 0.0, -0.5 * kh], [-kh, 0.0, 0.5 * kh]])
 
     # ------------------------------------------------------------------ time-solver extras
@@ -654,7 +725,7 @@ class TrainModel:
                                                              velocityLevel=True))
             # the other wheelsets keep their distance to the leading one
             self.odometer_links = [self.mbs.AddObject(ii.CoordinateConstraint(markerNumbers=[m_odo[0], m_odo[j]]))
-                                   for j in range(1, 4)]
+                                   for j in range(1, self.n_wheelsets)]
 
             def speed_function(mbs, t, itemNumber, lOffset):
                 return _lookup(esym, self.speed_leaves, t * self.speed_step, m)
@@ -671,10 +742,10 @@ class TrainModel:
         from exudyn import itemInterface as ii
         from exudyn.advancedUtilities import CreateSymbolicUserFunction
 
-        kh = self.uf_values["kh"]
         n = self.features.track_capacity
         zeros = np.zeros((3, 3))
         for j, node in enumerate(self.track_nodes):
+            kh = self.uf_wheel[j]["kh"]
             element = self.mbs.AddObject(ii.ObjectGenericODE2(
                 nodeNumbers=[node, self.odometers[j]], massMatrix=zeros, stiffnessMatrix=zeros,
                 dampingMatrix=zeros, forceVector=[0.0, 0.0, 0.0]))
@@ -705,11 +776,10 @@ class TrainModel:
         c2 = float(self.features.blow_off_rate)
         vb = float(self.features.blow_off_velocity)
         zeros = np.zeros((7, 7))
-        for b, side, node in self.yaw_nodes:
-            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
-            w = point_jacobian((xb, side * p["b_yaw"], p["h_yaw"] - p["h_car"]))[0]
+        for car, end, side, node in self.yaw_nodes:
+            w = point_jacobian((end * p["a_bogie"], side * p["b_yaw"], p["h_yaw"] - p["h_car"]))[0]
             element = self.mbs.AddObject(ii.ObjectGenericODE2(
-                nodeNumbers=[self.nodes["carbody"], node], massMatrix=zeros, stiffnessMatrix=zeros,
+                nodeNumbers=[self.nodes[car], node], massMatrix=zeros, stiffnessMatrix=zeros,
                 dampingMatrix=zeros, forceVector=[0.0] * 7))
             uf = CreateSymbolicUserFunction(self.mbs, _blow_off_force(esym, w, c, c2, vb), "forceUserFunction",
                                             element)
@@ -765,7 +835,7 @@ class TrainModel:
         feat = self.features
         n = feat.track_capacity
         leaves = self.track_leaves
-        c = self.uf_values
+        c = self.uf_wheel[j]
 
         def force(mbs, t, itemNumber, q, q_t):
             q.SetVector([0.0] * 7)
@@ -802,27 +872,33 @@ class TrainModel:
         return force
 
     def _uf_constants(self) -> None:
-        """Named symbolic constants of the contact functions, kept in step with the parameters."""
+        """Named symbolic constants of the contact functions, kept in step with the parameters: one set per
+        wheelset (:attr:`uf_wheel`; the wheel loads of an articulated layout differ), the track sampling
+        step ``dx`` shared (:attr:`uf_values`)."""
         esym = self.exu.symbolic
+        load = self.layout.wheel_load
         getters = {
-            "two_kh": lambda q: 2.0 * P.hertz_stiffness(q),
-            "kh": lambda q: P.hertz_stiffness(q),
-            "kh_l0": lambda q: P.hertz_stiffness(q) * q["l0"],
-            "kg": lambda q: P.gravitational_stiffness(q),
-            "f11": lambda q: P.creep_coefficients(q)[0],
-            "f22": lambda q: P.creep_coefficients(q)[1],
-            "yaw_y": lambda q: 2.0 * P.creep_coefficients(q)[0] * q["l0"] * q["conicity"] / q["r0"],
-            "l0": lambda q: q["l0"],
-            "lam_r0": lambda q: q["conicity"] / q["r0"],
-            "n0": lambda q: P.static_loads(q)["wheel"],
-            "mu": lambda q: self.features.friction,
+            "two_kh": lambda q, j: 2.0 * P.hertz_stiffness(q, load(q, j)),
+            "kh": lambda q, j: P.hertz_stiffness(q, load(q, j)),
+            "kh_l0": lambda q, j: P.hertz_stiffness(q, load(q, j)) * q["l0"],
+            "kg": lambda q, j: P.gravitational_stiffness(q, load(q, j)),
+            "f11": lambda q, j: P.creep_coefficients(q, load(q, j))[0],
+            "f22": lambda q, j: P.creep_coefficients(q, load(q, j))[1],
+            "yaw_y": lambda q, j: 2.0 * P.creep_coefficients(q, load(q, j))[0] * q["l0"] * q["conicity"] / q["r0"],
+            "l0": lambda q, j: q["l0"],
+            "lam_r0": lambda q, j: q["conicity"] / q["r0"],
+            "n0": lambda q, j: load(q, j),
+            "mu": lambda q, j: self.features.friction,
         }
-        self.uf_values = {}
-        for name, getter in getters.items():
-            leaf = esym.Real(name, 0.0)
-            self.uf_values[name] = leaf
-            self._track(lambda v, r=leaf: r.SetValue(float(v)), getter)
-        self.uf_values["dx"] = esym.Real("dx", 1.0)
+        self.uf_values = {"dx": esym.Real("dx", 1.0)}
+        self.uf_wheel: list[dict[str, object]] = []
+        for j in range(self.n_wheelsets):
+            leaves = {"dx": self.uf_values["dx"]}
+            for name, getter in getters.items():
+                leaf = esym.Real(f"{name}_{j}", 0.0)
+                leaves[name] = leaf
+                self._track(lambda v, r=leaf: r.SetValue(float(v)), lambda q, g=getter, j=j: g(q, j))
+            self.uf_wheel.append(leaves)
 
     def _add_bump_stops(self) -> None:
         """Lateral bump stops between carbody and each bogie frame (symbolic force law)."""
@@ -832,11 +908,11 @@ class TrainModel:
         esym = self.exu.symbolic
         p = self.values
         gap, k = self.features.bump_gap, self.features.bump_stiffness
-        car = self.objects["carbody"]
-        for b, bogie in enumerate(("bogie_front", "bogie_rear")):
-            xb = p["a_bogie"] if b == 0 else -p["a_bogie"]
+        for b, bogie in enumerate(self.layout.bogies):
+            c, end = self.layout.bogie_cars(b)[0]
+            car = self.objects[self.layout.carbodies[c]]
             m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_sec"] - p["h_bogie"]))
-            m1 = self._marker(car, (xb, 0.0, p["h_sec"] - p["h_car"]))
+            m1 = self._marker(car, (end * p["a_bogie"], 0.0, p["h_sec"] - p["h_car"]))
             csd = self.mbs.AddObject(ii.CartesianSpringDamper(markerNumbers=[m0, m1]))
 
             def stop(mbs, t, itemNumber, displacement, velocity, stiffness, damping, offset):
@@ -855,7 +931,7 @@ class TrainModel:
         self.n_ode2 = len(mbs.systemData.GetODE2Coordinates())
         free, labels = [], []
         self.node_index: dict[str, int] = {}
-        for name in BODIES:
+        for name in self.bodies:
             start = mbs.GetNodeODE2Index(self.nodes[name])
             self.node_index[name] = start
             for k, motion in enumerate(COORDINATES):
@@ -875,7 +951,7 @@ class TrainModel:
         self.free_position = {label: i for i, label in enumerate(labels)}
         # coordinate k of wheelset j -> free index (or -1)
         self.contact_rows = []
-        for j in range(4):
+        for j in range(self.n_wheelsets):
             start = self.node_index[f"wheelset_{j + 1}"]
             self.contact_rows.append([position.get(start + k, -1) for k in range(6)])
 
@@ -894,21 +970,22 @@ class TrainModel:
         K = np.asarray(K)[np.ix_(idx, idx)]
         D = np.asarray(D)[np.ix_(idx, idx)]
         n = len(idx)
-        G6 = self.input_matrix(self.values)
-        G = np.zeros((4, n, 3))
-        for j in range(4):
+        n_w = self.n_wheelsets
+        G = np.zeros((n_w, n, 3))
+        for j in range(n_w):
+            G6 = self.input_matrix(self.values, self.layout.wheel_load(self.values, j))
             for k, row in enumerate(self.contact_rows[j]):
                 if row >= 0:
                     G[j, row] = G6[k]
         if self.track_nodes:
-            Gt = self.input_matrix_track(self.values)
-            for j in range(4):
+            for j in range(n_w):
+                Gt = self.input_matrix_track(self.values, self.layout.wheel_load(self.values, j))
                 for k, side in enumerate(("left", "right")):
                     G[j, self.free_position[("track", f"wheelset_{j + 1}_{side}")]] = Gt[k]
         for e in self.effects:
             e.input_rows(self, G, self.values)
         C, C_disp = self.sensor_matrices()
-        return LinearSystem(M, K, D, G, C, list(self.labels), wheelset_positions(self.values), self.speed,
+        return LinearSystem(M, K, D, G, C, list(self.labels), self.layout.wheelset_x(self.values), self.speed,
                             C_disp=C_disp if np.any(C_disp) else None, periodic=self.periodic_inputs())
 
     def static_residual(self) -> np.ndarray:
@@ -1124,10 +1201,12 @@ def _saturation(esym, fx, fy, limit):
     return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
 
 
-def track_support_matrices(q: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def track_support_matrices(q: dict[str, float], wheel: float | None = None
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M, K, D) ``(8, 8)`` of the track support under one wheelset: coordinates the wheelset's x, y, z,
-    roll, pitch, yaw and the left and right rail displacements (see :meth:`TrainModel._add_track_support`)."""
-    kh = P.hertz_stiffness(q)
+    roll, pitch, yaw and the left and right rail displacements (see :meth:`TrainModel._add_track_support`);
+    ``wheel``: the static wheel load, N."""
+    kh = P.hertz_stiffness(q, wheel)
     l0 = q["l0"]
     M, K, D = np.zeros((8, 8)), np.zeros((8, 8)), np.zeros((8, 8))
     for r, sign in ((6, 1.0), (7, -1.0)):

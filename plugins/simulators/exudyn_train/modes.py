@@ -15,7 +15,9 @@ coordinate with the largest share the dominant motion.
 
 Groups (the order of the listing): ``carbody`` and ``bogie`` (rigid-body
 suspension modes), ``wheelset`` (wheelset modes below
-:data:`CONTACT_HZ`: kinematic and creep-damped modes), ``track/contact``
+:data:`CONTACT_HZ`: kinematic and creep-damped modes), ``articulation``
+(carbody modes at or above :data:`CONTACT_HZ`: the carbody ends of an
+articulated rake on the stiff articulation springs), ``track/contact``
 (wheelsets on the contact and the track support, at or above
 :data:`CONTACT_HZ`, and track modes), ``internal`` (internal coordinates:
 Maxwell yaw dampers, effects). Within a group, by frequency.
@@ -34,7 +36,7 @@ import numpy as np
 
 from .model import LinearSystem
 
-GROUPS = ("carbody", "bogie", "wheelset", "track/contact", "internal")
+GROUPS = ("carbody", "bogie", "wheelset", "articulation", "track/contact", "internal")
 """Mode groups in the order of the listing."""
 
 CONTACT_HZ = 30.0
@@ -83,8 +85,8 @@ def state_matrix(linear: LinearSystem) -> np.ndarray:
 
 def mode_group(body: str, frequency_hz: float) -> str:
     """The group (:data:`GROUPS`) of a mode from its dominant body and frequency."""
-    if body == "carbody":
-        return "carbody"
+    if body.startswith("carbody"):
+        return "carbody" if frequency_hz < CONTACT_HZ else "articulation"
     if body.startswith("bogie"):
         return "bogie"
     if body.startswith("wheelset"):

@@ -7,8 +7,9 @@ naming it under ``parameters:`` in a config, or given another nominal value
 through the simulator option ``vehicle: {name: value}``; ``vehicle: <preset>``
 or ``vehicle: {preset: <preset>, name: value}`` selects a preset.
 
-Presets (:data:`PRESETS`; every preset has the same parameter names, the model
-is the same):
+Presets (:data:`PRESETS`; every preset has the same parameter names, the
+articulated one adds those of its articulations, :data:`ARTICULATED_ONLY`;
+the model is the same, built on the preset's layout, :mod:`.layout`):
 
 - ``conventional-hs`` (default): a high-speed trailer car on two conventional
   bogies, ICE3/CRH class, 15.5 t axle load. Masses, pitch inertias, geometry,
@@ -25,6 +26,19 @@ is the same):
   public code; the paper itself was not read), with the Maxwell yaw damper of
   the high-speed car above (the benchmark gives none) and the same contact
   and track. A benchmark, not a high-speed car.
+- ``tgv-articulated``: a power-car-free section of an articulated TGV-class
+  trainset, three carbodies on four bogies (two Jacobs bogies shared by
+  adjacent carbodies, an end bogie at each end), eight wheelsets; 17 t axle
+  load on the Jacobs bogies. Masses, pitch inertias, geometry and vertical
+  suspension of the Eurostar/TMST articulated (TGV-derived) intermediate
+  trailer after A. Domenech Monforte, thesis, Universitat Politecnica de
+  Valencia 2014 (2-D vehicle model; its values per wheelset and per carbody
+  end are halved per axlebox and per side here); the lateral and longitudinal
+  suspension as the conventional-hs car (no public TGV value); the
+  articulation (a spherical joint as stiff springs, inter-car dampers)
+  assumed. The same identified names apply to every suspension of a kind
+  (k_sec_z to every carbody end's air springs), as the paper identifies one
+  value per kind.
 
 Wheel-rail contact: the linear creep coefficients are Kalker's
 (:func:`creep_coefficients`): f11 = G a b C11, f22 = G a b C22 with the
@@ -58,6 +72,10 @@ CRH = "CRH380A-class high-speed car (public parameter file; origin not confirmed
 HMPE = ("high-speed car with Maxwell yaw dampers: Mathematical Problems in Engineering 2019, "
         "article 7163732, Table 2")
 MANCHESTER = "Manchester Benchmark Vehicle 1 (Iwnicki, Vehicle System Dynamics 30 (1998) 295-313)"
+TMST = ("Eurostar/TMST articulated (TGV-derived) intermediate trailer: Domenech Monforte, Influencia del modelo de "
+        "vehiculo en la prediccion del comportamiento a flexion de puentes isostaticos de ferrocarril para trafico "
+        "de alta velocidad, thesis, Universitat Politecnica de Valencia 2014, doi:10.4995/Thesis/10251/36740 "
+        "(2-D vehicle model: values per wheelset and per carbody end)")
 ASSUMED = "assumption (typical value; not in the cited sources)"
 EN13674 = "60E1 rail head crown radius 300 mm (EN 13674-1)"
 KLINGEL = "half distance between the contact points of a standard-gauge wheelset (1.5 m apart)"
@@ -203,11 +221,64 @@ MANCHESTER_COACH: tuple[VehicleParameter, ...] = _override(CONVENTIONAL_HS, {
 })
 """The ``manchester-coach`` preset (benchmark)."""
 
+AS_CONVENTIONAL = "no public TGV value: as the conventional-hs car"
+ARTICULATED_ONLY = ("k_art", "c_art", "h_art", "c_ic", "b_ic", "h_ic")
+"""Parameters of the articulation between adjacent carbodies (articulated presets only)."""
+
+TGV_ARTICULATED: tuple[VehicleParameter, ...] = _override(CONVENTIONAL_HS, {
+    "m_car": (27300, 20000, 34000, TMST + "; the empty body's 22,525 kg there plus payload, derived for the 17 t "
+              "axle load of TGV sets on the Jacobs bogies (2 x 17 t = m_car + m_bogie + 2 m_ws)"),
+    "I_car_x": (48.5e3, 35e3, 70e3, ASSUMED + ": the conventional-hs value scaled by the mass ratio"),
+    "I_car_y": (0.98e6, 0.7e6, 1.3e6, TMST + "; the body's 810,000 kg m^2 there scaled by the mass ratio "
+                "27.3 / 22.5 t (payload spread along the body)"),
+    "I_car_z": (0.98e6, 0.7e6, 1.3e6, ASSUMED + ": equal to the pitch inertia"),
+    "h_car": (1.8, 1.5, 2.1, ASSUMED + ": as the conventional-hs car"),
+    "m_bogie": (2900, 2400, 3500, TMST),
+    "I_bogie_x": (1900, 1300, 2700, ASSUMED + ": the Manchester bogie's 1722 kg m^2 scaled by the mass ratio"),
+    "I_bogie_y": (2508, 1800, 3300, TMST),
+    "I_bogie_z": (4400, 3100, 6000, ASSUMED + ": I_bogie_x + I_bogie_y (flat frame, perpendicular-axis "
+                  "theorem)"),
+    "m_ws": (1900, 1500, 2300, TMST),
+    "a_bogie": (9.35, 8.5, 10.0, TMST + ": bogie pivots 18.7 m apart"),
+    "a_ws": (1.5, 1.3, 1.6, TMST + ": 3 m bogie wheelbase (TGV bogies)"),
+    "k_prim_z": (1.0e6, 0.65e6, 1.35e6, TMST + ": 2.0 MN/m per wheelset, halved per axlebox"),
+    "c_prim_z": (6e3, 3e3, 12e3, TMST + ": 12 kN s/m per wheelset, halved per axlebox"),
+    "k_sec_z": (290e3, 190e3, 420e3, TMST + ": 580 kN/m per carbody end, halved per side"),
+    "c_sec_z": (10e3, 5e3, 20e3, TMST + ": 20 kN s/m per carbody end for the end trailer EC1, halved per side "
+                "(the intermediate-trailer file gives none)"),
+    "k_prim_x": (14.68e6, 8e6, 20e6, AS_CONVENTIONAL + " (" + CRH + ")"),
+    "k_prim_y": (6.47e6, 3.0e6, 9.0e6, AS_CONVENTIONAL + " (" + CRH + ")"),
+    "k_sec_x": (160e3, 80e3, 320e3, AS_CONVENTIONAL + " (" + CRH + ")"),
+    "k_sec_y": (160e3, 100e3, 240e3, AS_CONVENTIONAL + " (" + CRH + ")"),
+    "c_sec_y": (30e3, 15e3, 60e3, AS_CONVENTIONAL + " (" + HMPE + ")"),
+    "c_yaw": (300e3, 150e3, 450e3, AS_CONVENTIONAL + " (" + HMPE + ")"),
+    "k_yaw_s": (10e6, 5e6, 20e6, AS_CONVENTIONAL + " (" + HMPE + ")"),
+    "k_arb": (1.0e6, 0.5e6, 2.0e6, ASSUMED + ": the conventional-hs value scaled by the carbody mass per end"),
+}) + (
+    # --- articulation between adjacent carbodies, above each Jacobs bogie -------------------------------
+    _p("k_art", "N/m", 1e9, 3e8, 3e9, "stiffness of the articulation (a spherical joint between adjacent "
+       "carbody ends, as three springs x, y, z)", ASSUMED + ": stiff, so that the relative translation modes of "
+       "the carbody ends lie above 50 Hz"),
+    _p("c_art", "N s/m", 1e6, 3e5, 3e6, "damping of the articulation springs (x, y, z)",
+       ASSUMED + ": damping ratio about 0.2 of the articulation modes"),
+    _p("h_art", "m", 1.2, 1.0, 1.5, "height of the articulation above rail level", ASSUMED),
+    _p("c_ic", "N s/m", 50e3, 20e3, 100e3, "inter-car damper rate, per damper (two longitudinal dampers per "
+       "articulation, at roof level, against relative yaw and pitch of adjacent carbodies)", ASSUMED),
+    _p("b_ic", "m", 1.0, 0.8, 1.2, "half lateral spacing of the inter-car dampers", ASSUMED),
+    _p("h_ic", "m", 3.3, 3.0, 3.6, "height of the inter-car dampers above rail level", ASSUMED + ": roof level"),
+)
+"""The ``tgv-articulated`` preset: a section of an articulated TGV-class trainset."""
+
 PRESETS: dict[str, tuple[VehicleParameter, ...]] = {
     "conventional-hs": CONVENTIONAL_HS,
     "manchester-coach": MANCHESTER_COACH,
+    "tgv-articulated": TGV_ARTICULATED,
 }
-"""Preset name -> parameter table (same names and order in every preset)."""
+"""Preset name -> parameter table (the names of conventional-hs in every preset, in the same order; articulated
+presets add :data:`ARTICULATED_ONLY`)."""
+
+LAYOUTS: dict[str, int] = {"tgv-articulated": 3}
+"""Articulated presets -> number of carbodies (the others are one car on two bogies, :mod:`.layout`)."""
 
 DEFAULT_PRESET = "conventional-hs"
 
@@ -220,6 +291,11 @@ DEFAULT_IDENTIFIED: tuple[str, ...] = (
 set the carbody's vertical stiffness, the secondary one closest to the carbody sensors)."""
 
 BY_NAME: dict[str, VehicleParameter] = {p.name: p for p in PARAMETERS}
+
+
+def by_name(preset: str = DEFAULT_PRESET) -> dict[str, VehicleParameter]:
+    """Name -> parameter of a preset."""
+    return {p.name: p for p in PRESETS[preset]}
 
 
 def parameter_table(preset: str = DEFAULT_PRESET) -> tuple[VehicleParameter, ...]:
@@ -236,7 +312,9 @@ def nominal_values(preset: str = DEFAULT_PRESET) -> dict[str, float]:
 
 
 def static_loads(p: dict[str, float]) -> dict[str, float]:
-    """Static forces (N) of the symmetric car at rest: per secondary side, per axlebox, per wheel."""
+    """Static forces (N) of the symmetric car at rest: per secondary side (per carbody end), per axlebox,
+    per wheel, per axle, for a bogie that carries one carbody end (a Jacobs bogie of an articulated
+    layout carries two: :meth:`.layout.Layout.wheel_load`)."""
     g = GRAVITY
     sec = p["m_car"] * g / 4.0
     axlebox = (p["m_car"] / 8.0 + p["m_bogie"] / 4.0) * g
@@ -304,7 +382,7 @@ def hertz_ellipse(load: float, curvature_x: float, curvature_y: float, young: fl
     return (longer, shorter) if curvature_x <= curvature_y else (shorter, longer)
 
 
-def creep_coefficients(p: dict[str, float]) -> tuple[float, float]:
+def creep_coefficients(p: dict[str, float], wheel: float | None = None) -> tuple[float, float]:
     """Kalker's linear creep coefficients (f11, f22) per wheel in N, times ``kalker_scale``.
 
     f11 = G a b C11, f22 = G a b C22 with G = E / (2 (1 + nu)) the shear
@@ -314,9 +392,10 @@ def creep_coefficients(p: dict[str, float]) -> tuple[float, float]:
     About 12.2 and 11.0 MN for the conventional-hs car (wheel load 76 kN);
     9.7 and 8.8 MN at 54.5 kN (the Manchester coach), inside the 9.4-10.4 and
     8.3-9.2 MN published for that load and a 300 mm rail crown. Spin creep
-    (f23, f33) is left out.
+    (f23, f33) is left out. ``wheel``: the static wheel load, N (default: that
+    of :func:`static_loads`).
     """
-    n = static_loads(p)["wheel"]
+    n = static_loads(p)["wheel"] if wheel is None else wheel
     a, b = hertz_ellipse(n, 0.5 / p["r0"], 0.5 / p["r_rail"])
     c11, c22 = kalker_c11_c22(a / b)
     shear = YOUNG / (2.0 * (1.0 + POISSON))
@@ -324,7 +403,7 @@ def creep_coefficients(p: dict[str, float]) -> tuple[float, float]:
     return s * shear * a * b * c11, s * shear * a * b * c22
 
 
-def hertz_stiffness(p: dict[str, float]) -> float:
+def hertz_stiffness(p: dict[str, float], wheel: float | None = None) -> float:
     """Linearised Hertzian vertical contact stiffness per wheel, N/m.
 
     Hertz: deflection d = G N^(2/3), so k = dN/dd = 1.5 N^(1/3) / G, with the
@@ -332,20 +411,22 @@ def hertz_stiffness(p: dict[str, float]) -> float:
     cited from Garg & Dukkipati, Dynamics of Railway Vehicle Systems (1984).
     About 1.5e9 N/m for the default car: the wheel on the rail mass
     (m_track) then vibrates near 490 Hz, damped by the track support
-    (damping ratio 0.2).
+    (damping ratio 0.2). ``wheel``: the static wheel load, N (default: that of :func:`static_loads`).
     """
-    n = static_loads(p)["wheel"]
+    n = static_loads(p)["wheel"] if wheel is None else wheel
     g_const = 3.86e-8 * p["r0"] ** -0.115
     return 1.5 * n ** (1.0 / 3.0) / g_const
 
 
-def gravitational_stiffness(p: dict[str, float]) -> float:
+def gravitational_stiffness(p: dict[str, float], wheel: float | None = None) -> float:
     """Lateral gravitational stiffness of a wheelset, N/m: W lambda / l0 with W the axle load.
 
     Coned-wheel approximation (Wickens): a lateral shift y rolls the wheelset
-    by lambda y / l0 and tilts the normal forces by that angle.
+    by lambda y / l0 and tilts the normal forces by that angle. ``wheel``: the
+    static wheel load, N (default: that of :func:`static_loads`; W = 2 wheel).
     """
-    return static_loads(p)["axle"] * p["conicity"] / p["l0"]
+    axle = static_loads(p)["axle"] if wheel is None else 2.0 * wheel
+    return axle * p["conicity"] / p["l0"]
 
 
 def check_values(values: dict[str, float], known: dict | None = None) -> list[str]:

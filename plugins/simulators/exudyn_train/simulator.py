@@ -15,7 +15,8 @@ from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 
 from . import effects as E
 from . import parameters as P
-from .model import BODIES, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
+from .layout import layout_of
+from .model import TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
@@ -33,7 +34,8 @@ class SensorOptions(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: str = Field(min_length=1, description="channel name")
-    body: Literal[BODIES] = Field(description="body the sensor is fixed to")
+    body: str = Field(description="body the sensor is fixed to: carbody, bogie_front, bogie_rear, wheelset_1-4 "
+                      "(articulated presets: carbody_<c>, bogie_<b>, wheelset_<j>)")
     direction: Literal["vertical", "lateral", "longitudinal"] = "vertical"
     position: tuple[float, float, float] = Field(
         default=(0.0, 0.0, 0.0), description="m, relative to the body's centre of mass (x forward, y left, z up)")
@@ -115,15 +117,21 @@ class Options(BaseModel):
         if preset not in P.PRESETS:
             raise ValueError(f"unknown vehicle preset {preset!r} (known: {', '.join(P.PRESETS)})")
         numbers = {k: v for k, v in value.items() if k != "preset"}
-        problems = P.check_values(numbers)
+        known = P.by_name(preset)
+        problems = P.check_values(numbers, known)
         if problems:
-            raise ValueError(problems[0] + f" (known: preset, {', '.join(sorted(P.BY_NAME))})")
+            raise ValueError(problems[0] + f" (known: preset, {', '.join(sorted(known))})")
         return value
 
     @property
     def preset(self) -> str:
         """The selected vehicle preset."""
         return str(self.vehicle.get("preset", P.DEFAULT_PRESET))
+
+    @property
+    def layout(self):
+        """The bodies of the selected preset (:class:`.layout.Layout`)."""
+        return layout_of(self.preset)
 
     def vehicle_values(self) -> dict[str, float]:
         """The nominal parameter values: the preset's, then the ``vehicle`` overrides and ``contact.conicity``."""
@@ -156,11 +164,16 @@ class Options(BaseModel):
         if self.yaw_damper.blow_off and any(e["name"] == "yaw-damper-series-stiffness" for e in self.effects):
             raise ValueError("yaw_damper.blow_off acts on the model's own yaw dampers; the effect "
                              "'yaw-damper-series-stiffness' replaces them: use one or the other")
-        sensors = (default_sensors(self.vehicle_values()) if self.sensors is None else
+        layout = self.layout
+        sensors = (default_sensors(self.vehicle_values(), layout) if self.sensors is None else
                    [Sensor(s.name, s.body, s.direction, tuple(s.position)) for s in self.sensors])
+        for i, s in enumerate(sensors):
+            if s.body not in layout.bodies:
+                raise ValueError(f"sensors.{i}.body: unknown body {s.body!r} for vehicle {self.preset!r} "
+                                 f"(bodies: {', '.join(layout.bodies)})")
         for i, spec in enumerate(self.effects):
             try:
-                E.make(spec).check(sensors, 4)
+                E.make(spec).check(sensors, layout.n_wheelsets)
             except ValueError as exc:
                 raise ValueError(f"effect {i}: {exc}") from None
         return self
@@ -290,7 +303,7 @@ class ExudynTrain(Simulator):
     def sensors(self, values: Mapping[str, float] | None = None) -> list[Sensor]:
         """The sensors of the configured channels (defaults depend on the geometry ``values``)."""
         if self.opts.sensors is None:
-            return default_sensors(dict(values or self._nominal()))
+            return default_sensors(dict(values or self._nominal()), self.opts.layout)
         return [Sensor(s.name, s.body, s.direction, tuple(float(c) for c in s.position)) for s in self.opts.sensors]
 
     def channels(self) -> list[str]:
@@ -308,7 +321,7 @@ class ExudynTrain(Simulator):
             raise SimulatorError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for exudyn-train; "
                                  f"known: {', '.join(sorted(values) + sorted(effect_values))}")
         values.update({k: float(v) for k, v in w.items() if k in values})
-        problems = P.check_values(values)
+        problems = P.check_values(values, P.by_name(self.opts.preset))
         effect_values.update({k: float(v) for k, v in w.items() if k in effect_values})
         problems += [f"effect parameter '{k}' = {v!r} must be finite" for k, v in effect_values.items()
                      if not math.isfinite(v)]
@@ -326,7 +339,8 @@ class ExudynTrain(Simulator):
         model = self._models.get(key)
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
-                model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll)
+                model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll,
+                                   self.opts.layout)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
@@ -342,9 +356,10 @@ class ExudynTrain(Simulator):
         n = max(len(s.distance) for s in segments) + 2 * TABLE_PAD
         cap = 1 << max(4, int(math.ceil(math.log2(n))))
         variable = not all(is_constant_speed(s) for s in segments)
-        # the speed table spans the run-in (leading wheelset up to 15 m ahead of the car centre),
-        # the record and the run-out, at 0.02 s
-        longest = max(s.duration() + 15.0 / float(np.atleast_1d(s.speed)[0]) + 1.0 for s in segments)
+        # the speed table spans the run-in (leading wheelset up to 15 m ahead of the car centre, more for an
+        # articulated rake), the record and the run-out, at 0.02 s
+        ahead = max(15.0, float(np.max(self.opts.layout.wheelset_x(self._nominal()))) + 2.0)
+        longest = max(s.duration() + ahead / float(np.atleast_1d(s.speed)[0]) + 1.0 for s in segments)
         speed_cap = (1 << max(6, int(math.ceil(math.log2(longest / 0.02 + 60))))) if variable else 0
         return TimeFeatures(track_capacity=cap, variable_speed=variable, speed_capacity=speed_cap,
                             saturation=c.creep_saturation, friction=c.friction, bump_stops=c.bump_stops,

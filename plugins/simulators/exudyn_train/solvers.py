@@ -53,7 +53,7 @@ from suspid.errors import SimulatorError
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
 from suspid.infra.threads import single_blas_thread
-from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet, wheelset_positions
+from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
 
@@ -146,7 +146,7 @@ def simulate_time(model: TrainModel, segment: TrackSegment, settings: TimeSettin
     table = track_table(segment, settings.taper_m)
     n_t = output_samples(segment, fs)
     T = n_t / fs
-    a = wheelset_positions(model.values)
+    a = model.layout.wheelset_x(model.values)
     a_max = float(np.max(a))
     t_post = 0.05 + 12.0 / fs          # margin for the decimation filter (half length 10 k fine samples = 10 / fs)
 
@@ -240,7 +240,13 @@ class FrequencyResponse:
             A[n:, :n] = -Minv @ K
             A[n:, n:] = -Minv @ D
             lam, V = np.linalg.eig(A)
-            cond = np.linalg.cond(V)
+            # condition number of the eigenvectors in the 1-norm (an inverse instead of an SVD: cheaper,
+            # and the inverse serves the modal form)
+            try:
+                Vinv = np.linalg.inv(V)
+                cond = float(np.linalg.norm(V, 1) * np.linalg.norm(Vinv, 1))
+            except np.linalg.LinAlgError:
+                cond = math.inf
         self.eigenvalues = lam
         unstable = lam[lam.real > 1e-9 * np.maximum(1.0, np.abs(lam))]
         if unstable.size:
@@ -259,8 +265,6 @@ class FrequencyResponse:
         self.Cq = np.hstack([linear.C, np.zeros_like(linear.C)])
         self.Cd = None if linear.C_disp is None else np.hstack([linear.C_disp, np.zeros_like(linear.C_disp)])
         if self.modal:
-            with single_blas_thread():
-                Vinv = np.linalg.inv(V)
             self.L = self.Cq @ V                               # (n_out, 2n)
             self.Ld = None if self.Cd is None else self.Cd @ V
             R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, 2n, n_in)
