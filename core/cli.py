@@ -259,6 +259,26 @@ def _one_line(exc: BaseException) -> tuple[str, int]:
     return f"internal error: {what} (a bug in suspid; --debug shows the traceback)", 1
 
 
+def _click_exceptions() -> dict[str, tuple[type, ...]]:
+    """click's Exit, ClickException and Abort, with typer's own classes of the same names.
+
+    Recent typer versions parse the command line with a vendored copy of click
+    (``typer._click``), whose usage errors (unknown command or option, missing
+    argument) are not ``click.ClickException``, and raise their own ``Exit``/``Abort``.
+    """
+    modules = [click.exceptions, typer.exceptions]
+    try:
+        from typer._click import exceptions as vendored   # typer's private copy, when it has one
+        modules.append(vendored)
+    except ImportError:
+        pass
+    return {name: tuple({getattr(m, name) for m in modules if hasattr(m, name)})
+            for name in ("Exit", "ClickException", "Abort")}
+
+
+_CLICK = _click_exceptions()
+
+
 def _kept() -> str:
     """What an interrupted command leaves: the finished simulations in the ledgers it opened."""
     from suspid.infra.lock import OPENED_LEDGERS
@@ -287,12 +307,12 @@ def main(argv: list[str] | None = None) -> int:
         returned = app(args=argv, prog_name="suspid", standalone_mode=False)
         code = returned if isinstance(returned, int) else 0
         interrupted = code == 130
-    except click.exceptions.Exit as exc:
+    except _CLICK["Exit"] as exc:
         code = exc.exit_code
-    except click.ClickException as exc:
+    except _CLICK["ClickException"] as exc:
         exc.show()
         code = exc.exit_code
-    except (KeyboardInterrupt, click.exceptions.Abort):
+    except (KeyboardInterrupt, *_CLICK["Abort"]):
         interrupted, code = True, 130
     except Exception as exc:  # noqa: BLE001 - every error becomes one line; --debug shows the traceback
         if debug:

@@ -132,3 +132,17 @@ def test_debug_shows_traceback(tmp_path):
     cfg.write_text("seed: -1\n")
     res = run_cli("--debug", "validate", str(cfg))
     assert res.returncode != 0 and "Traceback" in res.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    (["no-such-command"], "No such command 'no-such-command'"),
+    (["run", "--no-such-option", "x.yaml"], "No such option: --no-such-option"),
+    (["run"], "Missing argument 'config'"),
+])
+def test_command_line_mistakes_are_usage_errors_with_exit_2(args, words):
+    """A mistyped command, option or a missing argument: click's usage message and exit 2, never "internal error"."""
+    from conftest import run_cli
+
+    res = run_cli(*args)
+    assert res.returncode == 2, (res.returncode, res.stderr)
+    assert words in res.stderr and "internal error" not in res.stderr and "Traceback" not in res.stderr, res.stderr
