@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import hashlib
 import logging
 import os
@@ -200,6 +201,8 @@ class DaskExecutor(Executor):
     cluster_: Any = None  # only a LocalCluster we started ourselves; closed in __exit__
     address_: str = ""  # the scheduler, as the user named it (or the LocalCluster's)
     source_: str = ""  # where that address came from
+    lost_: bool = False  # a ClusterError was raised: the cluster is gone
+    published_: OrderedDict | None = None  # hashes of the task functions left with the scheduler
 
     def _options(self) -> DaskOptions:
         return self.opts_ if self.opts_ is not None else executor_options(DaskOptions, self.options)
@@ -265,7 +268,7 @@ class DaskExecutor(Executor):
         distributed = _import_distributed()
         address, self.source_ = scheduler_address(opts)
         self.session_, self.published_, self.tokens_ = uuid.uuid4().hex[:12], OrderedDict(), OrderedDict()
-        self.n_submitted_ = 0
+        self.n_submitted_, self.lost_ = 0, False
         try:
             if address is None:
                 self._start_local_cluster(distributed, opts)
@@ -338,27 +341,35 @@ class DaskExecutor(Executor):
         self._close()
 
     def _close(self) -> None:
-        """Let go of the cluster; never raises, so that the error (or Ctrl-C) that ends the block goes through."""
+        """Let go of the cluster; never raises, so that the error (or Ctrl-C) that ends the block goes through.
+
+        After a lost cluster the client is closed without a word: dask would
+        log the end of its reconnection attempts as errors with tracebacks,
+        under the one line of the :class:`~suspid.errors.ClusterError`.
+        """
         client, cluster = self.client_, self.cluster_
         self.client_ = self.cluster_ = None
-        if client is not None:
-            try:
-                if client.status == "running" and getattr(self, "published_", None):
-                    client.set_metadata(["suspid", "executor-fn", self.session_], {})  # the scheduler lets go
-                client.close(timeout=self.opts_.timeout_s if self.opts_ else 10)
-            except Exception as exc:  # noqa: BLE001 - a lost cluster: nothing left to close
-                log.debug("dask executor: closing the client: %s", exc)
-        if cluster is not None:
-            try:
-                cluster.close()
-            except Exception as exc:  # noqa: BLE001
-                log.debug("dask executor: closing the LocalCluster: %s", exc)
+        lost = self.lost_ or (client is not None and client.status != "running")
+        with _quiet_dask_logs(lost):
+            if client is not None:
+                try:
+                    if not lost and self.published_:
+                        client.set_metadata(["suspid", "executor-fn", self.session_], {})  # the scheduler lets go
+                    client.close(timeout=self.opts_.timeout_s if self.opts_ else 10)
+                except Exception as exc:  # noqa: BLE001 - a lost cluster: nothing left to close
+                    log.debug("dask executor: closing the client: %s", exc)
+            if cluster is not None:
+                try:
+                    cluster.close()
+                except Exception as exc:  # noqa: BLE001
+                    log.debug("dask executor: closing the LocalCluster: %s", exc)
 
     # -- the connection and the task function ---------------------------------------------------
     def _check_connection(self) -> None:
         """:raises ClusterError: the client is no longer connected to the scheduler."""
         status = self.client_.status
         if status not in ("running", "newly-created"):
+            self.lost_ = True
             raise ClusterError(f"lost the connection to the dask scheduler at {self.address_} (client {status}); "
                                f"the simulations in flight were not recorded: run the same command again to "
                                f"resume once the scheduler and its workers are back")
@@ -427,7 +438,7 @@ class DaskExecutor(Executor):
                 return []
             try:
                 wait([h.future for h in handles], timeout=left, return_when="FIRST_COMPLETED")
-            except TimeoutError:
+            except (TimeoutError, concurrent.futures.CancelledError):  # cancelled: reported by _outcome
                 pass
 
     def _outcome(self, h: TaskHandle) -> Any:
@@ -446,8 +457,11 @@ class DaskExecutor(Executor):
                                    f"were not recorded: run the same command again to resume")
         except _TRANSFER_ERRORS as exc:
             self._check_connection()
-            raise ClusterError(f"dask executor: could not fetch the result of {h.label} from the cluster at "
-                               f"{self.address_} within timeout_s={timeout:g} ({type(exc).__name__}: {exc})") from None
+            self.lost_ = True
+            raise ClusterError(f"lost the connection to the dask cluster at {self.address_} while fetching the "
+                               f"result of {h.label} (within timeout_s={timeout:g}: {type(exc).__name__}: {exc}); "
+                               f"the simulations in flight were not recorded: run the same command again to "
+                               f"resume once the scheduler and its workers are back") from None
         future.release()  # a result still held when its worker dies would be recomputed
         h.done, h.outcome, h.future = True, outcome, None
         return outcome
@@ -495,6 +509,23 @@ class DaskExecutor(Executor):
                     yield pending.pop(h), outcome
         finally:
             self._cancel(list(pending))
+
+
+@contextlib.contextmanager
+def _quiet_dask_logs(quiet: bool) -> Iterator[None]:
+    """Inside: dask's loggers silent (when ``quiet``), their levels restored after."""
+    if not quiet:
+        yield
+        return
+    names = ["distributed"] + [n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]
+    levels = {n: logging.getLogger(n).level for n in names}
+    for n in names:
+        logging.getLogger(n).setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for n, level in levels.items():
+            logging.getLogger(n).setLevel(level)
 
 
 def _error_outcome(label: str, exc: BaseException, tb: Any) -> BaseException:
