@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sqlite3
+import subprocess
 import threading
 import time
 from pathlib import Path
@@ -105,7 +107,7 @@ def _error_lines(stderr: str) -> list[str]:
 
 
 @pytest.mark.slow
-def test_scheduler_killed_mid_run_exit_2_nothing_failed_and_the_rerun_gives_the_serial_result(
+def test_ctrl_c_then_scheduler_killed_mid_run_nothing_failed_and_the_rerun_gives_the_serial_result(
         tmp_path, processes, serial_result):
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
@@ -113,12 +115,26 @@ def test_scheduler_killed_mid_run_exit_2_nothing_failed_and_the_rerun_gives_the_
     config = _config(tmp_path, "run", plugin="dask", options={"address": address, "timeout_s": 10})
     path = tmp_path / "tiny.yaml"
     path.write_text(yaml.safe_dump(config, sort_keys=False))
-    run = cli("run", str(path), "--quiet", env={SLEEP_VAR: "0.3"})
     ledger = tmp_path / "run" / "ledger.sqlite"
-    deadline = time.monotonic() + 120
-    while _ledger_status(ledger).get("ok", 0) < 3 and run.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.1)
-    assert run.poll() is None, f"the run ended before the scheduler was killed: {run.communicate()}"
+
+    def run_until(more: int) -> subprocess.Popen:
+        """The run, started, once ``more`` simulations more than now are in the ledger."""
+        n_ok = _ledger_status(ledger).get("ok", 0) + more
+        run = cli("run", str(path), "--quiet", env={SLEEP_VAR: "0.3"})
+        deadline = time.monotonic() + 120
+        while _ledger_status(ledger).get("ok", 0) < n_ok and run.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert run.poll() is None, f"the run ended too early: {run.communicate()}"
+        return run
+
+    # Ctrl-C first: exit 130 as everywhere, nothing failed
+    run = run_until(2)
+    run.send_signal(signal.SIGINT)
+    _, stderr = run.communicate(timeout=60)
+    assert run.returncode == 130 and "interrupted" in stderr, stderr
+    assert _ledger_status(ledger).get("failed", 0) == 0
+
+    run = run_until(2)
     stop(processes[0])  # the scheduler
     t0 = time.monotonic()
     _, stderr = run.communicate(timeout=60)
@@ -128,7 +144,7 @@ def test_scheduler_killed_mid_run_exit_2_nothing_failed_and_the_rerun_gives_the_
     assert len(lines) == 1 and "lost the connection to the dask" in lines[0] and address in lines[0], stderr
     assert "run the same command again" in lines[0]
     status = _ledger_status(ledger)
-    assert status.get("failed", 0) == 0 and 3 <= status["ok"] < 10, status
+    assert status.get("failed", 0) == 0 and 4 <= status["ok"] < 10, status  # killed mid-design or mid-EGO
 
     # a new scheduler on the same port, new workers: the same command resumes and finishes
     for proc in processes[1:]:
