@@ -43,7 +43,6 @@ from pathlib import Path
 import numpy as np
 
 from suspid import registry
-from suspid.workflows.evaluation import simulate_spectra_task
 from suspid.workflows.tasks import SpectraTask
 from suspid.data.track import synthetic_segments
 
@@ -67,16 +66,17 @@ def design_speedup(n_points: int, length_m: float) -> None:
     segments = synthetic_segments({"n_segments": 1, "length_m": length_m, "speed_kmh": 300.0, "seed": 1})
     rng = np.random.default_rng(0)
     ks = 215e3 + rng.random(n_points) * 430e3
-    tasks = [("exudyn-train", {"solver": "time"}, {"k_sec_z": float(k)}, segments, {}) for k in ks]
+    tasks = [{"k_sec_z": float(k)} for k in ks]
+    simulate = SpectraTask(registry.get("simulator", "exudyn-train"), {"solver": "time"}, segments, {})
     rows = []
     reference = None
     for name, options in (("serial", {}), ("processes", {"workers": 2}), ("dask", {"n_workers": 2})):
         cls = registry.get("executor", name)
         with cls(**options) as ex:
             if name != "serial":  # warm the workers (imports, exudyn) before timing
-                list(ex.map_unordered(simulate_spectra_task, tasks[:2]))
+                list(ex.map_unordered(simulate, tasks[:2]))
             t0 = time.perf_counter()
-            out = dict(ex.map_unordered(simulate_spectra_task, tasks))
+            out = dict(ex.map_unordered(simulate, tasks))
             wall = time.perf_counter() - t0
         ys = np.array([out[i] for i in range(len(tasks))])
         if reference is None:

@@ -338,3 +338,13 @@ def check_executor(cls: type, options: Mapping[str, Any] | None = None, *, worke
                 assert marker.exists(), "the victim task never ran"
                 assert got == {i: v * v for i, v in enumerate(values)}, (
                     f"after a worker died, the results are not all there: {got}")
+                marker = Path(tmp) / "died-submit"
+                task = DieOnce(sleep_then_square, victim=1, marker=marker)
+                handles = [executor.submit(task, (i, (0.1, v))) for i, v in enumerate(values[:4])]
+                got = {}
+                while len(got) < len(handles):
+                    for h, outcome in executor.wait_first([h for h in handles if h not in got], timeout=60):
+                        got[h] = outcome
+                assert marker.exists(), "the victim task never ran"
+                assert [got[h] for h in handles] == [v * v for v in values[:4]], (
+                    f"submit: after a worker died, the results are not all there: {list(got.values())}")
