@@ -248,3 +248,15 @@ def test_a_task_cancelled_by_the_cluster_is_a_cluster_error_not_a_shorter_list()
         executor.client_.cancel([Future(key, executor.client_) for key in list(executor.client_.futures)])
         with pytest.raises(ClusterError, match="task 1 was cancelled by the cluster without a result"):
             next(results)
+
+
+def test_validate_reaches_the_scheduler(tmp_path):
+    """``suspid validate`` connects as a run would: an unreachable scheduler is a config error naming it."""
+    from suspid.errors import ConfigError
+
+    config = _config(tmp_path, "run", plugin="dask", options={"address": "tcp://127.0.0.1:9", "timeout_s": 1})
+    config["simulator"]["plugin"] = "exudyn-train"
+    with pytest.raises(ConfigError, match=r"cannot connect to the dask scheduler at tcp://127\.0\.0\.1:9"):
+        suspid.validate(config)
+    config["executor"]["options"] = {"n_workers": 2}  # a LocalCluster: nothing to reach, nothing started
+    assert suspid.validate(config).config.executor.plugin == "dask"
