@@ -300,7 +300,9 @@ class Executor(ABC):
         """Wait until at least one of ``handles`` has finished; return every finished one.
 
         :param handles: handles from :meth:`submit` whose outcome was not returned yet.
-        :param timeout: seconds to wait at most (``None``: no limit).
+        :param timeout: seconds to wait at most (``None``: no limit of the caller's; an executor
+            may still give up on a cluster where nothing finishes for its own limit, with a
+            :class:`~suspid.errors.ClusterError`).
         :returns: ``[(handle, result or exception), ...]`` in the order of ``handles``,
             empty when none finished within ``timeout``. A task's exception is
             returned, not raised, as in :meth:`map_unordered`.

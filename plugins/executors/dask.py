@@ -421,19 +421,27 @@ class DaskExecutor(Executor):
         """The finished ones of ``handles`` (see :meth:`suspid.interfaces.Executor.wait_first`).
 
         Waits in slices of at most a second, checking the connection between them.
+        Without ``timeout``, none finishing for ``result_timeout_s`` is a lost cluster.
 
         :raises ClusterError: the connection is lost, a task was lost or cancelled by the cluster,
-            or a result could not be fetched within ``timeout_s``.
+            a result could not be fetched within ``timeout_s``, or (no ``timeout``) nothing finished
+            within ``result_timeout_s``.
         """
         from distributed import wait
 
-        deadline = None if timeout is None else time.monotonic() + timeout
+        limit = self.opts_.result_timeout_s if timeout is None else timeout
+        deadline = time.monotonic() + limit
         while True:
             self._check_connection()
             ready = [h for h in handles if h.done or h.future.done()]
             if ready:
                 return [(h, self._outcome(h)) for h in ready]
-            left = 1.0 if deadline is None else min(1.0, deadline - time.monotonic())
+            left = min(1.0, deadline - time.monotonic())
+            if left <= 0 and timeout is None:
+                raise ClusterError(f"dask executor: no task finished for result_timeout_s={limit:g} s "
+                                   f"({len(handles)} waiting) on the cluster at {self.address_}; see its "
+                                   f"dashboard {self.dashboard_link}, or raise executor.options.result_timeout_s "
+                                   f"for longer simulations")
             if left <= 0:
                 return []
             try:
@@ -499,13 +507,7 @@ class DaskExecutor(Executor):
             for i, item in enumerate(items):
                 pending[self._submit(fn, token, item, f"task {i}")] = i
             while pending:
-                done = self.wait_first(list(pending), timeout=self.opts_.result_timeout_s)
-                if not done:
-                    raise ClusterError(f"dask executor: no task finished for result_timeout_s="
-                                       f"{self.opts_.result_timeout_s:g} s ({len(pending)} waiting) on the cluster "
-                                       f"at {self.address_}; see its dashboard {self.dashboard_link}, or raise "
-                                       f"executor.options.result_timeout_s for longer simulations")
-                for h, outcome in done:
+                for h, outcome in self.wait_first(list(pending)):  # raises after result_timeout_s without progress
                     yield pending.pop(h), outcome
         finally:
             self._cancel(list(pending))
