@@ -8,21 +8,42 @@
    the frequency solver and the ``processes`` executor: simulator calls,
    EGO iterations (batches), wall time and the largest error in % of the
    admissible interval.
+3. ``--whole-run``: one identification (time solver, ``ego.batch: 2``) with the
+   serial, ``processes`` (2) and ``dask`` (LocalCluster, 2) executors in the
+   same script run: wall time of the design phase and of the whole run, and
+   the speed-ups against serial.
+4. ``--scheduler-memory``: the resident memory (psutil) of a real ``dask
+   scheduler`` process, with two ``dask worker`` processes, while ``--tasks``
+   tasks of ``configs/table1.yaml`` run, each task sending its track with its
+   item (``simulate_spectra_task``, as before the track was sent once per
+   worker) and with the track held by the task function (``SpectraTask``,
+   sent once per worker). The tasks do not simulate (a Table 1 simulation
+   takes 0.7 s, 500 of them on 2 cores about 3 minutes): they return an
+   array of the size of a Table 1 result, so that the scheduler sees the same
+   task specifications, data sizes and results as in a run.
 
     python benchmarks/bench_executors.py [--points 8] [--quick]
+    python benchmarks/bench_executors.py --whole-run
+    python benchmarks/bench_executors.py --scheduler-memory [--tasks 500] [--tasks-before 30]
 """
 
 from __future__ import annotations
 
 import argparse
+import socket
+import subprocess
+import sys
 import tempfile
+import threading
 import time
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from suspid import registry
-from suspid.workflows.evaluation import simulate_spectra_task
+from suspid.workflows.tasks import SpectraTask
 from suspid.data.track import synthetic_segments
 
 EXPERIMENT = """\
@@ -45,16 +66,17 @@ def design_speedup(n_points: int, length_m: float) -> None:
     segments = synthetic_segments({"n_segments": 1, "length_m": length_m, "speed_kmh": 300.0, "seed": 1})
     rng = np.random.default_rng(0)
     ks = 215e3 + rng.random(n_points) * 430e3
-    tasks = [("exudyn-train", {"solver": "time"}, {"k_sec_z": float(k)}, segments, {}) for k in ks]
+    tasks = [{"k_sec_z": float(k)} for k in ks]
+    simulate = SpectraTask(registry.get("simulator", "exudyn-train"), {"solver": "time"}, segments, {})
     rows = []
     reference = None
     for name, options in (("serial", {}), ("processes", {"workers": 2}), ("dask", {"n_workers": 2})):
         cls = registry.get("executor", name)
         with cls(**options) as ex:
             if name != "serial":  # warm the workers (imports, exudyn) before timing
-                list(ex.map_unordered(simulate_spectra_task, tasks[:2]))
+                list(ex.map_unordered(simulate, tasks[:2]))
             t0 = time.perf_counter()
-            out = dict(ex.map_unordered(simulate_spectra_task, tasks))
+            out = dict(ex.map_unordered(simulate, tasks))
             wall = time.perf_counter() - t0
         ys = np.array([out[i] for i in range(len(tasks))])
         if reference is None:
@@ -85,13 +107,159 @@ def batch_ego(m1: int) -> None:
                   f"{max(r['errors_percent'].values()):12.2f}")
 
 
+WHOLE_RUN = """\
+name: bench-whole-{executor}
+seed: 7
+simulator: {{plugin: exudyn-train, options: {{solver: time, fs_hz: 100.0}}}}
+parameters: {{k_sec_z: {{}}, c_sec_z: {{}}, c_sec_y: {{}}}}
+data:
+  source: experiment
+  track: {{spectrum: german-low, n_segments: {segments}, length_m: 500.0, speed_kmh: 300.0}}
+  w_ref: {{k_sec_z: 280.0e3, c_sec_z: 14.0e3, c_sec_y: 21.0e3}}
+spectra: {{f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 100}}
+design: {{n_initial: {m0}}}
+ego: {{max_iter: {m1}, batch: 2}}
+identifiability: {{n_redraws: 20}}
+executor: {{plugin: {executor}, options: {options}}}
+output: {{dir: {out}}}
+"""
+
+
+def whole_run(segments: int, m0: int, m1: int) -> None:
+    """Section 3 of the module docstring."""
+    from suspid.config import load_config
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.identify import run
+
+    print(f"\n3. whole run, time solver, {segments} segments of 500 m at 300 km/h, q = 3, m0 = {m0}, m1 = {m1}, "
+          f"ego.batch = 2")
+    print(f"{'executor':<10} {'design (s)':>10} {'speed-up':>9} {'run (s)':>8} {'speed-up':>9}  same w_opt")
+    reference = None
+    with tempfile.TemporaryDirectory() as tmp:
+        for executor, options in (("serial", "{}"), ("processes", "{workers: 2}"), ("dask", "{n_workers: 2}")):
+            cfg = Path(tmp) / f"{executor}.yaml"
+            cfg.write_text(WHOLE_RUN.format(executor=executor, options=options, segments=segments, m0=m0, m1=m1,
+                                            out=Path(tmp) / executor))
+            t0 = time.time()
+            r = run(load_config(cfg), progress=False, log=lambda s: None)
+            wall = time.time() - t0
+            finished = sorted(e.finished_at for e in Ledger(r.run_dir / "ledger.sqlite").evaluations())
+            design = finished[m0 - 1] - t0  # the reference and measurement dates, then the m0 design points
+            if reference is None:
+                reference = (design, wall, r.w_opt)
+            print(f"{executor:<10} {design:10.1f} {reference[0] / design:9.2f} {wall:8.1f} {reference[1] / wall:9.2f}"
+                  f"  {r.w_opt == reference[2]}", flush=True)
+
+
+@dataclass(frozen=True)
+class ResultOnly(SpectraTask):
+    """A Table 1 task that does not simulate: a zero result of the size of a Table 1 one (benchmark only)."""
+
+    shape: tuple = (60, 10, 200)
+
+    def __call__(self, w):
+        return np.zeros(self.shape)
+
+
+def result_only(task: tuple) -> np.ndarray:
+    """The item-carries-the-track form: ``(plugin, options, w, segments, spectra)``, result as :class:`ResultOnly`."""
+    return np.zeros(ResultOnly.shape)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def scheduler_memory(n_tasks: int, n_tasks_before: int) -> None:
+    """Section 4 of the module docstring."""
+    import cloudpickle
+    from suspid.config import load_config
+    from suspid.workflows.problem import synthetic_track
+
+    config = load_config(Path(__file__).resolve().parents[1] / "configs" / "table1.yaml")
+    segments = synthetic_track(config, "measurement")
+    cls = registry.get("simulator", config.simulator.plugin)
+    options = dict(config.simulator.options)
+    ws = [{"k_sec_z": 230e3 + i} for i in range(max(n_tasks, n_tasks_before))]
+    task = ResultOnly(cls, options, segments, config.spectra)
+    print(f"\n4. dask scheduler memory, Table 1 tasks ({len(segments)} segments of "
+          f"{config.data.track.length_m:g} m), 2 workers, a new scheduler for each line")
+    print(f"   bytes per task: {len(cloudpickle.dumps(ws[0]))} (w only, the task function sent once per worker: "
+          f"{len(cloudpickle.dumps(task)) / 1e6:.1f} MB); "
+          f"{len(cloudpickle.dumps(('exudyn-train', options, ws[0], segments, config.spectra))) / 1e6:.1f} MB "
+          f"with the track in the item")
+    print(f"{'tasks':>6} {'track sent':<16} {'RSS idle (MB)':>13} {'peak (MB)':>10} {'per task (MB)':>14} "
+          f"{'wall (s)':>9}")
+    for label, fn, items in (("with every task", result_only,
+                              [("exudyn-train", options, w, segments, config.spectra) for w in ws[:n_tasks_before]]),
+                             ("once per worker", task, ws[:n_tasks])):
+        base, peak, wall = _scheduler_rss(fn, items)
+        print(f"{len(items):6d} {label:<16} {base / 1e6:13.0f} {peak / 1e6:10.0f} "
+              f"{(peak - base) / 1e6 / len(items):14.3f} {wall:9.1f}", flush=True)
+
+
+def _scheduler_rss(fn, items) -> tuple[int, int, float]:
+    """``(RSS once connected, peak RSS, wall s)`` of a new ``dask scheduler`` process while ``fn`` maps ``items``."""
+    import psutil
+    from suspid.plugins.executors.dask import DaskExecutor
+
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                               "--port", str(port), "--no-dashboard"], **quiet)]
+    procs += [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+                                "--no-dashboard"], **quiet) for _ in range(2)]
+    scheduler = psutil.Process(procs[0].pid)
+    try:
+        with DaskExecutor(address=address, n_workers=2, timeout_s=120) as executor:
+            time.sleep(1.0)  # let the scheduler settle
+            base = scheduler.memory_info().rss
+            peak, done = [base], threading.Event()
+
+            def sample() -> None:
+                while not done.is_set():
+                    peak[0] = max(peak[0], scheduler.memory_info().rss)
+                    time.sleep(0.05)
+
+            sampler = threading.Thread(target=sample)
+            sampler.start()
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():  # dask's "large graph" warning: the point of the first line
+                warnings.simplefilter("ignore", UserWarning)
+                for _ in executor.map_unordered(fn, items):
+                    pass
+            wall = time.perf_counter() - t0
+            done.set()
+            sampler.join()
+            return base, peak[0], wall
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait(timeout=30)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=8)
     parser.add_argument("--length-m", type=float, default=1000.0)
     parser.add_argument("--m1", type=int, default=16)
     parser.add_argument("--quick", action="store_true", help="design part only")
+    parser.add_argument("--whole-run", action="store_true", help="only section 3: a whole run per executor")
+    parser.add_argument("--segments", type=int, default=4, help="section 3: track segments")
+    parser.add_argument("--m0", type=int, default=10, help="section 3: initial design size")
+    parser.add_argument("--scheduler-memory", action="store_true", help="only section 4")
+    parser.add_argument("--tasks", type=int, default=500, help="section 4: tasks, track once per worker")
+    parser.add_argument("--tasks-before", type=int, default=30, help="section 4: tasks, track with every task")
     args = parser.parse_args()
+    if args.scheduler_memory:
+        scheduler_memory(args.tasks, args.tasks_before)
+        return
+    if args.whole_run:
+        whole_run(args.segments, args.m0, args.m1 if args.m1 != 16 else 6)
+        return
     design_speedup(args.points, args.length_m)
     if not args.quick:
         batch_ego(args.m1)

@@ -49,6 +49,17 @@ class SimulatorError(SuspidError):
     """A simulator run failed (external program, invalid output, unstable model)."""
 
 
+class ClusterError(SuspidError):
+    """The cluster that runs the simulations failed the run, not the simulations.
+
+    A lost connection to the scheduler, a task the cluster dropped without a
+    result, no progress within the executor's result timeout, or workers that
+    cannot run suspid's tasks (the message names them). Nothing is recorded
+    as a failed simulation: the same command, once the cluster is back,
+    simulates the points that were running.
+    """
+
+
 class PluginBugError(PluginError):
     """A plugin raised an exception that is not one of suspid's: a bug in the plugin (exit code 1).
 

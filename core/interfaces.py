@@ -259,6 +259,19 @@ class Executor(ABC):
         """How many tasks run at once (EGO batches use it)."""
         return 1
 
+    def describe(self) -> str:
+        """One line for the run's log: where the tasks run (a cluster adds its addresses and dashboard)."""
+        return f"executor {self.name}, {self.n_workers} task(s) at once"
+
+    def validate(self) -> None:
+        """Check, as ``suspid validate`` does, that tasks could run (e.g. reach a cluster and check its workers).
+
+        Called outside a ``with`` block; it must let go of whatever it opened.
+        Default: nothing to check.
+
+        :raises suspid.errors.SuspidError: one line saying what is wrong.
+        """
+
     @abstractmethod
     def map_unordered(self, fn: Callable[[Any], Any], items: Sequence[Any]) -> Iterator[tuple[int, Any]]:
         """Apply ``fn`` to every item; yield ``(index, result)`` as each task finishes.
@@ -267,7 +280,52 @@ class Executor(ABC):
         so the caller can record the failure and go on with the others. A
         worker that dies loses only its task in flight, which is retried.
         ``fn`` and the items must be picklable for out-of-process executors.
+        A failure of the executor itself (a lost cluster) is raised, not
+        yielded: :class:`suspid.errors.ClusterError`.
         """
+
+    # -- asynchronous drivers: one task at a time --------------------------------------------------
+    def submit(self, fn: Callable[[Any], Any], item: Any) -> "TaskHandle":
+        """Start ``fn(item)`` and return its handle at once, for :meth:`wait_first`.
+
+        For a driver that keeps every worker busy (an asynchronous EGO
+        proposes a new point as soon as one finishes). The default runs the
+        task here, now, and returns it finished (what ``serial`` does);
+        parallel executors override it. Inside the ``with`` block only.
+        """
+        try:
+            outcome = fn(item)
+        except Exception as exc:  # yielded by wait_first, like map_unordered's
+            outcome = exc
+        return TaskHandle(fn, item, done=True, outcome=outcome)
+
+    def wait_first(self, handles: Sequence["TaskHandle"], timeout: float | None = None
+                   ) -> list[tuple["TaskHandle", Any]]:
+        """Wait until at least one of ``handles`` has finished; return every finished one.
+
+        :param handles: handles from :meth:`submit` whose outcome was not returned yet.
+        :param timeout: seconds to wait at most (``None``: no limit of the caller's; an executor
+            may still give up on a cluster where nothing finishes for its own limit, with a
+            :class:`~suspid.errors.ClusterError`).
+        :returns: ``[(handle, result or exception), ...]`` in the order of ``handles``,
+            empty when none finished within ``timeout``. A task's exception is
+            returned, not raised, as in :meth:`map_unordered`.
+        :raises suspid.errors.ClusterError: the executor lost its workers or cluster.
+        """
+        return [(h, h.outcome) for h in handles if h.done]
+
+
+class TaskHandle:
+    """A task started by :meth:`Executor.submit`: ``fn``, ``item`` and, once known, its outcome.
+
+    Executors keep their own state (a future) in ``future``; callers only
+    pass handles back to :meth:`Executor.wait_first`.
+    """
+
+    def __init__(self, fn: Callable[[Any], Any], item: Any, *, done: bool = False, outcome: Any = None,
+                 future: Any = None) -> None:
+        self.fn, self.item, self.done, self.outcome, self.future = fn, item, done, outcome, future
+        self.lost = 0  # times its worker died under it (executors that retry)
 
 
 # ---------------------------------------------------------------------------------------------------

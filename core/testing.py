@@ -242,6 +242,42 @@ def collect(executor: Executor, fn: Callable[[Any], Any], items: list[Any]) -> d
     return out
 
 
+def check_submit(executor: Executor) -> None:
+    """The asynchronous API of an entered executor: ``submit`` then ``wait_first`` until every task is back.
+
+    Every handle comes back exactly once with its own result; a task's
+    exception is returned, not raised; ``wait_first`` on unfinished tasks with
+    a short timeout returns at once (possibly empty) rather than waiting for all.
+
+    :raises AssertionError: saying which part of the contract is broken.
+    """
+    values = list(range(6))
+    handles = {executor.submit(sleep_then_square, (0.02 * (len(values) - v), v)): v for v in values}
+    bad = executor.submit(fail_on_odd, 3)
+    waiting, got = list(handles) + [bad], {}
+    deadline = time.monotonic() + 120
+    while waiting:
+        assert time.monotonic() < deadline, f"wait_first never returned {len(waiting)} handle(s)"
+        t0 = time.monotonic()
+        done = executor.wait_first(waiting, timeout=5.0)
+        assert time.monotonic() - t0 < 30, "wait_first overran its timeout"
+        for h, outcome in done:
+            assert h in waiting, "wait_first returned a handle twice, or one it was not given"
+            waiting.remove(h)
+            got[h] = outcome
+    for h, v in handles.items():
+        assert got[h] == v * v, f"submit: task of {v} gave {got[h]!r}"
+    assert isinstance(got[bad], ValueError) and "task input 3 is odd" in str(got[bad]), (
+        f"submit: a task's exception must be returned with its message, got {got[bad]!r}")
+    slow = executor.submit(sleep_then_square, (1.5, 2))
+    t0 = time.monotonic()
+    early = executor.wait_first([slow], timeout=0.2)
+    assert time.monotonic() - t0 < 1.4 or early, "wait_first waited past its timeout"
+    while not early:
+        early = executor.wait_first([slow], timeout=5.0)
+    assert early == [(slow, 4)], f"submit: the slow task gave {early!r}"
+
+
 def check_executor(cls: type, options: Mapping[str, Any] | None = None, *, worker_death: bool = False) -> None:
     """Check an executor class against :class:`suspid.interfaces.Executor`.
 
@@ -250,7 +286,8 @@ def check_executor(cls: type, options: Mapping[str, Any] | None = None, *, worke
     comes back once under its index, whatever the completion order; numpy
     arrays come back intact; a task's exception is yielded with its index
     (type and message kept) and the other tasks still finish; no items yield
-    nothing; several calls work within one ``with`` block.
+    nothing; several calls work within one ``with`` block; ``submit`` and
+    ``wait_first`` (:func:`check_submit`).
 
     :param cls: the executor class.
     :param options: its options (as in ``executor.options``).
@@ -290,6 +327,8 @@ def check_executor(cls: type, options: Mapping[str, Any] | None = None, *, worke
             else:
                 assert got[i] == v, f"task {i}: expected {v}, got {got[i]!r}"
 
+        check_submit(executor)
+
         if worker_death:
             with tempfile.TemporaryDirectory(prefix="suspid-check-executor-") as tmp:
                 marker = Path(tmp) / "died"
@@ -299,3 +338,13 @@ def check_executor(cls: type, options: Mapping[str, Any] | None = None, *, worke
                 assert marker.exists(), "the victim task never ran"
                 assert got == {i: v * v for i, v in enumerate(values)}, (
                     f"after a worker died, the results are not all there: {got}")
+                marker = Path(tmp) / "died-submit"
+                task = DieOnce(sleep_then_square, victim=1, marker=marker)
+                handles = [executor.submit(task, (i, (0.1, v))) for i, v in enumerate(values[:4])]
+                got = {}
+                while len(got) < len(handles):
+                    for h, outcome in executor.wait_first([h for h in handles if h not in got], timeout=60):
+                        got[h] = outcome
+                assert marker.exists(), "the victim task never ran"
+                assert [got[h] for h in handles] == [v * v for v in values[:4]], (
+                    f"submit: after a worker died, the results are not all there: {list(got.values())}")

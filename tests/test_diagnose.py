@@ -355,7 +355,8 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     from suspid.workflows.diagnose import calibrate_null, locate, make_cells, rank_effects
     from suspid.interfaces import TrackSegment
     from suspid.infra.ledger import Ledger
-    from suspid.workflows.problem import build_problem, simulate_spectra
+    from suspid.workflows.problem import build_problem
+    from suspid.workflows.tasks import simulate_spectra
     from suspid.plugins.simulators.exudyn_train import ExudynTrain
 
     cfg = load_config(_config(tmp_path, "speeds", [], n_segments=32))

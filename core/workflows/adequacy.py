@@ -28,10 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import minimize
 
-from suspid.errors import SuspidError
+from suspid.errors import ClusterError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
+from suspid.interfaces import Executor
 from suspid.method.objective import ObjectiveFunction
-from suspid.workflows.problem import Problem, simulate_spectra
+from suspid.workflows.problem import Problem
+from suspid.workflows.tasks import SpectraTask, run_one
 
 
 @dataclass
@@ -77,8 +79,11 @@ class GroupEstimates:
 
 
 def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_group_share: float,
-                    max_evaluations: int, initial_step: float, ledger: Ledger | None = None) -> GroupEstimates:
+                    max_evaluations: int, initial_step: float, ledger: Ledger | None = None,
+                    executor: Executor | None = None) -> GroupEstimates:
     """Re-identify the free parameters of every group from ``u_opt`` (see the module docstring).
+
+    Each simulation runs on ``executor`` (entered; in this process without one).
 
     With a ``ledger`` the estimates are cached there (keyed by the run's data, w_opt and the
     options), so that a resumed run does not simulate them again.
@@ -92,6 +97,7 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
         return GroupEstimates(groups, share, cached[:, :-1], int(cached[0, -1]))
     u_hat = np.full((len(groups), problem.q), np.nan)
     spectra: dict[bytes, np.ndarray | None] = {}
+    task = SpectraTask.of(problem.simulator, problem.segments, problem.config.spectra)
     n_sims = 0
 
     def y_at(u: np.ndarray) -> np.ndarray | None:
@@ -99,8 +105,9 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
         k = np.round(u, 6).tobytes()
         if k not in spectra:
             try:
-                spectra[k] = simulate_spectra(problem.simulator, problem.w_of(problem.from_unit(u)),
-                                              problem.segments, problem.config.spectra)[0]
+                spectra[k] = run_one(executor, task, problem.w_of(problem.from_unit(u)))
+            except ClusterError:
+                raise
             except SuspidError:
                 spectra[k] = None
             n_sims += 1

@@ -9,7 +9,7 @@ in the gradient of J at w_opt (:func:`gradient_noise`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -17,36 +17,66 @@ from suspid.config import Config
 from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
+from suspid.interfaces import Executor
 from suspid.method.adequacy import band_residuals, frequency_bands, information_share
 from suspid.method.identifiability import ModelErrorOptions, assess
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.evaluation import j_of_spectra
-from suspid.workflows.problem import Problem, _cached_spectra, simulate_spectra
+from suspid.workflows.problem import Problem
+from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.reference import self_check
 
 
-def cached_y_sim(problem: Problem, ledger: Ledger, u: np.ndarray, retry_failed: bool = False) -> np.ndarray:
+def _y_sim_key(problem: Problem, u: np.ndarray) -> tuple[str, dict[str, float]]:
+    w = problem.w_of(problem.from_unit(u))
+    return stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest), w
+
+
+def simulate_missing(problem: Problem, ledger: Ledger, us: Sequence[np.ndarray], executor: Executor | None = None,
+                     retry_failed: bool = False) -> None:
+    """Simulate together, on ``executor``, the spectra at the points ``us`` ([0, 1]^q) not yet in the ledger.
+
+    Each result is stored in the ledger (:func:`cached_y_sim` reads it); a failed
+    simulation (:class:`~suspid.errors.SimulatorError`) is recorded as failed, and
+    not simulated again unless ``retry_failed``.
+    """
+    todo = {}
+    for u in us:
+        key, w = _y_sim_key(problem, u)
+        known = ledger.get(key)
+        if ledger.get_array(key + ":y") is None and (known is None or known.ok or retry_failed):
+            todo[key] = w
+    task = SpectraTask.of(problem.simulator, problem.segments, problem.config.spectra, with_freqs=True)
+    for (key, w), outcome in zip(todo.items(), run_tasks(executor, [(task, w) for w in todo.values()])):
+        if isinstance(outcome, SimulatorError):
+            ledger.put(Evaluation(key, w, None, None, status="failed", error=str(outcome)))
+        elif isinstance(outcome, BaseException):
+            raise outcome
+        else:
+            ledger.put_array(key + ":y", outcome[0])
+            ledger.put_array(key + ":freqs", outcome[1])
+
+
+def cached_y_sim(problem: Problem, ledger: Ledger, u: np.ndarray, retry_failed: bool = False,
+                 executor: Executor | None = None) -> np.ndarray:
     """Spectra ``(v, n_channels, n_freqs)`` dB at ``u`` ([0, 1]^q) on the measurement date's segments.
 
-    Cached in the ledger; a failure is cached too, and raised again (unless ``retry_failed``).
+    Cached in the ledger (simulated on ``executor`` when missing); a failure is
+    cached too, and raised again (unless ``retry_failed``).
     """
-    w = problem.w_of(problem.from_unit(u))
-    key = stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest)
-    known = ledger.get(key)
-    if known is not None and not known.ok and not retry_failed:
-        raise SimulatorError(known.error)
-    try:
-        return _cached_spectra(ledger, key, lambda: simulate_spectra(problem.simulator, w, problem.segments,
-                                                                      problem.config.spectra))[0]
-    except SimulatorError as exc:
-        ledger.put(Evaluation(key, w, None, None, status="failed", error=str(exc)))
-        raise
+    simulate_missing(problem, ledger, [u], executor, retry_failed)
+    key, _ = _y_sim_key(problem, u)
+    y = ledger.get_array(key + ":y")
+    if y is None:
+        raise SimulatorError(ledger.get(key).error)
+    return y
 
 
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
                    paired: bool = True, failed: list[dict[str, Any]] | None = None,
-                   retry_failed: bool = False) -> tuple[np.ndarray, np.ndarray, float]:
+                   retry_failed: bool = False, executor: Executor | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
 
     J is estimated from v measured spectra and v modelled ones (y_sim_i + b_i).
@@ -58,7 +88,7 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     then takes the central-difference gradient of J at w_opt from the 2q points
     w_opt ± h e_k (clipped to the box). The spread of these gradients over the
     replicates, Σ_g, is how far the data of the same kind could tilt J at its
-    maximum. The 2q spectra are simulated once (cached in the ledger).
+    maximum. The 2q spectra are simulated once, together on ``executor`` (cached in the ledger).
 
     The same 2q + 1 spectra with the run's own data give the curvature of J
     along each axis, d²J/du_k² (central second differences).
@@ -73,6 +103,8 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
     y_sim_at = lambda u: cached_y_sim(problem, ledger, u, retry_failed)  # noqa: E731
 
+    points = [u_opt, *np.clip(u_opt + h * np.eye(q), 0.0, 1.0), *np.clip(u_opt - h * np.eye(q), 0.0, 1.0)]
+    simulate_missing(problem, ledger, points, executor, retry_failed)
     y_opt = y_sim_at(u_opt)  # w_opt was simulated by EGO: it cannot fail here
 
     def y_or_centre(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -111,10 +143,12 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
 
 def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
-            failed: list[dict[str, Any]] | None = None, retry_failed: bool = False) -> dict[str, Any]:
+            failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
+            executor: Executor | None = None) -> dict[str, Any]:
     """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict.
 
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
+    :param executor: runs the simulations (entered; in this process without one).
     """
     failed = list(failed or [])
     opts = config.identifiability
@@ -123,11 +157,11 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     u_opt = problem.to_unit(x_opt)
     sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
                                                  paired=opts.bootstrap == "paired", failed=failed,
-                                                 retry_failed=retry_failed)
+                                                 retry_failed=retry_failed, executor=executor)
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
-    trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd)
+    trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor)
     interval_unit = verdict.interval_unit
     if opts.model_error.widen and trust["widen"] is not None:
         # each side widened in quadrature (an interval clipped at a bound is not centred on w_opt)
@@ -203,13 +237,15 @@ def errors_percent(problem: Problem, x_si: np.ndarray) -> dict[str, float]:
 
 
 def local_sensitivity(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float,
-                      retry_failed: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                      retry_failed: bool = False, executor: Executor | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Spectra at w_opt and their sensitivity, from the simulations of :func:`gradient_noise` (ledger cache).
 
     :returns: ``(y_opt (v, n_channels, n_freqs) dB, S (q, n_channels, n_freqs))`` with
         S_k = ∂ mean_i y_sim_i / ∂u_k (dB per unit of the normalised parameter),
         by central differences at w_opt ± h e_k (one-sided where a side fails or is clipped).
     """
+    simulate_missing(problem, ledger, [u_opt, *np.clip(u_opt + h * np.eye(problem.q), 0, 1),
+                                       *np.clip(u_opt - h * np.eye(problem.q), 0, 1)], executor, retry_failed)
     y_opt = cached_y_sim(problem, ledger, u_opt, retry_failed)
     mean_opt = y_opt.mean(axis=0)
     S = np.zeros((problem.q,) + mean_opt.shape)
@@ -227,7 +263,8 @@ def local_sensitivity(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: fl
 
 
 def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, options: ModelErrorOptions,
-                retry_failed: bool = False, sd: np.ndarray | None = None) -> dict[str, Any]:
+                retry_failed: bool = False, sd: np.ndarray | None = None,
+                executor: Executor | None = None) -> dict[str, Any]:
     """Trust under model error: the reference-date self-check and the adequacy test at w_opt.
 
     A component is **not trustworthy under model error** when
@@ -259,7 +296,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     if not sc_opt.enabled:
         report["self_check"] = {"status": "disabled"}
     else:
-        check = self_check(problem, ledger, sc_opt)
+        check = self_check(problem, ledger, sc_opt, executor=executor)
         if check is None:
             report["self_check"] = {"status": "not run: the reference date's data are not part of this run "
                                               "(give noise.reference, or use at least 8 reference segments)"}
@@ -283,7 +320,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     if not ad_opt.enabled:
         report["adequacy"] = {"status": "disabled"}
     else:
-        y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed)
+        y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed, executor)
         bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
         res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db)
         share, info = information_share(S, problem.noise_model.variance_, problem.weights, res)
@@ -308,7 +345,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                   f"lies in bands the model does not reproduce at w_opt ({where})")
         if ad_opt.groups:
             ge = group_estimates(problem, u_opt, S, ad_opt.min_group_share, ad_opt.group_evaluations,
-                                 options.self_check.initial_step, ledger)
+                                 options.self_check.initial_step, ledger, executor)
             informed = np.isfinite(ge.u)
             spread = np.array([np.ptp(ge.u[informed[:, k], k]) if informed[:, k].sum() >= 2 else 0.0
                                for k in range(q)])

@@ -8,7 +8,9 @@ channels and rate, the files a run reads, and the folder it writes:
 - a noise model named by ``noise.path`` opens, and belongs to this frequency grid and these channels;
 - the frequency grid fits the records: below the Nyquist frequency of the simulator's
   output, and every grid cell holds a DFT line of a record as long as the segments;
-- measured data files read, pair with their track and give spectra on the grid.
+- measured data files read, pair with their track and give spectra on the grid;
+- the executor could run tasks (:meth:`~suspid.interfaces.Executor.validate`: for a
+  dask cluster, its scheduler answers and every worker runs suspid in the driver's versions).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from suspid import registry
 from suspid.config import Config, build_simulator
 from suspid.errors import DataError
 from suspid.method.noise import NoiseModel
@@ -82,4 +85,6 @@ def dry_run(config: Config) -> int:
     simulator = build_simulator(config)
     check_noise_model(config, simulator.channels())
     check_records(config, simulator.sampling_rate_hz())
-    return validate_data(config)
+    n_measured = validate_data(config)
+    registry.get("executor", config.executor.plugin)(**config.executor.options).validate()
+    return n_measured

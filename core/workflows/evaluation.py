@@ -6,8 +6,10 @@ with Y_mod = y_sim + b_i. Each result is committed to the ledger the moment
 it arrives, keyed by the simulator's identity, w and the data identity, so
 that a resumed run reads it instead of simulating it again.
 
-Workers receive picklable tasks with resolved options
-(:func:`simulate_spectra_task`); the simulator is built once per process.
+Workers receive picklable tasks with resolved options (:class:`SpectraTask`,
+called with w); the simulator is built once per process. Every simulation of
+a run, not only the evaluations of J, goes through the run's executor
+(:func:`run_tasks`), so that with a cluster the driver simulates nothing.
 """
 
 from __future__ import annotations
@@ -19,10 +21,11 @@ import numpy as np
 
 from suspid import registry
 from suspid.errors import SimulatorError, SuspidError
-from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
-from suspid.interfaces import Executor, Simulator
+from suspid.infra.ledger import Evaluation, Ledger, evaluation_key
+from suspid.interfaces import Executor
 from suspid.method.objective import ObjectiveFunction
-from suspid.workflows.problem import Problem, simulate_spectra
+from suspid.workflows.problem import Problem
+from suspid.workflows.tasks import SpectraTask, in_process
 
 
 def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
@@ -35,27 +38,14 @@ def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = Non
 
 
 def simulate_spectra_task(task: tuple) -> np.ndarray:
-    """Worker side of one evaluation: ``(plugin, options, w, segments, spectra) -> y_sim``.
+    """One evaluation from a tuple ``(plugin name, options, w, segments, spectra) -> y_sim``.
 
-    Module-level and built from picklable parts so that process and cluster
-    executors can run it; the simulator is rebuilt from the registry.
+    Module-level and built from picklable parts; the simulator class comes from
+    the registry of the process that runs it. Each item carries its segments:
+    :class:`SpectraTask` sends them once per worker instead.
     """
     plugin, options, w, segments, spectra_options = task
-    y_sim, _ = simulate_spectra(_simulator(plugin, options), w, segments, spectra_options)
-    return y_sim
-
-
-_SIMULATORS: dict[str, Simulator] = {}
-
-
-def _simulator(plugin: str, options: dict) -> Simulator:
-    """The simulator for ``(plugin, options)``, built once per process (models keep caches per instance)."""
-    key = stable_hash(plugin, options)
-    if key not in _SIMULATORS:
-        if len(_SIMULATORS) >= 4:
-            _SIMULATORS.pop(next(iter(_SIMULATORS)))
-        _SIMULATORS[key] = registry.get("simulator", plugin)(**options)
-    return _SIMULATORS[key]
+    return SpectraTask(registry.get("simulator", plugin), dict(options), list(segments), spectra_options)(w)
 
 
 def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str, float]]:
@@ -90,10 +80,10 @@ def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: 
             on_done(i, out[i], True)
         else:
             keys[len(todo)] = (i, key, w)
-            todo.append((problem.config.simulator.plugin, dict(problem.config.simulator.options), w,
-                         problem.segments, problem.config.spectra))
+            todo.append(w)
+    task = SpectraTask.of(problem.simulator, problem.segments, problem.config.spectra)
     t0 = time.perf_counter()
-    for j, result in executor.map_unordered(simulate_spectra_task, todo):
+    for j, result in executor.map_unordered(task, todo) if todo else ():
         i, key, w = keys[j]
         wall = time.perf_counter() - t0
         if isinstance(result, SimulatorError):
@@ -118,7 +108,7 @@ def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray, retry_failed: b
     :param x_si: ``(q,)`` SI values in the order of ``problem.names``.
     :raises SimulatorError: when the simulator fails (the failure is recorded first), or failed before.
     """
-    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], registry.get("executor", "serial")(),
+    ev = evaluate_many(problem, ledger, np.asarray(x_si, float)[None, :], in_process(),
                        retry_failed=retry_failed)[0]
     if ev is None:
         key, _ = evaluation_key_of(problem, x_si)

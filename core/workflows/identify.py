@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import json
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -34,6 +35,7 @@ from suspid.infra.files import write_json, write_text
 from suspid.infra.ledger import Evaluation, Ledger
 from suspid.infra.lock import open_run_dir
 from suspid.infra.threads import single_blas_thread
+from suspid.interfaces import Executor
 from suspid.optimize.design import from_unit, make_design
 from suspid.optimize.ego import EGOResult, run_ego
 from suspid.workflows.analysis import analyse
@@ -174,22 +176,24 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
     :raises RunDirError: the run directory is in use by another process, or holds another config's run.
     """
     run_dir = config.run_dir()
-    with open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, fresh=fresh,
-                      force=force, log=log) as ledger:
+    # the executor first: an unreachable cluster, or workers that cannot run suspid, stop the run before anything
+    with registry.get("executor", config.executor.plugin)(**config.executor.options) as executor, \
+            open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, fresh=fresh,
+                         force=force, log=log) as ledger:
+        log(executor.describe())
         write_config(config, run_dir)
-        return _run(config, run_dir, ledger, progress=progress, log=log, retry_failed=retry_failed)
+        return _run(config, run_dir, ledger, executor, progress=progress, log=log, retry_failed=retry_failed)
 
 
-def _run(config: Config, run_dir: Path, ledger: Ledger, *, progress: bool, log: Callable[[str], None],
-         retry_failed: bool) -> IdentificationResult:
-    """:func:`run` inside its locked run directory."""
+def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, progress: bool,
+         log: Callable[[str], None], retry_failed: bool) -> IdentificationResult:
+    """:func:`run` inside its locked run directory; every simulation runs on ``executor`` (entered)."""
     t_start = time.perf_counter()
     n_before = ledger.count()
-    problem = build_problem(config, ledger, log)
+    problem = build_problem(config, ledger, log, executor)
     problem.noise_model.save(run_dir / "noise_model.npz")
 
     surrogate = surrogate_for(config)
-    executor_cls = registry.get("executor", config.executor.plugin)
     X0 = from_unit(make_design(config.design, problem.q), problem.bounds)
     ei_history: list[float] = []
     # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.infra.threads)
@@ -203,7 +207,7 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, *, progress: bool, log: 
                 j_max = max(j_max, ev.J)
             bars.update(design_task, advance=1, status=f"J_max {j_max:.4g}" if ev else "failed point")
 
-        with executor_cls(**config.executor.options) as executor:
+        with nullcontext(executor):  # entered by run(): the same executor serves the whole run
             evs = evaluate_many(problem, ledger, X0, executor, design_done, retry_failed=retry_failed)
             ok = np.array([e is not None for e in evs])
             failed = [failure(problem, ledger, "design", x) for x, e in zip(X0, evs) if e is None]
@@ -254,7 +258,7 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, *, progress: bool, log: 
         bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
 
     with single_blas_thread():
-        result = analyse(problem, ledger, ego, config, failed, retry_failed)
+        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor)
     result.update({
         "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),
@@ -264,5 +268,5 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, *, progress: bool, log: 
         "design_min_distance": float(ego.design_min_distance),
     })
     write_json(run_dir / "result.json", result)
-    write_report(run_dir, problem, ego, result, ei_history)
+    write_report(run_dir, problem, ego, result, ei_history, executor)
     return IdentificationResult.from_dict(result, run_dir, problem, ego)

@@ -80,6 +80,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from suspid import registry
 from suspid.config import Config, build_simulator, identified_bounds, load_config, override_arguments
 from suspid.errors import ConfigError
 from suspid.infra.files import atomic_open, pyplot, save_figure, write_json, write_text
@@ -229,15 +230,17 @@ def identify_reference(source: ConfigSource, overrides: Sequence[str], config: C
     """Identify the noise model B at the reference date, once for every date (paper §2.3).
 
     The base config as a numerical experiment at w0 (:func:`suspid.workflows.problem.build_problem`), with its
-    own ledger in ``<monitor dir>/reference/``; returns the ``noise_model.npz`` written there.
+    own ledger in ``<monitor dir>/reference/``, simulated on the config's executor; returns the
+    ``noise_model.npz`` written there.
     """
     ref_dir = config.run_dir() / "reference"
     ref_cfg = load_config(source, [*overrides, *override_arguments({"monitor": None, "output.dir": str(ref_dir),
                                                            "name": f"{config.name}-reference"})])
-    with open_run_dir(ref_dir, config_name=ref_cfg.name, config_file=ref_cfg.source_file, fresh=fresh,
-                      log=log) as ledger:
+    with registry.get("executor", ref_cfg.executor.plugin)(**ref_cfg.executor.options) as executor, \
+            open_run_dir(ref_dir, config_name=ref_cfg.name, config_file=ref_cfg.source_file, fresh=fresh,
+                         log=log) as ledger:
         log("reference date: identifying the noise model B once for every date (paper §2.3)")
-        problem = build_problem(ref_cfg, ledger, log)
+        problem = build_problem(ref_cfg, ledger, log, executor)
         return problem.noise_model.save(ref_dir / "noise_model.npz")
 
 

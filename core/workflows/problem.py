@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -29,14 +29,15 @@ from suspid.config import Config, build_simulator, channel_weights, identified_b
 from suspid.data.experiment import apply_model_error
 from suspid.data.files import read_accelerations_records, read_track
 from suspid.data.track import synthetic_segments
-from suspid.errors import DataError, PluginBugError, SimulatorError, SuspidError
+from suspid.errors import DataError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.seeds import seed_for
-from suspid.interfaces import Objective, Response, Simulator, TrackSegment
+from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
 from suspid.method.noise import NoiseModel, fit_noise_model
-from suspid.method.spectra import SpectraOptions, compute_spectra
+from suspid.method.spectra import compute_spectra
 from suspid.optimize.design import from_unit, to_unit
+from suspid.workflows.tasks import SpectraTask, run_tasks
 
 
 def array_digest(*arrays: np.ndarray) -> str:
@@ -128,30 +129,6 @@ def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarra
     return y, f
 
 
-def simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequence[TrackSegment],
-                     spectra_options: SpectraOptions | dict[str, Any] | None,
-                     transform: Callable[[list[Response]], list[Response]] | None = None
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Spectra ``(y (v, n_channels, n_freqs) dB, freqs (n_freqs,) Hz)`` of ``simulator`` at ``w`` on ``segments``.
-
-    :param transform: applied to the responses before the spectra (e.g. a measurement process).
-    """
-    try:
-        responses = simulator.simulate(w, segments)
-    except SuspidError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - not one of suspid's errors: a bug of the plugin
-        raise PluginBugError(f"{registry.describe('simulator', simulator.name)} failed at w = {dict(w)}: "
-                             f"{type(exc).__name__}: {exc}") from exc
-    for r in responses:
-        if not np.all(np.isfinite(np.asarray(r.accelerations, dtype=float))):
-            raise SimulatorError(f"simulator '{simulator.name}' returned non-finite accelerations (NaN or inf) "
-                                 f"for segment '{r.segment}' at w = {dict(w)}; the model may be unstable there")
-    if transform is not None:
-        responses = transform(responses)
-    return compute_spectra(responses, spectra_options)
-
-
 def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
     """The synthetic track of one date of a numerical experiment (seeded by the config's seed)."""
     options = config.data.track
@@ -225,12 +202,14 @@ def validate_data(config: Config) -> int:
     return len(segments)
 
 
-def measured_reference(config: Config, simulator: Simulator, ledger: Ledger, log: Callable[[str], None]
+def measured_reference(config: Config, simulator: Simulator, ledger: Ledger, log: Callable[[str], None],
+                       executor: Executor | None = None
                        ) -> tuple[list[TrackSegment], np.ndarray, np.ndarray, np.ndarray]:
     """The reference date's measured spectra and the simulator's at w0 on its measured track (eq. 3).
 
-    The simulation at w0 is cached in the run ledger (keyed by the simulator,
-    the reference track and the spectra options).
+    The simulation at w0 runs on ``executor`` (in this process without one) and
+    is cached in the run ledger (keyed by the simulator, the reference track
+    and the spectra options).
 
     :returns: ``(segments, y_mes0, y_sim0, freqs)``, spectra ``(v0, n_channels, n_freqs)`` dB.
     """
@@ -242,12 +221,41 @@ def measured_reference(config: Config, simulator: Simulator, ledger: Ledger, log
                       config.spectra.model_dump())
     if ledger.get_array(key + ":y") is None:
         log(f"reference date: simulating w0 on the {len(segments)} measured segments of {ref.measurements}")
-    y_sim0, _ = _cached_spectra(ledger, key, lambda: simulate_spectra(simulator, {}, segments, config.spectra))
+    (y_sim0, _), = cached_spectra(ledger, executor, [(key, _task(simulator, segments, config.spectra), {})])
     return segments, y_mes0, y_sim0, freqs
 
 
-def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None) -> Problem:
-    """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3)."""
+def _task(simulator: Simulator, segments: Sequence[TrackSegment], spectra: Any,
+          transform: Callable[[list[Response]], list[Response]] | None = None):
+    """The executor task simulating ``simulator`` on ``segments``, returning ``(y, freqs)``."""
+    return SpectraTask.of(simulator, segments, spectra, transform=transform, with_freqs=True)
+
+
+def cached_spectra(ledger: Ledger, executor: Executor | None, jobs: Sequence[tuple[str, Callable, dict]]
+                   ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Spectra ``(y, freqs)`` of ``(key, task, w)`` jobs: from the ledger's artifacts, or simulated together by
+    ``executor`` (in this process without one) and stored there.
+
+    :raises SimulatorError: (or any task's error) the first failed job's.
+    """
+    found = {key: (ledger.get_array(key + ":y"), ledger.get_array(key + ":freqs")) for key, _, _ in jobs}
+    todo = [(key, task, w) for key, task, w in jobs if found[key][0] is None or found[key][1] is None]
+    for (key, _, _), outcome in zip(todo, run_tasks(executor, [(task, w) for _, task, w in todo])):
+        if isinstance(outcome, BaseException):
+            raise outcome
+        found[key] = outcome
+        ledger.put_array(key + ":y", outcome[0])
+        ledger.put_array(key + ":freqs", outcome[1])
+    return [found[key] for key, _, _ in jobs]
+
+
+def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None,
+                  executor: Executor | None = None) -> Problem:
+    """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3).
+
+    The simulations of the reference and measurement dates run on ``executor``
+    (entered; in this process without one), all at once.
+    """
     simulator = build_simulator(config)
     bounds_map = identified_bounds(config, simulator)
     names = list(bounds_map)
@@ -265,6 +273,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
         segments = synthetic_track(config, "measurement")
         ref_opt = config.data.reference
+        jobs = []
         if noise_path:
             noise_model = NoiseModel.load(noise_path)
         else:
@@ -276,14 +285,9 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             key = stable_hash("reference", sim_id, ref_sim.identity(), segments_digest(ref_segments),
                               ref_opt.model_dump(), spectra_options.model_dump(), config.seed)
             err_rng = named_rng(config.seed, "reference-model-error")
-            y_mes0, freqs = _cached_spectra(ledger, key + ":mes", lambda: simulate_spectra(
-                ref_sim, {}, ref_segments, spectra_options, lambda rs: apply_model_error(rs, ref_opt, err_rng)))
-            y_sim0, _ = _cached_spectra(ledger, key + ":sim", lambda: simulate_spectra(
-                simulator, {}, ref_segments, spectra_options))
-            noise_model = fit_noise_model(y_mes0, y_sim0, noise_options,
-                                          freqs=freqs, channels=channels)
-            reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
-            reference_segments = ref_segments
+            jobs += [(key + ":mes", _task(ref_sim, ref_segments, spectra_options,
+                                          partial(apply_model_error, options=ref_opt, rng=err_rng)), {}),
+                     (key + ":sim", _task(simulator, ref_segments, spectra_options), {})]
         log("measurement date: simulating w_ref (eq. 10)")
         meas_opt = config.data.measurement
         meas_sim, meas_id = simulator, sim_id
@@ -295,8 +299,13 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         # identified effect parameters (<effect>/<parameter>) keep the measurement simulator's own values
         w_meas = {k: v for k, v in w_ref.items() if meas_sim is simulator or "/" not in k or k in config.data.w_ref}
         key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump())
-        y_sim_ref, freqs = _cached_spectra(ledger, key, lambda: simulate_spectra(
-            meas_sim, w_meas, segments, spectra_options))
+        jobs.append((key, _task(meas_sim, segments, spectra_options), w_meas))
+        *reference_spectra, (y_sim_ref, freqs) = cached_spectra(ledger, executor, jobs)
+        if not noise_path:
+            (y_mes0, freqs0), (y_sim0, _) = reference_spectra
+            noise_model = fit_noise_model(y_mes0, y_sim0, noise_options, freqs=freqs0, channels=channels)
+            reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
+            reference_segments = ref_segments
         # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
         b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
                                                             + segments_digest(segments)[:16]))
@@ -307,7 +316,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                                 channels=channels, strict=config.data.strict)
         y_mes, freqs = compute_spectra(responses, spectra_options)
         if config.noise.reference is not None:
-            reference_segments, y_mes0, y_sim0, freqs0 = measured_reference(config, simulator, ledger, log)
+            reference_segments, y_mes0, y_sim0, freqs0 = measured_reference(config, simulator, ledger, log, executor)
             if freqs0.shape != freqs.shape or not np.allclose(freqs0, freqs):
                 raise config.error("the reference-date records give another frequency grid than "
                                    "data.measurements (sampling rate or duration differ)",

@@ -40,13 +40,15 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import minimize
 
-from suspid.errors import SuspidError
+from suspid.errors import ClusterError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
+from suspid.interfaces import Executor
 from suspid.method.identifiability import SelfCheckOptions
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
-from suspid.workflows.problem import Problem, segments_digest, simulate_spectra
+from suspid.workflows.problem import Problem, segments_digest
+from suspid.workflows.tasks import SpectraTask, run_one
 
 
 @dataclass
@@ -75,8 +77,10 @@ class SelfCheck:
 
 
 def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
-               log: Callable[[str], None] = lambda s: None) -> SelfCheck | None:
+               log: Callable[[str], None] = lambda s: None, executor: Executor | None = None) -> SelfCheck | None:
     """The self-check of the module docstring, or None without reference-date data (or fewer than 8 segments).
+
+    Each simulation of the searches runs on ``executor`` (entered; in this process without one).
 
     The result is cached in the run ledger (keyed by the reference data, the
     simulator, the objective and the options), so a resumed run does not redo it.
@@ -112,7 +116,7 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
         paths = model.sample(b.size, rng)
         fn = ObjectiveFunction(problem.objective, y_mes0[b], problem.freqs, paths, weights=problem.weights,
                                channels=problem.channels)
-        seg_b = [segments[i] for i in b]
+        task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
         cache: dict[bytes, float] = {}
 
         def neg_j(u: np.ndarray) -> float:
@@ -122,8 +126,9 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
             if k not in cache:
                 w = problem.w_of(problem.from_unit(u))
                 try:
-                    y, _ = simulate_spectra(problem.simulator, w, seg_b, config.spectra)
-                    cache[k] = -float(fn.evaluate(y)[0])
+                    cache[k] = -float(fn.evaluate(run_one(executor, task, w))[0])
+                except ClusterError:
+                    raise
                 except SuspidError:  # an unstable point is simply a bad one for the search
                     cache[k] = np.inf
                 n_sims += 1

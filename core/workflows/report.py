@@ -15,8 +15,10 @@ import numpy as np
 from suspid.config import figure_channel
 from suspid.infra.files import pyplot, save_figure, write_text
 from suspid.infra.seeds import rng as named_rng
+from suspid.interfaces import Executor
 from suspid.optimize.ego import EGOResult
-from suspid.workflows.problem import Problem, simulate_spectra
+from suspid.workflows.problem import Problem
+from suspid.workflows.tasks import SpectraTask, run_one
 
 
 def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_sim: np.ndarray, y_mod: np.ndarray,
@@ -173,8 +175,12 @@ def model_error_section(result: dict[str, Any]) -> str:
 
 
 def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
-                 ei_history: list[float]) -> Path:
-    """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot."""
+                 ei_history: list[float], executor: Executor | None = None) -> Path:
+    """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot.
+
+    :param executor: runs Figure 1's simulation at w0 when the run has no reference date
+        (entered; in this process without one).
+    """
     config = problem.config
     names = problem.names
     k = figure_channel(config, problem.channels)
@@ -183,7 +189,7 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
         date = "reference date (where B is identified)"
     else:
         y_mes0 = problem.y_mes
-        y_sim0, _ = simulate_spectra(problem.simulator, {}, problem.segments, config.spectra)
+        y_sim0 = run_one(executor, SpectraTask.of(problem.simulator, problem.segments, config.spectra), {})
         date = "measurement date"
     y_mod0 = y_sim0 + problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1"))
     figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, y_mes0, y_sim0, y_mod0, k, problem.channels[k])

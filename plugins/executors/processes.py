@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import time
 from collections import Counter, deque
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -49,7 +50,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from suspid import hookimpl
 from suspid.errors import PluginError
-from suspid.interfaces import Executor
+from suspid.interfaces import Executor, TaskHandle
 
 from ._common import WorkerLostError, executor_options
 
@@ -212,6 +213,54 @@ class ProcessExecutor(Executor):
         finally:
             for fut in running:
                 fut.cancel()
+
+
+    def submit(self, fn: Callable[[Any], Any], item: Any) -> TaskHandle:
+        """Start ``fn(item)`` in the pool; see :meth:`suspid.interfaces.Executor.submit`.
+
+        :raises RuntimeError: outside a ``with`` block.
+        """
+        if self.pool_ is None:
+            raise RuntimeError("processes executor: submit needs the executor entered (`with executor:`)")
+        return TaskHandle(fn, item, future=self._submit(fn, item))
+
+    def wait_first(self, handles: Sequence[TaskHandle], timeout: float | None = None
+                   ) -> list[tuple[TaskHandle, Any]]:
+        """The finished ones of ``handles`` (see :meth:`suspid.interfaces.Executor.wait_first`).
+
+        A task lost to a dead worker is submitted again to a new pool, up to
+        ``max_retries`` times, then returned as a ``WorkerLostError`` (no
+        search for the culprit among the tasks in flight, unlike ``map_unordered``).
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            ready = [(h, h.outcome) for h in handles if h.done]
+            running = {h.future: h for h in handles if not h.done}
+            if ready or not running:
+                return ready
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            done, _ = wait(running, timeout=left, return_when=FIRST_COMPLETED)
+            if not done:
+                return []
+            if any(isinstance(f.exception(), BrokenProcessPool) for f in done):
+                done, _ = wait(running)  # a broken pool fails every task in flight
+                self._resubmit_lost([running[f] for f in done if isinstance(f.exception(), BrokenProcessPool)])
+            for fut in done:
+                h = running[fut]
+                if not h.done and h.future is fut:  # neither submitted again nor given up
+                    h.done, h.outcome = True, fut.exception() or fut.result()
+
+    def _resubmit_lost(self, lost: list[TaskHandle]) -> None:
+        """Tasks whose worker died: into a new pool, or given up after ``max_retries``."""
+        self._rebuild()
+        for h in lost:
+            h.lost += 1
+            if h.lost <= self.opts_.max_retries:
+                h.future = self.pool_.submit(h.fn, h.item)
+            else:
+                h.done, h.outcome = True, WorkerLostError(
+                    f"processes executor: a task was lost {h.lost} times because the worker process running "
+                    f"it died (gave up after max_retries={self.opts_.max_retries})")
 
 
 def _terminate_workers(pool: ProcessPoolExecutor) -> None:

@@ -17,7 +17,7 @@ from suspid.config import Config, validate_options
 from suspid.errors import ConfigError, SimulatorError
 from suspid.infra.files import canonical
 from suspid.sections import DiagnoseOptions
-from suspid.workflows.problem import simulate_spectra
+from suspid.workflows.tasks import simulate_spectra
 
 from .cells import CellGrid
 from .locate import DiscrepancyMap

@@ -17,7 +17,8 @@ from suspid.infra.files import canonical, write_text
 from suspid.infra.lock import open_run_dir
 from suspid.sections import OutputSection
 from suspid.workflows.identify import run
-from suspid.workflows.problem import build_problem, simulate_spectra
+from suspid.workflows.problem import build_problem
+from suspid.workflows.tasks import simulate_spectra
 
 from .fit import Candidate
 from .locate import DiscrepancyMap
