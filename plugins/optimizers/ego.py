@@ -22,6 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from suspid.errors import SimulatorError, SuspidError
+from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Optimizer, OptimizerResult
 from suspid.optimize.design import check_bounds, from_unit, make_design
 from suspid.optimize.ego import EGO
@@ -56,7 +57,8 @@ class EGOOptimizer(Optimizer):
     @property
     def done(self) -> bool:
         self._start()
-        return self.ego_ is not None and not self._out and self.ego_.done
+        with single_blas_thread():  # EGO proposes its next point to know whether it stops
+            return self.ego_ is not None and not self._out and self.ego_.done
 
     def ask(self, n: int = 1, pending: np.ndarray | None = None) -> np.ndarray:
         """The design first (all of it), then the EGO points.
@@ -64,6 +66,10 @@ class EGOOptimizer(Optimizer):
         :param pending: ``(p, q)`` SI points being evaluated (asked before, not told yet):
             one more point is proposed beside them (:meth:`suspid.optimize.ego.EGO.ask_beside`).
         """
+        with single_blas_thread():  # the fits and the EI search work on small matrices
+            return self._ask(pending)
+
+    def _ask(self, pending: np.ndarray | None) -> np.ndarray:
         self._start()
         q = self.bounds_.shape[0]
         room = self.budget - len(self.y_) - len(self._out)
@@ -89,6 +95,10 @@ class EGOOptimizer(Optimizer):
             self._out.pop(i)
         self.X_.extend(X)
         self.y_.extend(values)
+        with single_blas_thread():
+            self._learn(X, values)
+
+    def _learn(self, X: np.ndarray, values: list[float]) -> None:
         if self.ego_ is None:
             for x, v in zip(X, values):
                 self.y0_[int(np.argmin(np.max(np.abs(self.X0_ - x), axis=1)))] = v
@@ -103,7 +113,8 @@ class EGOOptimizer(Optimizer):
         self._start()
         if self.ego_ is None:
             raise SuspidError("ego: no point has a value yet")
-        res = self.ego_.result()
+        with single_blas_thread():  # the final refit
+            res = self.ego_.result()
         return OptimizerResult(x_opt=res.x_opt, y_opt=res.y_opt, X=np.array(self.X_), y=np.array(self.y_),
                                stop_reason=res.stop_reason, n_initial=res.n_initial, details=res)
 

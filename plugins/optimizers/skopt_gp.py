@@ -20,6 +20,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
+from suspid.infra.threads import single_blas_thread
 from suspid.optimize.budgeted import BudgetedOptimizer
 from suspid.options import Section
 
@@ -59,11 +60,11 @@ class SkoptGP(BudgetedOptimizer):
     def _propose(self, n: int) -> np.ndarray:
         if not self.U_:
             return self._design
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), single_blas_thread():
             warnings.simplefilter("ignore")  # skopt warns when it proposes a point twice
             return np.array(self.opt_.ask(), dtype=float)[None, :]
 
     def _learn(self, U: np.ndarray, J: np.ndarray) -> None:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), single_blas_thread():  # small matrices: BLAS threads only contend
             warnings.simplefilter("ignore")
             self.opt_.tell([list(map(float, u)) for u in U], [float(-v) for v in J], fit=True)
