@@ -60,9 +60,9 @@ def test_ego_ask_with_pending_points_proposes_elsewhere_and_takes_them_in_any_or
     assert a.shape == b.shape == (1, 2)
     span = f.bounds[:, 1] - f.bounds[:, 0]
     assert np.max(np.abs(a - b) / span) > 1e-3  # the believer moved the second point away from the first
-    again = opt.ask(pending=a)  # the same state and the same pending point: the same proposal
-    assert len(again) == 1
-    opt.tell(again, [-float(f.func(again[0]))])
+    c = opt.ask(pending=np.vstack([a, b]))  # a third worker
+    assert c.shape == (1, 2) and min(np.max(np.abs(c - p) / span) for p in (a[0], b[0])) > 1e-3
+    opt.tell(c, [-float(f.func(c[0]))])
     opt.tell(b, [-float(f.func(b[0]))])
     opt.tell(a, [-float(f.func(a[0]))])
     n = 9
