@@ -26,6 +26,27 @@ def test_every_built_in_passes_the_conformance_check(name):
     check_optimizer(registry.get("optimizer", name))
 
 
+def test_the_example_optimizer_of_the_docs_passes_the_check():
+    import re
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "methods.md").read_text(encoding="utf-8")
+    example = next(b for b in re.findall(r"```python\n(.*?)```", text, re.S) if "class CoordinateSearch" in b)
+    namespace: dict = {}
+    exec(compile(example, "docs/methods.md", "exec"), namespace)
+    check_optimizer(namespace["CoordinateSearch"])
+
+
+def test_skopt_gp_without_scikit_optimize_is_one_line(monkeypatch):
+    import suspid
+    from suspid.errors import ConfigError
+    from suspid.plugins.optimizers import skopt_gp
+
+    monkeypatch.setattr(skopt_gp, "skopt", None)
+    with pytest.raises(ConfigError, match=r"optimizer.options.*needs scikit-optimize: pip install") as err:
+        suspid.load_config({"optimizer": {"plugin": "skopt-gp"}})
+    assert "\n" not in str(err.value)
+
+
 def _maximise(name: str, f, budget: int, seed: int = 0):
     opt = registry.get("optimizer", name)(f.bounds, budget=budget, seed=seed,
                                           design=DesignOptions(n_initial=6, seed=seed))
