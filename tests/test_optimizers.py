@@ -218,3 +218,19 @@ def test_sigkill_during_cma_es_then_resume_gives_the_same_result(tmp_path):
     clean = json.loads((tmp_path / "clean" / "result.json").read_text())
     for key in ("w_opt", "J_max", "n_simulator_calls", "interval", "identifiable", "errors_percent", "anytime"):
         assert resumed[key] == clean[key], key
+
+
+def test_the_methods_study_config_is_valid_with_equal_budgets():
+    from suspid.config import load_config, optimizer_budget
+    from suspid.workflows.study import study_variants
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "methods.yaml"
+    config = load_config(path)
+    variants = study_variants(path, [], config)
+    assert len(variants) == 6 * 5
+    plugins = {cfg.optimizer.plugin for _, cfg in variants}
+    assert plugins == {"ego", "random", "nelder-mead", "cma-es", "skopt-gp"}
+    assert {optimizer_budget(cfg, 7) for _, cfg in variants} == {300}
+    refined = [cfg for label, cfg in variants if label.startswith("ego-refine")]
+    assert all(cfg.ego.refine.enabled and cfg.design.n_initial + cfg.ego.max_iter + cfg.ego.refine.max_iter == 300
+               for cfg in refined)
