@@ -306,8 +306,10 @@ class Optimizer(ABC):
             opt.tell(X, values)           # (k,) J there; None or NaN where the evaluation failed
         res = opt.result()                # an OptimizerResult
 
-    Contract: every point :meth:`ask` returns lies in the box; it is told (all of
-    them, in any grouping) before the next :meth:`ask`; no more than ``budget``
+    Contract: every point :meth:`ask` returns lies in the box; the points of one
+    :meth:`ask` are told together, in that order, before the next :meth:`ask`
+    (an optimiser may accept more, as ``ego`` takes them one by one in any order;
+    asking again before telling returns the same points); no more than ``budget``
     points are asked in all (initial ones included); the same seed and the same
     values give the same points. ``ask(n)`` is a hint: an optimiser may return
     fewer (one at a time) or more (a whole design) points than ``n``. A failed
