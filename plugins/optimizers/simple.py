@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from suspid.optimize.budgeted import BudgetedOptimizer
-from suspid.optimize.design import DesignOptions
+from suspid.optimize.design import DesignOptions, make_design
 from suspid.options import Section
 
 
@@ -35,7 +35,6 @@ class DesignOnly(BudgetedOptimizer):
 
     def _propose(self, n: int) -> np.ndarray:
         base = self.design if isinstance(self.design, DesignOptions) else DesignOptions(seed=int(self.seed) % 2**63)
-        self.design = base.model_copy(update={"n_initial": self.budget})
-        U = self.initial_design()
+        U = make_design(base.model_copy(update={"n_initial": self.budget}), self.q_)
         self.n_initial = len(U)
         return U
