@@ -80,7 +80,8 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt, stric
     cfg = checked.config
     data = f", {checked.n_measured_segments} measured segments" if checked.n_measured_segments else ""
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "
-                  f"surrogate {cfg.surrogate.plugin}, executor {cfg.executor.plugin}{data})")
+                  f"surrogate {cfg.surrogate.plugin}, optimizer {cfg.optimizer.plugin}, "
+                  f"executor {cfg.executor.plugin}{data})")
 
 
 @app.command()

@@ -34,11 +34,11 @@ from suspid.infra.seeds import seed_for
 from suspid.method.identifiability import IdentifiabilityOptions
 from suspid.method.objective import validate_weights
 from suspid.method.spectra import SpectraOptions
-from suspid.optimize.design import DesignOptions
+from suspid.optimize.design import DesignOptions, default_n_initial
 from suspid.optimize.ego import EGOOptions
 from suspid.options import Section, against, key_error, raise_validation_error
 from suspid.sections import (DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
-                             ObjectiveSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
+                             ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
 
 
@@ -63,6 +63,7 @@ class Config(Section):
     surrogate: SurrogateSection = Field(default_factory=SurrogateSection)
     design: DesignOptions = Field(default_factory=DesignOptions)
     ego: EGOOptions = Field(default_factory=EGOOptions)
+    optimizer: OptimizerSection = Field(default_factory=OptimizerSection)
     executor: ExecutorSection = Field(default_factory=ExecutorSection)
     identifiability: IdentifiabilityOptions = Field(default_factory=IdentifiabilityOptions)
     study: StudyOptions | None = None
@@ -319,6 +320,7 @@ def check_config_plugins(config: Config) -> None:
         section.options = validate_options(cls, section.options, file=config.file, key=f"{kind}.options",
                                            lines=config._lines, base_dir=base_dir,
                                            seed=seed_for(config.seed, kind))
+    check_optimizer_section(config, base_dir)
     sim_cls = type(build_simulator(config))
     for date in ("reference", "measurement"):  # the simulator of a date of the numerical experiment
         extra = getattr(config.data, date).simulator_options
@@ -334,6 +336,37 @@ def check_config_plugins(config: Config) -> None:
         if name not in registry.names("effect"):
             raise config.error(f"unknown effect '{name}'; effects: {', '.join(registry.names('effect'))}",
                                f"diagnose.effects.{i}")
+
+
+def check_optimizer_section(config: Config, base_dir: Path | None) -> None:
+    """Resolve ``optimizer.plugin`` and validate its options (seeded from the run seed).
+
+    An optimiser with an ``options_section`` (the ``ego`` plugin: ``ego:``) takes that
+    section as its options when ``optimizer.options`` is empty; options given there are
+    validated over it and written back, so that the section and the options agree.
+    """
+    section = config.optimizer
+    cls = plugin_class("optimizer", section, "optimizer", config)
+    home = getattr(cls, "options_section", None)
+    if home and isinstance(getattr(config, home, None), BaseModel):
+        current = getattr(config, home)
+        options = current.model_dump() | dict(section.options)
+        validated = validate_options(cls, options, file=config.file, key="optimizer.options",
+                                     lines=config._lines, base_dir=base_dir)
+        setattr(config, home, type(current).model_validate(validated))
+        section.options = validated
+        return
+    section.options = validate_options(cls, section.options, file=config.file, key="optimizer.options",
+                                       lines=config._lines, base_dir=base_dir)
+
+
+def optimizer_budget(config: Config, q: int) -> int:
+    """``optimizer.budget``, or what the paper's loop may spend: m0 + m1 (+ the refinement's points)."""
+    if config.optimizer.budget is not None:
+        return config.optimizer.budget
+    m0 = config.design.n_initial if config.design.n_initial is not None else default_n_initial(q)
+    ego = config.ego
+    return m0 + ego.max_iter + (ego.refine.max_iter if ego.refine.enabled else 0)
 
 
 def channel_weights(config: Config, channels: Sequence[str]) -> np.ndarray:

@@ -63,6 +63,19 @@ def suspid_register_surrogates(register: Register) -> None:
 
 
 @hookspec
+def suspid_register_optimizers(register: Register) -> None:
+    """Register optimisers: who chooses the points where J is evaluated (the paper's EGO and others).
+
+    Called once, when the registry is first used, after every plugin is loaded.
+
+    :param register: call ``register(cls)`` for each optimiser class. ``cls``
+        subclasses :class:`suspid.interfaces.Optimizer` (an ask/tell object) and
+        has a unique ``name``; configs select it as ``optimizer: {plugin: <name>}``.
+    :returns: nothing; the return value is ignored.
+    """
+
+
+@hookspec
 def suspid_register_executors(register: Register) -> None:
     """Register executors: where the simulator calls of a run are carried out.
 

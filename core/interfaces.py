@@ -1,4 +1,4 @@
-"""Small interfaces for the three plugin kinds, with their shapes and units.
+"""Small interfaces for the plugin kinds, with their shapes and units.
 
 Conventions (those of scikit-learn's estimators): constructors store their options and
 do no work; methods work; fitted state ends in ``_``. A plugin class may
@@ -326,6 +326,102 @@ class TaskHandle:
                  future: Any = None) -> None:
         self.fn, self.item, self.done, self.outcome, self.future = fn, item, done, outcome, future
         self.lost = 0  # times its worker died under it (executors that retry)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Optimisers: who chooses the parameter vectors w at which J is evaluated
+# ---------------------------------------------------------------------------------------------------
+@dataclass
+class OptimizerResult:
+    """What an :class:`Optimizer` found.
+
+    :ivar x_opt: ``(q,)`` the best evaluated point, SI units.
+    :ivar y_opt: J there.
+    :ivar X: ``(n_evaluations, q)`` every point told, in evaluation order, SI units.
+    :ivar y: ``(n_evaluations,)`` J at those points, NaN where the evaluation failed.
+    :ivar stop_reason: why it stopped (``"budget"``, or the optimiser's own rule, e.g. ``"ei_below_tol"``).
+    :ivar n_initial: points of an initial design among the first of ``X`` (0 without one).
+    :ivar details: the optimiser's own result object, when it has one (the ``ego`` plugin:
+        its :class:`suspid.optimize.ego.EGOResult`, with the fitted surrogate and the iteration records).
+    """
+
+    x_opt: np.ndarray
+    y_opt: float
+    X: np.ndarray
+    y: np.ndarray
+    stop_reason: str
+    n_initial: int = 0
+    details: Any = None
+
+    @property
+    def n_evaluations(self) -> int:
+        """Evaluations of J told (simulator calls), failed ones included."""
+        return int(self.y.shape[0])
+
+
+class Optimizer(ABC):
+    """A maximiser of J over the parameter box, driven by **ask/tell** (the model is :class:`suspid.optimize.ego.EGO`)::
+
+        opt = cls(bounds, budget=300, seed=7, **options)
+        while not opt.done:
+            X = opt.ask(n=n_workers)      # (k, q) SI points, k >= 1
+            opt.tell(X, values)           # (k,) J there; None or NaN where the evaluation failed
+        res = opt.result()                # an OptimizerResult
+
+    Contract: every point :meth:`ask` returns lies in the box; the points of one
+    :meth:`ask` are told together, in that order, before the next :meth:`ask`
+    (an optimiser may accept more, as ``ego`` takes them one by one in any order;
+    asking again before telling returns the same points); no more than ``budget``
+    points are asked in all (initial ones included); the same seed and the same
+    values give the same points. ``ask(n)`` is a hint: an optimiser may return
+    fewer (one at a time) or more (a whole design) points than ``n``. A failed
+    point counts against the budget; model-based optimisers give it the worst J
+    told so far. Subclasses set ``name`` and may set ``Options`` (a pydantic model
+    of ``optimizer.options``). :func:`suspid.testing.check_optimizer` checks the contract.
+
+    :param bounds: ``(q, 2)`` lower and upper bounds, SI units.
+    :param budget: the largest number of evaluations of J (simulator calls), initial design included.
+    :param seed: seeds every random draw (the config's ``optimizer`` stream, :func:`suspid.infra.seeds.seed_for`).
+    :param design: the config's ``design:`` section (:class:`suspid.optimize.design.DesignOptions`),
+        for optimisers that start from a space-filling design; None: its defaults.
+    :param surrogate: the config's surrogate instance, for model-based optimisers (may be ignored).
+    :param options: the validated ``optimizer.options``.
+    """
+
+    name: ClassVar[str]
+    Options: ClassVar[type | None] = None
+    #: A top-level config section holding this optimiser's options when ``optimizer.options`` is
+    #: empty (the ``ego`` plugin: the ``ego:`` section, which configs had before optimisers were plugins).
+    options_section: ClassVar[str | None] = None
+    #: Optional sink the driver sets: ``on_record(run, index, record)`` stores one JSON-able row
+    #: of the optimiser's own log (e.g. EI and hyperparameters per EGO iteration) in the run ledger.
+    on_record: Callable[[str, int, dict], None] | None = None
+
+    def __init__(self, bounds: Any, *, budget: int, seed: int = 0, design: Any = None, surrogate: Any = None,
+                 **options: Any) -> None:
+        self.bounds = bounds
+        self.budget = budget
+        self.seed = seed
+        self.design = design
+        self.surrogate = surrogate
+        self.options = options
+
+    @abstractmethod
+    def ask(self, n: int = 1) -> np.ndarray:
+        """The next points to evaluate, ``(k, q)`` SI units, k >= 1 (``n``: how many workers wait)."""
+
+    @abstractmethod
+    def tell(self, X: np.ndarray, values: Sequence[float | None]) -> None:
+        """J at points :meth:`ask` returned: ``X (k, q)`` SI, ``values (k,)``, None or NaN where it failed."""
+
+    @property
+    @abstractmethod
+    def done(self) -> bool:
+        """True when the optimiser asks nothing more (budget spent or its own stopping rule)."""
+
+    @abstractmethod
+    def result(self) -> OptimizerResult:
+        """The :class:`OptimizerResult` (after at least one value was told)."""
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -36,6 +36,7 @@ KINDS: dict[str, str] = {
     "simulator": "suspid_register_simulators",
     "objective": "suspid_register_objectives",
     "surrogate": "suspid_register_surrogates",
+    "optimizer": "suspid_register_optimizers",
     "executor": "suspid_register_executors",
     "effect": "suspid_register_effects",
     "reader": "suspid_register_readers",

@@ -49,6 +49,18 @@ class SurrogateSection(PluginSection):
     plugin: str = "gpy-kriging"
 
 
+class OptimizerSection(PluginSection):
+    """``optimizer:``: who chooses the points where J is evaluated (:class:`suspid.interfaces.Optimizer`).
+
+    The default ``ego`` is the paper's loop; its options are the ``ego:`` section
+    unless ``optimizer.options`` gives them.
+    """
+
+    plugin: str = "ego"
+    budget: int | None = Field(default=None, ge=1, description="evaluations of J (simulator calls), initial "
+                               "design included; default: design.n_initial + ego.max_iter (+ ego.refine.max_iter)")
+
+
 class ExecutorSection(PluginSection):
     plugin: str = "serial"
 

@@ -30,6 +30,11 @@ from suspid.interfaces import (IRREGULARITY_CHANNELS, Executor, Objective, Param
 def _build(cls: type, base: type, options: Mapping[str, Any] | None) -> Any:
     """An instance of plugin class ``cls`` (a subclass of ``base``) from ``options`` validated by its
     ``Options`` model, which must reject unknown keys (one validation pass: a typo is an error)."""
+    return cls(**_validated(cls, base, options))
+
+
+def _validated(cls: type, base: type, options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """``options`` validated by ``cls.Options`` (see :func:`_build`)."""
     assert isinstance(cls, type) and issubclass(cls, base), f"{cls!r} must subclass {base.__name__}"
     name = getattr(cls, "name", None)
     assert isinstance(name, str) and name, f"{cls.__name__}.name must be a non-empty string"
@@ -45,7 +50,7 @@ def _build(cls: type, base: type, options: Mapping[str, Any] | None) -> Any:
             raise AssertionError(f"{cls.__name__}.Options must reject unknown keys (extra='forbid')")
         validated = model.model_validate(options)
         options = {k: getattr(validated, k) for k in model.model_fields}
-    return cls(**options)
+    return options
 
 
 def sample_segments(n: int = 2, length_m: float = 600.0, speed_mps: float = 50.0, dx_m: float = 0.25,
@@ -173,6 +178,76 @@ def check_surrogate(cls: type, options: Mapping[str, Any] | None = None) -> None
     _, v_in = model.predict(X[:1])
     _, v_out = model.predict(np.array([[3.0, 3.0]]))
     assert v_in[0] < v_out[0], "variance at a training point must be below the variance far from the data"
+
+
+# -- optimisers ------------------------------------------------------------------------------------
+OPTIMIZER_BOX = np.array([[-2.0, 3.0], [10.0, 20.0]])
+"""``(2, 2)`` the box of :func:`check_optimizer`, SI-like bounds that are not the unit square."""
+
+
+def _run_optimizer(cls: type, options: dict[str, Any], budget: int, seed: int,
+                   fail_every: int) -> tuple[list[np.ndarray], Any]:
+    """Drive one optimiser on a concave quadratic (maximiser (1, 16)) whose every ``fail_every``-th
+    evaluation fails; returns the points in the order told and the result."""
+    from suspid.optimize.design import DesignOptions  # the conformance kit only
+
+    opt = cls(OPTIMIZER_BOX, budget=budget, seed=seed, design=DesignOptions(n_initial=6, seed=seed), **options)
+    told: list[np.ndarray] = []
+    for _ in range(10 * budget):
+        if opt.done:
+            break
+        X = np.asarray(opt.ask(n=2), dtype=float)
+        assert X.ndim == 2 and X.shape[1] == 2 and X.shape[0] >= 1, \
+            f"ask() must return (k >= 1, q) points while not done, got shape {X.shape}"
+        assert np.all(X >= OPTIMIZER_BOX[:, 0] - 1e-9) and np.all(X <= OPTIMIZER_BOX[:, 1] + 1e-9), \
+            f"ask() returned points outside the bounds: {X.tolist()}"
+        assert len(told) + len(X) <= budget, f"asked {len(told) + len(X)} points for a budget of {budget}"
+        values = [None if (len(told) + i + 1) % fail_every == 0 else
+                  float(-((x[0] - 1.0) / 5.0) ** 2 - ((x[1] - 16.0) / 10.0) ** 2) for i, x in enumerate(X)]
+        opt.tell(X, values)
+        told.extend(X)
+    else:
+        raise AssertionError(f"not done after {10 * budget} ask/tell rounds")
+    return told, opt.result()
+
+
+def check_optimizer(cls: type, options: Mapping[str, Any] | None = None, budget: int = 24) -> None:
+    """Check an optimiser class against :class:`suspid.interfaces.Optimizer`.
+
+    Checks, on a 2-d concave quadratic over a box that is not the unit square,
+    with every 5th evaluation failing (told as None): ``ask`` returns ``(k >= 1, q)``
+    points inside the bounds while not ``done``; no more than ``budget`` points
+    in all; a point not asked is refused by ``tell``; ``result()`` holds every
+    point told, in order, with NaN where it failed, and its best point; it
+    improves on the first point told; the same seed gives the same points.
+    """
+    from suspid.interfaces import Optimizer  # the conformance kit only
+
+    opts = _validated(cls, Optimizer, options)
+    opts.pop("seed", None)  # an option ``seed`` is the constructor's seed, which the check sets
+    told, res = _run_optimizer(cls, opts, budget, seed=3, fail_every=5)
+    assert told, "the optimiser asked no point"
+    X, y = np.asarray(res.X), np.asarray(res.y, dtype=float)
+    assert X.shape == (len(told), 2) and y.shape == (len(told),), \
+        f"result() must hold every point told: X {X.shape}, y {y.shape} for {len(told)} points"
+    assert np.allclose(X, np.array(told), rtol=1e-12, atol=0), "result().X must be the points in the order told"
+    assert res.n_evaluations == len(told) <= budget, f"n_evaluations {res.n_evaluations} for {len(told)} told"
+    assert np.all(np.isnan(y[4::5])), "result().y must be NaN where the evaluation failed"
+    assert res.y_opt == np.nanmax(y) and np.any(np.all(np.isclose(X, res.x_opt), axis=1)), \
+        "result() must give the best evaluated point and its J"
+    assert res.y_opt > y[0] or y[0] == np.nanmax(y), "the optimiser never improved on its first point"
+    assert isinstance(res.stop_reason, str) and res.stop_reason != "running", "stop_reason must say why it stopped"
+    again, _ = _run_optimizer(cls, opts, budget, seed=3, fail_every=5)
+    assert len(again) == len(told) and np.array_equal(np.array(again), np.array(told)), \
+        "the same seed must give the same points"
+    opt = cls(OPTIMIZER_BOX, budget=budget, seed=3, **opts)
+    X = np.asarray(opt.ask(), dtype=float)
+    try:
+        opt.tell(X + 0.123, [0.0] * len(X))
+    except Exception:
+        pass
+    else:
+        raise AssertionError("tell() must refuse points that ask() did not return")
 
 
 # -- executors: module-level task functions, so that every executor can pickle them by reference --

@@ -101,3 +101,15 @@ def test_a_plugin_bug_names_the_plugin_and_exits_1(tmp_path, flaky, capsys):
     err = capsys.readouterr().err
     assert exit_.value.code == 1 and len(err.strip().splitlines()) == 1, err
     assert "buggy-train" in err and "ZeroDivisionError" in err and "Traceback" not in err
+
+
+def test_another_optimizer_tolerates_failed_points_and_counts_them_against_the_budget(tmp_path, flaky):
+    """cma-es through the same failure handling: failed points listed, never w_opt, the budget spent."""
+    cfg = _config(tmp_path) | {"optimizer": {"plugin": "cma-es", "budget": 30}}
+    r = suspid.identify(cfg)
+    failed = r.result["failed_points"]
+    assert failed and all(_fails(p["w"]) and "solver diverged" in p["error"] for p in failed)
+    assert not _fails(r.w_opt)
+    J = r.result["anytime"]["J"]
+    assert len(J) == 30 and sum(v is None for v in J) == len(failed)
+    assert r.n_simulator_calls == 30 - len(failed)

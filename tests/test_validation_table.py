@@ -32,6 +32,7 @@ BASE = {
     "design": {"n_initial": 6},
     "ego": {"max_iter": 2, "refine": {"enabled": False}},
     "executor": {"plugin": "serial", "options": {}},
+    "optimizer": {"plugin": "ego", "options": {}},
     "identifiability": {},
     "output": {},
     "diagnose": {},
@@ -59,6 +60,10 @@ SECTIONS = [
     (("design",), "n_initial", "many", None),
     (("ego",), "max_iter", "many", None),
     (("ego", "refine"), "enabled", "sometimes", None),
+    (("optimizer",), "budget", "many", None),
+    (("optimizer", "options"), "sigma0", "big", "cma-es"),
+    (("optimizer", "options"), "simplex", "wide", "nelder-mead"),
+    (("optimizer", "options"), "tol", "small", "ego"),
     (("executor", "options"), "workers", "many", "processes"),
     (("executor", "options"), "n_workers", "many", "dask"),
     (("identifiability",), "n_redraws", "many", None),
@@ -72,6 +77,8 @@ PLUGIN_OPTIONS = [  # every built-in plugin's options: (section, plugin)
     ("objective", "likelihood"), ("objective", "overlap"), ("objective", "mean-spectrum"),
     ("objective", "wasserstein"), ("surrogate", "gpy-kriging"), ("surrogate", "sklearn-gp"),
     ("executor", "serial"), ("executor", "processes"), ("executor", "dask"), ("simulator", "exudyn-train"),
+    ("optimizer", "ego"), ("optimizer", "random"), ("optimizer", "lhs-only"), ("optimizer", "nelder-mead"),
+    ("optimizer", "cma-es"), ("optimizer", "skopt-gp"),
 ]
 
 LINE = re.compile(r"^error: (?P<file>\S+\.yaml):(?P<line>\d+), key '(?P<key>[^']+)': (?P<what>.+)$")
@@ -140,6 +147,7 @@ def test_the_good_base_config_is_valid(tmp_path, capsys):
 
 @pytest.mark.parametrize("mutate, key, words", [
     (lambda c: c["executor"].update(plugin="dsk"), "executor.plugin", "not available"),
+    (lambda c: c["optimizer"].update(plugin="simplex"), "optimizer.plugin", "not available"),
     (lambda c: c["output"].update(figure_channel="roof"), "output.figure_channel", "unknown channel 'roof'"),
     (lambda c: c["objective"].update(weights=[1.0, 2.0]), "objective.weights", "weights"),
     (lambda c: c["diagnose"].update(effects=["bending"]), "diagnose.effects.0", "unknown effect 'bending'"),

@@ -240,6 +240,42 @@ class EGO:
         self._flush()
         return self.state_.records[n_before:]
 
+    def ask_beside(self, pending: np.ndarray) -> np.ndarray:
+        """One more EGO point while the points ``pending (p, q)`` SI are being evaluated (asynchronous drivers).
+
+        The kriging believer (:class:`suspid.optimize.loop.EIProposer`): the pending
+        points enter the fit with the surrogate's mean as their J, so EI looks
+        elsewhere. The point joins the points waiting for a value (tell it like
+        any other) and counts as one EGO iteration. Only in the ``"ego"`` phase;
+        elsewhere, and once m1 points are asked, :meth:`ask` answers instead.
+        EI candidates of the p-th pending point after n evaluations come from
+        ``default_rng([seed, 3, n, p])``.
+
+        :returns: ``(1, q)`` SI, or what :meth:`ask` returns when no point can be added.
+        """
+        self._start()
+        if self.phase != "ego" or self._iteration >= self.options_.max_iter:
+            return self.ask()
+        st, model, opts = self.state_, self.surrogate_, self.options_
+        U_p = to_unit(np.atleast_2d(np.asarray(pending, dtype=float)), self.bounds_)
+        U, y = self.proposer_._data(st)
+        t0 = time.perf_counter()
+        model.fit(U, y)
+        U_b, y_b = np.vstack([U, U_p]), np.concatenate([y, model.predict(U_p)[0]])
+        model.fit(U_b, y_b)
+        self.proposer_.fitted_on = 0  # the next regular step refits on the real data
+        t_fit = time.perf_counter() - t0
+        j_max = float(st.y_array.max())
+        rng = np.random.default_rng([opts.seed, 3, st.n_points, len(U_p)])
+        t0 = time.perf_counter()
+        u, log_ei = self.proposer_._search(model, U_b, y_b, st.y_array, j_max, rng)
+        self._iteration += 1
+        self._pending.append(_Slot(u=u, phase="ego", iteration=self._iteration, log_ei=log_ei, j_max=j_max,
+                                   epsilon=self.ei_rule_.epsilon(st.y_array),
+                                   hyperparameters=dict(model.hyperparameters_ or {}), fit_seconds=t_fit,
+                                   search_seconds=time.perf_counter() - t0))
+        return from_unit(u[None, :], self.bounds_)
+
     def stop(self, reason: str = "stopped") -> None:
         """End the run now (points still waiting for a value are dropped)."""
         self._start()

@@ -2,17 +2,20 @@
 
 1. the problem: measured spectra, noise model B and objective
    (:func:`suspid.workflows.problem.build_problem`);
-2. J on the maximin design of m0 points, through the run's executor;
-3. EGO on the Kriging metamodel (eq. 9), through the ask/tell loop of
-   :mod:`suspid.optimize.ego`;
+2. the optimiser the config names (``optimizer:``, default ``ego``: the paper's
+   maximin design of m0 points, then EGO on the Kriging metamodel, eq. 9) driven
+   through ask/tell by :func:`drive`, every J through the run's executor;
+3. for optimisers without a metamodel of their own, the configured surrogate
+   fitted on every evaluated point (the analysis reads it);
 4. identifiability, intervals (:mod:`suspid.workflows.analysis`),
    ``result.json`` and ``report.md`` (:mod:`suspid.workflows.report`).
 
 Every evaluation of J is committed to the run ledger the moment it finishes.
 The chain is deterministic for a given config, so a run that was interrupted
-is resumed by running it again: the design and the EGO steps are retraced and
-every finished evaluation is read from the ledger instead of being simulated
-again.
+is resumed by running it again: the optimiser's steps are retraced and every
+finished evaluation is read from the ledger instead of being simulated again.
+The ledger's ``evaluations`` rows (and ``result.json``'s ``anytime``) keep J and
+w of every evaluation in order: the anytime history of the run.
 """
 
 from __future__ import annotations
@@ -20,7 +23,6 @@ from __future__ import annotations
 import copy
 import json
 import time
-from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -29,15 +31,16 @@ import numpy as np
 import yaml
 
 from suspid import registry
-from suspid.config import Config
+from suspid.config import Config, optimizer_budget
 from suspid.errors import SimulatorError
 from suspid.infra.files import write_json, write_text
-from suspid.infra.ledger import Evaluation, Ledger
+from suspid.infra.ledger import Ledger
+from suspid.infra.seeds import seed_for
 from suspid.infra.lock import open_run_dir
 from suspid.infra.threads import single_blas_thread
-from suspid.interfaces import Executor
-from suspid.optimize.design import from_unit, make_design
-from suspid.optimize.ego import EGOResult, run_ego
+from suspid.interfaces import Executor, OptimizerResult
+from suspid.optimize.design import min_distance
+from suspid.optimize.ego import EGOResult
 from suspid.workflows.analysis import analyse
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.problem import Problem, build_problem
@@ -185,6 +188,20 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
         return _run(config, run_dir, ledger, executor, progress=progress, log=log, retry_failed=retry_failed)
 
 
+def optimizer_for(config: Config, problem: Problem):
+    """The configured optimiser (:class:`suspid.interfaces.Optimizer`) over the problem's box.
+
+    Its options were validated when the config was loaded; its seed is the option ``seed``
+    where its options have one (``ego.seed``), else derived from the run seed (stream
+    ``"optimizer"``); its budget is :func:`suspid.config.optimizer_budget`.
+    """
+    cls = registry.get("optimizer", config.optimizer.plugin)
+    options = dict(config.optimizer.options)
+    seed = options.pop("seed", seed_for(config.seed, "optimizer"))  # an option ``seed`` (``ego.seed``) is the seed
+    return cls(problem.bounds, budget=optimizer_budget(config, problem.q), seed=seed, design=config.design,
+               surrogate=surrogate_for(config), **options)
+
+
 def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, progress: bool,
          log: Callable[[str], None], retry_failed: bool) -> IdentificationResult:
     """:func:`run` inside its locked run directory; every simulation runs on ``executor`` (entered)."""
@@ -192,81 +209,87 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, p
     n_before = ledger.count()
     problem = build_problem(config, ledger, log, executor)
     problem.noise_model.save(run_dir / "noise_model.npz")
-
-    surrogate = surrogate_for(config)
-    X0 = from_unit(make_design(config.design, problem.q), problem.bounds)
-    ei_history: list[float] = []
+    optimizer = optimizer_for(config, problem)
     # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.infra.threads)
     with make_progress(progress) as bars, single_blas_thread():
-        design_task = bars.add_task("initial design", total=len(X0), status="")
-        j_max = -np.inf
-
-        def design_done(i: int, ev: Evaluation | None, reused: bool) -> None:
-            nonlocal j_max
-            if ev is not None:
-                j_max = max(j_max, ev.J)
-            bars.update(design_task, advance=1, status=f"J_max {j_max:.4g}" if ev else "failed point")
-
-        with nullcontext(executor):  # entered by run(): the same executor serves the whole run
-            evs = evaluate_many(problem, ledger, X0, executor, design_done, retry_failed=retry_failed)
-            ok = np.array([e is not None for e in evs])
-            failed = [failure(problem, ledger, "design", x) for x, e in zip(X0, evs) if e is None]
-            if ok.sum() < 2:
-                raise SimulatorError(f"only {int(ok.sum())} of {len(evs)} design points could be simulated; "
-                                     f"see the failures in {ledger.path}")
-            for i, e in enumerate(evs):
-                if e is not None:
-                    ledger.put_iteration("design", i, {"w": e.w, "J": e.J})
-            y0 = np.array([e.J for e in evs if e is not None])
-            ego_opts = config.ego
-            ego_task = bars.add_task("EGO", total=ego_opts.max_iter + (ego_opts.refine.max_iter
-                                                                       if ego_opts.refine.enabled else 0), status="")
-
-            worst = [float(np.min(y0))]  # J given to failed points: the worst J found so far
-
-            def value(x: np.ndarray, ev: Evaluation | None) -> float:
-                if ev is None:
-                    failed.append(failure(problem, ledger, "ego", x))
-                    return worst[0]
-                worst[0] = min(worst[0], ev.J)
-                return ev.J
-
-            def func(x: np.ndarray) -> float:
-                return func_batch(np.asarray(x, float)[None, :])[0]
-
-            def func_batch(X: np.ndarray) -> list[float]:
-                """EGO points, simulated in parallel by the executor when ``ego.batch`` > 1."""
-                out = evaluate_many(problem, ledger, X, executor, retry_failed=retry_failed)
-                return [value(x, e) for x, e in zip(X, out)]
-
-            def callback(record) -> None:
-                if record.phase != "initial":
-                    ei_history.append(float(record.EI) if record.EI is not None else float("nan"))
-                    run_key = "refine" if record.phase.startswith("refine") else "ego"
-                    ledger.put_iteration(run_key, record.index, {
-                        "iteration": record.iteration, "phase": record.phase, "w": problem.w_of(record.x),
-                        "J": record.J, "EI": record.EI, "J_max": record.J_max, "epsilon": record.epsilon,
-                        "hyperparameters": record.hyperparameters, "fit_s": record.fit_seconds,
-                        "search_s": record.search_seconds, "eval_s": record.eval_seconds})
-                    bars.update(ego_task, advance=1 if record.phase in ("ego", "refine") else 0,
-                                status=f"J_max {record.J_max:.4g}  EI {record.EI:.2e}"
-                                if record.EI is not None else "")
-
-            ego = run_ego(func, problem.bounds, ego=ego_opts, design=config.design, surrogate=surrogate,
-                          X_init=X0[ok], y_init=y0, callback=callback,
-                          func_batch=func_batch if ego_opts.batch > 1 else None)
-        bars.update(ego_task, total=max(ego.n_iterations, 1), completed=max(ego.n_iterations, 1))
+        opt_result, failed = drive(optimizer, problem, ledger, executor, bars, retry_failed=retry_failed)
+    ego = opt_result.details if isinstance(opt_result.details, EGOResult) else \
+        as_ego_result(opt_result, surrogate_for(config), problem)
+    ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
     with single_blas_thread():
         result = analyse(problem, ledger, ego, config, failed, retry_failed, executor)
     result.update({
-        "n_initial": int(ok.sum()), "n_iterations": int(ego.n_iterations),
+        "n_initial": int(ego.n_initial), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),
         "n_simulator_calls_this_session": int(ledger.count() - n_before),
         "stop_reason": ego.stop_reason, "n_refine_iterations": int(ego.n_refine),
         "refine_stop_reason": ego.refine_stop_reason, "wall_time_s": round(time.perf_counter() - t_start, 3),
-        "design_min_distance": float(ego.design_min_distance),
+        "design_min_distance": float(ego.design_min_distance) if np.isfinite(ego.design_min_distance) else None,
+        "optimizer": config.optimizer.plugin, "budget": int(optimizer.budget),
+        "anytime": {"J": [None if not np.isfinite(v) else float(v) for v in opt_result.y],
+                    "w_normalized": problem.to_unit(opt_result.X).tolist() if len(opt_result.X) else []},
     })
     write_json(run_dir / "result.json", result)
     write_report(run_dir, problem, ego, result, ei_history, executor)
     return IdentificationResult.from_dict(result, run_dir, problem, ego)
+
+
+def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_failed: bool = False
+          ) -> tuple[OptimizerResult, list[dict[str, Any]]]:
+    """Run an optimiser through ask/tell, every J through :func:`evaluate_many` (ledger, executor, failures).
+
+    Every evaluation is recorded in the ledger's ``evaluations`` rows (index -> w and J, None for a
+    failed point) in evaluation order: the anytime history of the run. The optimiser's own rows
+    (:attr:`suspid.interfaces.Optimizer.on_record`) go to the ledger with ``x`` given as w.
+
+    :returns: the optimiser's result and the failed points (phase, w and the simulator's message).
+    """
+    def on_record(run: str, index: int, row: dict) -> None:
+        row = dict(row)
+        if "x" in row:
+            row = {"w": problem.w_of(np.asarray(row.pop("x"), float)), **row}
+        ledger.put_iteration(run, index, row)
+
+    optimizer.on_record = on_record
+    label = optimizer.name  # the phase of a failed point after the design
+    task = bars.add_task(label, total=optimizer.budget, status="")
+    failed: list[dict[str, Any]] = []
+    n, j_max = 0, -np.inf
+    while not optimizer.done:
+        X = np.atleast_2d(optimizer.ask(n=executor.n_workers))
+        if X.size == 0:
+            break
+        phase = "design" if n == 0 and len(X) > 1 else label
+        evs = evaluate_many(problem, ledger, X, executor, lambda i, ev, reused: bars.update(task, advance=1),
+                            retry_failed=retry_failed)
+        values = []
+        for x, ev in zip(X, evs):
+            if ev is None:
+                failed.append(failure(problem, ledger, phase, x))
+            else:
+                j_max = max(j_max, ev.J)
+            ledger.put_iteration("evaluations", n, {"w": problem.w_of(x), "J": ev.J if ev else None})
+            values.append(ev.J if ev is not None else None)
+            n += 1
+        optimizer.tell(X, values)
+        bars.update(task, completed=n, status=f"J_max {j_max:.4g}" if np.isfinite(j_max) else "failed points")
+    bars.update(task, total=max(n, 1), completed=max(n, 1))
+    if not np.isfinite(j_max):
+        raise SimulatorError(f"none of the {n} points could be simulated; see the failures in {ledger.path}")
+    return optimizer.result(), failed
+
+
+def as_ego_result(res: OptimizerResult, surrogate, problem: Problem) -> EGOResult:
+    """An optimiser's result in the form the analysis takes: points with a value, and the configured
+    surrogate fitted on them (identifiability, Sobol indices and intervals read it)."""
+    ok = np.isfinite(res.y)
+    U = problem.to_unit(res.X[ok])
+    fitted = None
+    if ok.sum() >= 2:
+        with single_blas_thread():
+            fitted = surrogate.fit(U, res.y[ok])
+    return EGOResult(x_opt=np.asarray(res.x_opt, float), y_opt=float(res.y_opt), X=res.X[ok], y=res.y[ok], X_unit=U,
+                     n_initial=int(min(res.n_initial, ok.sum())), stop_reason=res.stop_reason, history=[],
+                     surrogate=fitted, bounds=problem.bounds, design_min_distance=min_distance(U[:res.n_initial]),
+                     n_function_calls=res.n_evaluations, X_failed=res.X[~ok])

@@ -174,6 +174,16 @@ def model_error_section(result: dict[str, Any]) -> str:
     return "\n".join(out) + "\n"
 
 
+def search_line(result: dict[str, Any]) -> str:
+    """How the optimiser searched: the paper's design and iterations, or another optimiser's evaluations."""
+    if result.get("optimizer", "ego") == "ego":
+        return (f"{result['n_initial']} initial points (maximin design, minimum distance\n"
+                f"{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} iterations, "
+                f"stop: `{result['stop_reason']}`")
+    return (f"Optimizer `{result['optimizer']}`: {result['n_simulator_calls']} evaluations of J with a value "
+            f"(budget {result['budget']}, {result['n_initial']} of them a design), stop: `{result['stop_reason']}`")
+
+
 def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
                  ei_history: list[float], executor: Executor | None = None) -> Path:
     """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot.
@@ -224,8 +234,7 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
-seed {config.seed}. {result['n_initial']} initial points (maximin design, minimum distance
-{result['design_min_distance']:.3f} in [0, 1]^q), {result['n_iterations']} iterations, stop: `{result['stop_reason']}`{refine},
+seed {config.seed}. {search_line(result)}{refine},
 J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 
 {markdown_table(header, rows)}
