@@ -226,11 +226,12 @@ def test_the_methods_study_config_is_valid_with_equal_budgets():
 
     path = Path(__file__).resolve().parents[1] / "configs" / "methods.yaml"
     config = load_config(path)
-    variants = study_variants(path, [], config)
-    assert len(variants) == 6 * 5
-    plugins = {cfg.optimizer.plugin for _, cfg in variants}
-    assert plugins == {"ego", "random", "nelder-mead", "cma-es", "skopt-gp"}
-    assert {optimizer_budget(cfg, 7) for _, cfg in variants} == {300}
-    refined = [cfg for label, cfg in variants if label.startswith("ego-refine")]
-    assert all(cfg.ego.refine.enabled and cfg.design.n_initial + cfg.ego.max_iter + cfg.ego.refine.max_iter == 300
-               for cfg in refined)
+    runs = study_variants(path, [], config)
+    assert len(runs) == 8 * 5
+    assert {run.config.optimizer.plugin for run in runs} == {"ego", "random", "nelder-mead", "cma-es", "skopt-gp"}
+    assert {run.config.objective.plugin for run in runs} == {"overlap", "likelihood", "mean-spectrum"}
+    assert {optimizer_budget(run.config, 7) for run in runs} == {300}
+    refined = [run.config for run in runs if run.variant == "ego-refine"]
+    assert len(refined) == 5 and all(
+        cfg.ego.refine.enabled and cfg.design.n_initial + cfg.ego.max_iter + cfg.ego.refine.max_iter == 300
+        for cfg in refined)

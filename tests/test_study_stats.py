@@ -109,6 +109,14 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
         assert curve.size == result["n_simulator_calls"] == 8
         assert float(r["error_at_1000"]) == pytest.approx(float(r["worst_error"]), rel=1e-9)
         assert float(r["error_at_7"]) == pytest.approx(curve[6], rel=1e-12)
+        # and it is the curve of the run's own record of every evaluation, in order (result.json "anytime")
+        names, best, expected = result["parameters"], -math.inf, []
+        for J, u in zip(result["anytime"]["J"], result["anytime"]["w_normalized"]):
+            if J is not None and J > best:
+                best, worst = J, max(100 * abs(u[i] - result["w_ref_normalized"][n])
+                                     for i, n in enumerate(names) if result["identifiable"][n])
+            expected.append(worst)
+        assert curve == pytest.approx(expected, rel=1e-9, abs=1e-9)
     text = (out / "study.md").read_text()
     assert "## Over seeds" in text and "## Worst identifiable error at N simulator calls" in text
     assert "## Paired comparison: likelihood against mean-spectrum" in text
