@@ -290,3 +290,37 @@ def test_flat_line_spike_and_jitter_are_reported(tmp_path):
         assert seg["t_end_s"] <= 50.0 or seg["t_start_s"] >= 52.0
         assert not seg["t_start_s"] <= 65.0 <= seg["t_end_s"]
     assert abs(r.offset_m - truth["offset_m"]) < 1.0
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_ingest", ROOT / "benchmarks/bench_ingest.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_memory_grows_by_less_than_two_and_a_half_copies_of_the_data(tmp_path):
+    """The Python (numpy included) memory an ingest needs grows with the recording by less than 2.5 times
+    the float64 accelerations it holds: one copy on the common grid, speed and distance (0.2), the track
+    record and its segments (about 0.5 at 300 km/h and 500 Hz), small working buffers. Two recordings of
+    10 channels at 500 Hz, 7.2 and 14.4 minutes of one cruise at 300 km/h (MDF4, asammdf); the difference
+    of the tracemalloc peaks cancels what does not grow with the data (imports, the simulator)."""
+    import tracemalloc
+
+    importlib.import_module("matplotlib.pyplot")     # imports are not data: before tracemalloc starts
+    bench = _bench()
+    peaks, sizes = [], []
+    for hours in (0.12, 0.24):
+        work = tmp_path / f"{hours:g}h"
+        rec, trk, cfg = bench.make_recording(work, hours, 500.0, legs=1)
+        path = bench.ingest_file(work, rec, trk, cfg)
+        tracemalloc.start()
+        try:
+            r = suspid.ingest(path)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+        assert abs(r.offset_m - bench.OFFSET_M) < 1.0 and len(r.segments) >= 8
+        sizes.append(len(bench.CHANNELS) * int(3600 * hours * 500.0) * 8)
+    growth = (peaks[1] - peaks[0]) / (sizes[1] - sizes[0])
+    assert growth < 2.5, (growth, [p / 2 ** 20 for p in peaks])

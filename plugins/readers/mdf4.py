@@ -28,7 +28,7 @@ from ._common import as_float, check_exists, optional_library, unknown_channel
 class Mdf4Options(Section):
     """``recording.options`` of the ``mdf4`` reader (time stamps and units come from the file)."""
 
-    chunk_records: PositiveInt = Field(default=262_144, description="records read at a time")
+    chunk_records: PositiveInt = Field(default=65_536, description="records read at a time")
 
 
 class Mdf4Reader(Reader):
