@@ -6,10 +6,12 @@ over distance in a band of wavelengths where the body follows the track (a
 bogie or axlebox below its bounce frequency), is the band-limited vertical
 profile z under it. Both are put on one distance grid (step: the short
 wavelength / 16), band-limited by FFT (cosine edges), and cross-correlated
-over the offsets ``guess_m +- search_m``; the offset of the highest normalised
-correlation, refined by a parabola through its neighbours, is where the
-sensor meets the track; minus ``lever_m`` it is the offset of the odometry
-reference point: track distance = odometry distance + offset.
+over the offsets ``guess_m +- search_m`` (by FFT over blocks of the
+vehicle's profile, at those offsets only: the memory does not grow with the
+run); the offset of the highest normalised correlation, refined by a parabola
+through its neighbours, is where the sensor meets the track; minus
+``lever_m`` it is the offset of the odometry reference point: track distance
+= odometry distance + offset.
 
 The lever is where the channel's response meets the track. A body's response
 also lags its input (a bogie on its primary suspension: about 20 ms, 1.8 m at
@@ -27,7 +29,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
 from scipy import signal as sps
 
 from suspid.errors import DataError
