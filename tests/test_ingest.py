@@ -327,3 +327,22 @@ def test_memory_grows_by_less_than_1_6_copies_of_the_data(tmp_path):
     print(f"tracemalloc peaks {peaks[0] / 2 ** 20:.1f} and {peaks[1] / 2 ** 20:.1f} MiB for {sizes[0] / 2 ** 20:.1f} "
           f"and {sizes[1] / 2 ** 20:.1f} MiB of samples: growth {growth:.2f}")
     assert growth < 1.6, (growth, [p / 2 ** 20 for p in peaks])
+
+
+def test_hdf5_accelerations_written_straight_to_disk_read_back_and_need_room(tmp_path, monkeypatch):
+    """``write_accelerations_h5(..., in_memory=False)`` (the ingest's large output) writes the layout that
+    ``read_accelerations`` reads; when the disk has no room for it, one DataError line and no file."""
+    from suspid.data import files
+    from suspid.interfaces import Response
+
+    rng = np.random.default_rng(0)
+    recs = [Response(("a", "b"), 100.0, rng.normal(size=(2, 500)), f"seg-{i}") for i in range(3)]
+    path = files.write_accelerations_h5(recs, tmp_path / "acc.h5", in_memory=False)
+    back = read_accelerations(path, ["a", "b"])
+    assert [r.segment for r in back] == ["seg-0", "seg-1", "seg-2"]
+    assert all(np.array_equal(r.accelerations, s.accelerations) for r, s in zip(back, recs))
+    monkeypatch.setattr(files.shutil, "disk_usage", lambda p: type("usage", (), {"free": 1000})())
+    with pytest.raises(DataError, match=r"full\.h5: cannot write the file \(only 0 megabytes free on the disk, "
+                                        r"about 16 needed\)"):
+        files.write_accelerations_h5(recs, tmp_path / "full.h5", in_memory=False)
+    assert not (tmp_path / "full.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["acc.h5"]

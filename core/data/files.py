@@ -657,8 +657,8 @@ def _write_h5(path: Path, fill: Any, append: bool = False, size: int | None = No
         def write_through() -> None:
             free = shutil.disk_usage(path.parent).free
             if free < 1.1 * size + (16 << 20):
-                raise OSError(errno.ENOSPC, f"{free / 2 ** 20:.0f} MiB free on the disk, about "
-                                            f"{1.1 * size / 2 ** 20 + 16:.0f} MiB needed")
+                raise OSError(errno.ENOSPC, f"only {free / 2 ** 20:.0f} megabytes free on the disk, about "
+                                            f"{1.1 * size / 2 ** 20 + 16:.0f} needed")
             with atomic_open(path, "w+b") as fh, h5py.File(fh, "w", libver=("v110", "latest")) as f:
                 fill(f)
 
