@@ -211,6 +211,22 @@ def test_variable_speed_time_solver():
         ExudynTrain(solver="frequency").simulate({}, [ramp])
 
 
+
+def test_variable_speed_run_that_starts_slow_has_the_constant_speed_lateral_response():
+    """A run from 5 m/s up to 50 m/s, then held: over its last 300 m the lateral accelerations have the RMS of a
+    run at 50 m/s throughout. The creep forces (f/v) are nonlinear in the speed; a single linear solve per
+    step kept the starting speed's creep damping (10 times too large here) and gave 2.5 times the RMS."""
+    sim = ExudynTrain(solver="time", fs_hz=100.0)
+    seg = track(700.0, 180.0)[0]
+    x = seg.distance
+    v = np.minimum(50.0, np.sqrt(5.0 ** 2 + 2 * 10.0 * x))              # 10 m/s^2 to 50 m/s in 124 m
+    (ramp,) = sim.simulate({}, [TrackSegment("ramp", x, seg.irregularities, v)])
+    (const,) = sim.simulate({}, [TrackSegment("const", x, seg.irregularities, 50.0)])
+    last = int(300.0 / 50.0 * 100.0)
+    lateral = [i for i, c in enumerate(sim.channels()) if c.endswith("lateral")]
+    rms = [np.sqrt(np.mean(r.accelerations[lateral, -last:] ** 2, axis=1)) for r in (ramp, const)]
+    np.testing.assert_allclose(rms[0], rms[1], rtol=0.1)
+
 # ------------------------------------------------------------------------------------------ slow
 def test_stable_over_the_default_identification_box():
     """Every corner of the q = 7 box is stable at 200 and 320 km/h (the optimiser may go anywhere)."""

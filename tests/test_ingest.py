@@ -290,3 +290,59 @@ def test_flat_line_spike_and_jitter_are_reported(tmp_path):
         assert seg["t_end_s"] <= 50.0 or seg["t_start_s"] >= 52.0
         assert not seg["t_start_s"] <= 65.0 <= seg["t_end_s"]
     assert abs(r.offset_m - truth["offset_m"]) < 1.0
+
+
+def _bench():
+    spec = importlib.util.spec_from_file_location("bench_ingest", ROOT / "benchmarks/bench_ingest.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_memory_grows_by_less_than_1_6_copies_of_the_data(tmp_path):
+    """The Python (numpy included) memory an ingest needs grows with the recording by less than 1.6 times
+    the float64 accelerations it holds: one copy on the common grid, speed and distance (0.2), the track
+    record and its segments, small working buffers (measured: 1.2; the ingest that copied whole arrays
+    at each step: 2.1). Two recordings of 10 channels at 500 Hz, 7.2 and 14.4 minutes of one cruise at
+    300 km/h (MDF4, asammdf); the difference of the tracemalloc peaks cancels what does not grow with the
+    data (imports, the simulator)."""
+    import tracemalloc
+
+    importlib.import_module("matplotlib.pyplot")     # imports are not data: before tracemalloc starts
+    bench = _bench()
+    peaks, sizes = [], []
+    for hours in (0.12, 0.24):
+        work = tmp_path / f"{hours:g}h"
+        rec, trk, cfg = bench.make_recording(work, hours, 500.0, legs=1)
+        path = bench.ingest_file(work, rec, trk, cfg)
+        tracemalloc.start()
+        try:
+            r = suspid.ingest(path)
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+        assert abs(r.offset_m - bench.OFFSET_M) < 1.0 and len(r.segments) >= 8
+        sizes.append(len(bench.CHANNELS) * int(3600 * hours * 500.0) * 8)
+    growth = (peaks[1] - peaks[0]) / (sizes[1] - sizes[0])
+    print(f"tracemalloc peaks {peaks[0] / 2 ** 20:.1f} and {peaks[1] / 2 ** 20:.1f} MiB for {sizes[0] / 2 ** 20:.1f} "
+          f"and {sizes[1] / 2 ** 20:.1f} MiB of samples: growth {growth:.2f}")
+    assert growth < 1.6, (growth, [p / 2 ** 20 for p in peaks])
+
+
+def test_hdf5_accelerations_written_straight_to_disk_read_back_and_need_room(tmp_path, monkeypatch):
+    """``write_accelerations_h5(..., in_memory=False)`` (the ingest's large output) writes the layout that
+    ``read_accelerations`` reads; when the disk has no room for it, one DataError line and no file."""
+    from suspid.data import files
+    from suspid.interfaces import Response
+
+    rng = np.random.default_rng(0)
+    recs = [Response(("a", "b"), 100.0, rng.normal(size=(2, 500)), f"seg-{i}") for i in range(3)]
+    path = files.write_accelerations_h5(recs, tmp_path / "acc.h5", in_memory=False)
+    back = read_accelerations(path, ["a", "b"])
+    assert [r.segment for r in back] == ["seg-0", "seg-1", "seg-2"]
+    assert all(np.array_equal(r.accelerations, s.accelerations) for r, s in zip(back, recs))
+    monkeypatch.setattr(files.shutil, "disk_usage", lambda p: type("usage", (), {"free": 1000})())
+    with pytest.raises(DataError, match=r"full\.h5: cannot write the file \(only 0 megabytes free on the disk, "
+                                        r"about 16 needed\)"):
+        files.write_accelerations_h5(recs, tmp_path / "full.h5", in_memory=False)
+    assert not (tmp_path / "full.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["acc.h5"]

@@ -99,9 +99,11 @@ line), or an error with ``strict=True``:
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import math
 import os
+import shutil
 import warnings
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -636,15 +638,31 @@ def _order(f: Any, path: Path) -> list[str]:
     return order
 
 
-def _write_h5(path: Path, fill: Any, append: bool = False) -> Path:
+def _write_h5(path: Path, fill: Any, append: bool = False, size: int | None = None) -> Path:
     """Write an HDF5 file atomically: built in memory by ``fill(f)``, then written by ``atomic_open``.
 
     In memory (h5py's ``core`` driver), because h5py's own writes to disk fail
     badly on a full disk: an error while closing, then a crash (SIGSEGV) of the
     interpreter. A write of the finished image fails like any Python write,
     and the previous file stays.
+
+    With ``size`` (bytes of array data, a new file only), the file is written straight into
+    ``atomic_open``'s temporary file instead (h5py's file-object driver, every write a Python write),
+    once the disk is known to have room for it: a large file is then never held in memory (the
+    image and its copy as bytes would be two copies of the data).
     """
     h5py = _h5()
+
+    if size is not None and not append:
+        def write_through() -> None:
+            free = shutil.disk_usage(path.parent).free
+            if free < 1.1 * size + (16 << 20):
+                raise OSError(errno.ENOSPC, f"only {free / 2 ** 20:.0f} megabytes free on the disk, about "
+                                            f"{1.1 * size / 2 ** 20 + 16:.0f} needed")
+            with atomic_open(path, "w+b") as fh, h5py.File(fh, "w", libver=("v110", "latest")) as f:
+                fill(f)
+
+        return _written(path, write_through)
 
     def write() -> None:
         source = path if append and path.exists() else f"{path}.in-memory"
@@ -734,13 +752,15 @@ def read_track_h5(path: str | Path, *, strict: bool = False) -> list[TrackSegmen
 
 
 def write_accelerations_h5(responses: Sequence[Response], path: str | Path, mode: str = "w", *,
-                           extra: Any = None) -> Path:
+                           extra: Any = None, in_memory: bool = True) -> Path:
     """Write records of accelerations to HDF5 (layout in the module docstring), atomically; returns the path.
 
     All records must have the same channels. ``mode="a"`` adds to an existing file's root.
 
     :param extra: ``extra(f)`` is called with the open ``h5py.File`` to add more
         datasets or attributes before the file is moved into place.
+    :param in_memory: False writes a new file straight to disk once the free space is checked (for
+        records too large to hold twice more in memory; see ``_write_h5``).
     """
     path = Path(path)
     if mode not in ("w", "a"):
@@ -771,7 +791,8 @@ def write_accelerations_h5(responses: Sequence[Response], path: str | Path, mode
         if extra is not None:
             extra(f)
 
-    return _write_h5(path, fill, append=mode == "a")
+    size = None if in_memory else sum(np.asarray(r.accelerations).nbytes for r in responses)
+    return _write_h5(path, fill, append=mode == "a", size=size)
 
 
 def read_accelerations_h5(path: str | Path, channels: Sequence[str] | None = None, *,

@@ -24,7 +24,8 @@ measured-data config on what ``ingest-mf4.yaml`` writes, for ``suspid
 validate``); ``truth.json`` holds the offset and the speed profile.
 
 Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...]``
-(a few seconds; tests call :func:`make` with a ``tmp_path``).
+(about 15 s of computing, the time solver at variable speed; tests call :func:`make` with a
+``tmp_path``).
 """
 
 from __future__ import annotations

@@ -3,8 +3,9 @@
 Lines starting with ``#`` before the header are comments. Units may follow a
 name in brackets (``ACC_Z_K1 [mm/s^2]``); the channel is then named without
 them. The abscissa is a column (``index: time_s``) or a uniform ``step``.
-The file is parsed once, in chunks of rows, keeping only the columns that
-:meth:`CsvReader.select` named.
+The file is parsed in chunks of rows into preallocated columns, keeping only
+the columns that :meth:`CsvReader.select` named; :meth:`CsvReader.read` hands
+a column over (it is not kept), so that a long recording is held once.
 """
 
 from __future__ import annotations
@@ -85,10 +86,12 @@ class CsvReader(Reader):
         if not wanted:
             return
         cols = [header.index(c) for c in wanted]
-        parts: list[np.ndarray] = []
+        with open(self.path, "rb") as fh:   # count the rows first: the columns are filled in place
+            n_rows = sum(1 for line in itertools.islice(fh, self._skip, None) if line.strip())
+        data = [np.empty(n_rows) for _ in wanted]
         with open(self.path, encoding="utf-8", errors="replace") as fh:
             lines = itertools.islice(fh, self._skip, None)
-            row = self._skip + 1
+            row, filled = self._skip + 1, 0
             while True:
                 chunk = list(itertools.islice(lines, self.opts.chunk_rows))
                 if not chunk:
@@ -99,17 +102,20 @@ class CsvReader(Reader):
                 except ValueError as exc:
                     raise DataError(f"{self.path}: rows {row}-{row + len(chunk) - 1}: "
                                     f"{str(exc).splitlines()[0]}") from None
-                parts.append(block)
+                m = min(block.shape[0], n_rows - filled)
+                for j, column in enumerate(data):
+                    column[filled:filled + m] = block[:m, j]
+                filled += m
                 row += len(chunk)
-        data = np.concatenate(parts) if parts else np.empty((0, len(cols)))
-        for j, c in enumerate(wanted):
-            self._columns[c] = np.ascontiguousarray(data[:, j])
-        del data, parts
+        for c, column in zip(wanted, data):
+            self._columns[c] = column[:filled]
 
     def read(self, channel: str) -> Signal:
         if channel not in self._columns:
             self.select([channel])
-        values = self._columns[channel]
+        # the reader hands the column over (a second read parses the file again): the caller's copy on
+        # its grid is then the only one in memory
+        values = self._columns.pop(channel) if channel != self.opts.index else self._columns[channel]
         if self.opts.index:
             return Signal(channel, values, self._units.get(channel, ""), index=self._columns[self.opts.index])
         if self.opts.step is None:

@@ -6,7 +6,10 @@ values (the file's conversion rules applied). MDF stores a data group record
 by record (all its channels interleaved), and asammdf keeps the group's
 record buffer alive behind each channel it returns: a channel is therefore
 read in slices of ``chunk_records`` records copied into its own array, so
-that a one-hour group is never in memory whole.
+that a one-hour group is never in memory whole. The file is handed to asammdf
+as an open stream rather than a path: from a path asammdf maps the whole file
+into memory, and every page it touches then counts in the process's resident
+memory (the whole file, by the last channel).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ from ._common import as_float, check_exists, optional_library, unknown_channel
 class Mdf4Options(Section):
     """``recording.options`` of the ``mdf4`` reader (time stamps and units come from the file)."""
 
-    chunk_records: PositiveInt = Field(default=262_144, description="records read at a time")
+    chunk_records: PositiveInt = Field(default=65_536, description="records read at a time")
 
 
 class Mdf4Reader(Reader):
@@ -42,14 +45,17 @@ class Mdf4Reader(Reader):
         super().__init__(Path(path), **options)
         self.opts = Mdf4Options(**options)
         self._mdf: Any = None
+        self._stream: Any = None
 
     def _file(self) -> Any:
         if self._mdf is None:
             check_exists(self.path)
             asammdf = optional_library("asammdf", "asammdf", self.path)
             try:
-                self._mdf = asammdf.MDF(str(self.path))
+                self._stream = open(self.path, "rb")
+                self._mdf = asammdf.MDF(self._stream)   # a stream, not a path: no memory map of the file
             except Exception as exc:  # asammdf raises many types for a file that is not MDF
+                self.close()
                 raise DataError(f"{self.path}: not a readable MDF file ({str(exc).splitlines()[0]})") from None
         return self._mdf
 
@@ -80,3 +86,6 @@ class Mdf4Reader(Reader):
         if self._mdf is not None:
             self._mdf.close()
             self._mdf = None
+        if self._stream is not None:
+            self._stream.close()
+            self._stream = None

@@ -6,10 +6,12 @@ over distance in a band of wavelengths where the body follows the track (a
 bogie or axlebox below its bounce frequency), is the band-limited vertical
 profile z under it. Both are put on one distance grid (step: the short
 wavelength / 16), band-limited by FFT (cosine edges), and cross-correlated
-over the offsets ``guess_m +- search_m``; the offset of the highest normalised
-correlation, refined by a parabola through its neighbours, is where the
-sensor meets the track; minus ``lever_m`` it is the offset of the odometry
-reference point: track distance = odometry distance + offset.
+over the offsets ``guess_m +- search_m`` (by FFT over blocks of the
+vehicle's profile, at those offsets only: the memory does not grow with the
+run); the offset of the highest normalised correlation, refined by a parabola
+through its neighbours, is where the sensor meets the track; minus
+``lever_m`` it is the offset of the odometry reference point: track distance
+= odometry distance + offset.
 
 The lever is where the channel's response meets the track. A body's response
 also lags its input (a bogie on its primary suspension: about 20 ms, 1.8 m at
@@ -27,13 +29,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import signal as sps
 
 from suspid.errors import DataError
 
 from suspid.data.track import realise
 from suspid.interfaces import Simulator, TrackSegment
 
-from .load import TrackRecord
+from .load import CHUNK, TrackRecord
 from .options import AlignmentSection
 
 
@@ -83,6 +86,49 @@ def _bandpass(z: np.ndarray, dx: float, band) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(z) * w, z.size)
 
 
+def _at_speed(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.ndarray, v_min: float
+              ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """The usable samples at speed: their distance and a / v^2, and the sums of v^2 and v^3.
+
+    Built a chunk of samples at a time into arrays of the selected size (no whole-record temporaries).
+    """
+    sel = usable & np.isfinite(acc) & np.isfinite(speed) & (speed > v_min)
+    m = int(sel.sum())
+    if m < 16:
+        raise DataError("alignment: too few samples at speed to correlate the track record")
+    d, c = np.empty(m), np.empty(m)
+    v2 = v3 = 0.0
+    k = 0
+    for a in range(0, sel.size, CHUNK):
+        part = sel[a:a + CHUNK]
+        v = speed[a:a + CHUNK][part]
+        j = k + v.size
+        d[k:j] = distance[a:a + CHUNK][part]
+        c[k:j] = acc[a:a + CHUNK][part] / v ** 2
+        v2, v3 = v2 + float(np.sum(v ** 2)), v3 + float(np.sum(v ** 3))
+        k = j
+    return d, c, v2, v3
+
+
+def _correlation(u_v: np.ndarray, u_t: np.ndarray, s0: int, n_lags: int, block: int = 1 << 18) -> np.ndarray:
+    """``r[i] = sum_j u_v[j] u_t[j + s0 + i]`` for ``i < n_lags`` (``u_t`` zero outside its record).
+
+    By FFT over blocks of ``block`` samples of ``u_v``: the working memory grows with the block and the
+    number of lags, not with the length of the run.
+    """
+    r = np.zeros(n_lags)
+    for j0 in range(0, u_v.size, block):
+        v = u_v[j0:j0 + block]
+        lo, m = j0 + s0, v.size + n_lags - 1        # the stretch of u_t this block meets at all lags
+        a, b = max(lo, 0), min(lo + m, u_t.size)
+        if a >= b:
+            continue
+        t = np.zeros(m)
+        t[a - lo:b - lo] = u_t[a:b]
+        r += sps.correlate(t, v, mode="valid", method="fft")
+    return r
+
+
 def calibrate_lever(simulator: Simulator, channel: str, speed: float, opts: AlignmentSection,
                     length_m: float = 3000.0) -> float:
     """The effective lever of ``channel`` at ``speed`` (m/s): the same correlation, run on the simulator's
@@ -125,25 +171,24 @@ def align(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.n
                         "or give alignment.offset_m")
     band = opts.wavelength_m
     dx = band[0] / 16.0
-    sel = usable & np.isfinite(acc) & np.isfinite(speed) & (speed > max(min_speed, 5.0))
-    if sel.sum() < 16:
-        raise DataError("alignment: too few samples at speed to correlate the track record")
-    d, v, a = distance[sel], speed[sel], acc[sel]
+    d, c_d, v2, v3 = _at_speed(distance, speed, acc, usable, max(min_speed, 5.0))
     v_cal = None
     if opts.lever_m == "model":
         if simulator is None:
             raise DataError("alignment: lever_m 'model' needs the simulator; give alignment.lever_m")
-        v_cal = float(np.sum(v ** 3) / np.sum(v ** 2))      # the speeds whose responses dominate
+        v_cal = v3 / v2      # the speeds whose responses dominate
         opts = opts.model_copy(update={"lever_m": calibrate_lever(simulator, channel, v_cal, opts)})
     xv = np.arange(d[0], d[-1], dx)
     if xv.size * dx < 4 * band[1]:
         raise DataError(f"alignment: {xv.size * dx:.0f} m at speed is too short for wavelengths up to "
                         f"{band[1]:g} m")
-    c = np.interp(xv, d, a / v ** 2)
+    c = np.interp(xv, d, c_d)
+    del c_d
     # stretches the vehicle did not cover at speed (excluded, stations) carry no information: zero them
     near = np.searchsorted(d, xv)
     near = np.clip(near, 1, d.size - 1)
     hole = (d[near] - d[near - 1]) > 4 * dx
+    del d, near
     c[hole] = 0.0
     u_v = _profile_from_acceleration(c - c.mean(), dx, band)
     u_v[hole] = 0.0
@@ -152,11 +197,10 @@ def align(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.n
     z_src = track.irregularities[0]
     ok = np.isfinite(z_src)
     x_src = track.x0 + np.arange(z_src.size) * track.dx
-    z = np.interp(xt, x_src[ok], z_src[ok])
+    z = np.interp(xt, x_src, z_src) if ok.all() else np.interp(xt, x_src[ok], z_src[ok])
     u_t = _bandpass(z - z.mean(), dx, band)
+    del x_src, z, ok
     # r(s) = sum_j u_v[j] u_t[j + s]; sensor offset L: xv[0] + L = xt[0] + s dx
-    n_fft = 1 << int(np.ceil(np.log2(u_v.size + u_t.size)))
-    r = np.fft.irfft(np.conj(np.fft.rfft(u_v, n_fft)) * np.fft.rfft(u_t, n_fft), n_fft)
     lags = (opts.guess_m + opts.lever_m) + np.arange(-opts.search_m, opts.search_m + dx / 2, dx)
     s = np.round((xv[0] + lags - xt[0]) / dx).astype(np.int64)
     valid = (s > -u_v.size) & (s < u_t.size)
@@ -171,8 +215,9 @@ def align(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.n
     # only the part of the vehicle record that overlaps the track counts
     cv = np.concatenate(([0.0], np.cumsum(u_v ** 2)))
     energy_v = cv[np.clip(hi - s, 0, u_v.size)] - cv[np.clip(lo - s, 0, u_v.size)]
+    del cs, cv
     with np.errstate(invalid="ignore", divide="ignore"):
-        rho = r[s % n_fft] / np.sqrt(energy_t * energy_v)
+        rho = _correlation(u_v, u_t, int(s[0]), int(s[-1] - s[0]) + 1)[s - s[0]] / np.sqrt(energy_t * energy_v)
     overlap = (hi - lo) * dx
     rho[~np.isfinite(rho) | (overlap < 0.5 * min(u_v.size * dx, xt[-1] - xt[0]))] = 0.0
     i = int(np.argmax(np.abs(rho)))

@@ -117,16 +117,29 @@ def abscissa(sig: Signal, path: Path) -> np.ndarray | None:
     return idx
 
 
+CHUNK = 1 << 18
+"""Samples processed at a time by the whole-record loops (2 MiB of float64): working buffers stay small."""
+
+
 def _timing(sig: Signal, idx: np.ndarray | None, gap_factor: float) -> tuple[float, float, float, np.ndarray]:
-    """(start, nominal step, jitter, indices k of the gaps between sample k and k + 1)."""
+    """(start, nominal step, jitter, indices k of the gaps between sample k and k + 1).
+
+    The nominal step is the median of the steps (of each chunk's median when the record is longer than
+    :data:`CHUNK`); the jitter is the standard deviation of the regular steps over the nominal one.
+    """
     if idx is None:
         return float(sig.start), float(sig.step), 0.0, np.empty(0, dtype=np.int64)
-    dt = np.diff(idx)
-    nominal = float(np.median(dt))
-    gaps = np.flatnonzero(dt > gap_factor * nominal)
-    regular = np.delete(dt, gaps)
-    jitter = float(np.std(regular) / nominal) if regular.size else 0.0
-    return float(idx[0]), nominal, jitter, gaps
+    starts = range(0, idx.size - 1, CHUNK)
+    nominal = float(np.median([np.median(np.diff(idx[a:a + CHUNK + 1])) for a in starts]))
+    gaps, s1, s2, m = [], 0.0, 0.0, 0
+    for a in starts:
+        dt = np.diff(idx[a:a + CHUNK + 1])
+        g = np.flatnonzero(dt > gap_factor * nominal)
+        gaps.append(g + a)
+        dev = np.delete(dt, g) - nominal
+        s1, s2, m = s1 + float(dev.sum()), s2 + float(dev @ dev), m + dev.size
+    jitter = float(np.sqrt(max(s2 / m - (s1 / m) ** 2, 0.0)) / nominal) if m else 0.0
+    return float(idx[0]), nominal, jitter, np.concatenate(gaps)
 
 
 def lowpass(values: np.ndarray, fs_in: float, fs_out: float) -> np.ndarray:
@@ -140,9 +153,23 @@ def lowpass(values: np.ndarray, fs_in: float, fs_out: float) -> np.ndarray:
     return y
 
 
+def _count_at_or_before(grid: Grid, tau: float) -> int:
+    """Number of grid samples whose time ``t0 + j / fs`` is at most ``tau`` (0 .. grid.n)."""
+    j = min(max(int(np.floor((tau - grid.t0) * grid.fs)), -1), grid.n - 1)   # the last such j, up to rounding
+    while j + 1 < grid.n and grid.t0 + (j + 1) / grid.fs <= tau:
+        j += 1
+    while j >= 0 and grid.t0 + j / grid.fs > tau:
+        j -= 1
+    return j + 1
+
+
 def onto_grid(sig: Signal, idx: np.ndarray | None, grid: Grid, gap_factor: float,
               out: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
-    """``sig.values`` on ``grid`` (NaN in gaps and outside the record); returns (values, resampled)."""
+    """``sig.values`` on ``grid`` (NaN in gaps and outside the record); returns (values, resampled).
+
+    Written into ``out`` (``(grid.n,)``, allocated when None) :data:`CHUNK` samples at a time, so that
+    the only whole-record arrays are the signal's own and ``out``.
+    """
     start, step, _, gaps = _timing(sig, idx, gap_factor)
     values = sig.values
     n = values.size
@@ -157,13 +184,20 @@ def onto_grid(sig: Signal, idx: np.ndarray | None, grid: Grid, gap_factor: float
         return out, False
     if 1.0 / step > 1.05 * grid.fs:
         values = lowpass(values, 1.0 / step, grid.fs)
-    t_src = idx if idx is not None else start + np.arange(n) * step
-    t = grid.time
-    out[:] = np.interp(t, t_src, values)
-    out[(t < t_src[0] - 1e-9) | (t > t_src[-1] + 1e-9)] = np.nan
+    first, last = (float(idx[0]), float(idx[-1])) if idx is not None else (start, start + (n - 1) * step)
+    for a in range(0, grid.n, CHUNK):
+        t = grid.t0 + np.arange(a, min(a + CHUNK, grid.n)) / grid.fs
+        if idx is not None:
+            k0, k1 = np.searchsorted(idx, [t[0], t[-1]])
+        else:
+            k0, k1 = np.floor((t[0] - start) / step), np.ceil((t[-1] - start) / step)
+        k0, k1 = int(np.clip(k0 - 1, 0, n - 1)), int(np.clip(k1 + 1, 0, n - 1)) + 1
+        t_src = idx[k0:k1] if idx is not None else start + np.arange(k0, k1) * step
+        o = out[a:a + t.size]
+        o[:] = np.interp(t, t_src, values[k0:k1])
+        o[(t < first - 1e-9) | (t > last + 1e-9)] = np.nan
     for k in gaps:  # samples strictly inside a gap of the source
-        lo, hi = np.searchsorted(t, [t_src[k], t_src[k + 1]], side="right")
-        out[lo:hi] = np.nan
+        out[_count_at_or_before(grid, idx[k]):_count_at_or_before(grid, idx[k + 1])] = np.nan
     return out, True
 
 
@@ -215,11 +249,13 @@ def read_recording(opts: IngestOptions, sim_channels: Sequence[str]) -> Recordin
         _, step, jitter, gaps = _timing(sig, idx, q.gap_factor)
         values, _ = onto_grid(sig, idx, grid, q.gap_factor)
         if rec.speed is not None:
-            speed = values * SPEED_UNITS[rec.speed.unit]
+            speed = values
+            speed *= SPEED_UNITS[rec.speed.unit]
             w = _unit_warning(f"speed ('{motion}')", sig.unit, rec.speed.unit, SPEED_UNITS)
             distance = integrate_speed(speed, grid.fs)
         else:
-            distance = values * LENGTH_UNITS[rec.distance.unit]
+            distance = values
+            distance *= LENGTH_UNITS[rec.distance.unit]
             w = _unit_warning(f"distance ('{motion}')", sig.unit, rec.distance.unit, LENGTH_UNITS)
             speed = speed_from_distance(distance, grid.fs)
             distance = fill_nan(distance)
@@ -250,7 +286,14 @@ def integrate_speed(speed: np.ndarray, fs: float) -> np.ndarray:
     v = fill_nan(speed)
     d = np.empty_like(v)
     d[0] = 0.0
-    np.cumsum((v[1:] + v[:-1]) * (0.5 / fs), out=d[1:])
+    np.add(v[1:], v[:-1], out=d[1:])
+    d[1:] *= 0.5 / fs
+    carry = 0.0
+    for a in range(1, d.size, CHUNK):   # in place, a chunk at a time: no whole-record temporary
+        part = d[a:a + CHUNK]
+        np.cumsum(part, out=part)
+        part += carry
+        carry = float(part[-1])
     return d
 
 
@@ -259,7 +302,8 @@ def speed_from_distance(distance: np.ndarray, fs: float, smooth_s: float = 0.5) 
     d = fill_nan(distance)
     k = max(1, int(round(smooth_s * fs / 2)))
     v = np.empty_like(d)
-    v[k:-k] = (d[2 * k:] - d[:-2 * k]) * fs / (2 * k)
+    np.subtract(d[2 * k:], d[:-2 * k], out=v[k:-k])
+    v[k:-k] *= fs / (2 * k)
     v[:k], v[-k:] = v[k], v[-k - 1]
     v[~np.isfinite(distance)] = np.nan
     return v

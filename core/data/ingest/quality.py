@@ -24,6 +24,9 @@ from .options import IngestOptions, kind_of
 
 @dataclass
 class ChannelQuality:
+    """One channel's checks; ``masks`` holds, per check, the ``(n_runs, 2)`` start and stop (exclusive)
+    sample indices of the flagged runs (a few numbers, not a boolean per sample)."""
+
     dropouts: int = 0
     clipped: int = 0
     flat: int = 0
@@ -40,18 +43,22 @@ class ChannelQuality:
 
 def runs(mask: np.ndarray) -> np.ndarray:
     """``(n_runs, 2)`` start and stop (exclusive) of the runs of True in ``mask``."""
-    m = np.concatenate(([False], mask, [False]))
-    edges = np.flatnonzero(m[1:] != m[:-1])
+    edges = np.flatnonzero(np.diff(mask.view(np.int8), prepend=0, append=0))
     return edges.reshape(-1, 2)
 
 
-def long_runs(mask: np.ndarray, min_len: int) -> np.ndarray:
-    """``mask`` restricted to its runs of at least ``min_len`` samples."""
-    out = np.zeros_like(mask)
-    for a, b in runs(mask):
-        if b - a >= min_len:
-            out[a:b] = True
+def from_runs(r: np.ndarray, n: int, out: np.ndarray | None = None) -> np.ndarray:
+    """The ``(n,)`` boolean mask of the runs ``r`` (added to ``out`` when given)."""
+    out = np.zeros(n, dtype=bool) if out is None else out
+    for a, b in r:
+        out[a:b] = True
     return out
+
+
+def long_runs(mask: np.ndarray, min_len: int) -> np.ndarray:
+    """The runs of ``mask`` that last at least ``min_len`` samples, ``(n_runs, 2)``."""
+    r = runs(mask)
+    return r[r[:, 1] - r[:, 0] >= min_len]
 
 
 def dilate(mask: np.ndarray, k: int) -> np.ndarray:
@@ -64,41 +71,51 @@ def dilate(mask: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+def _count(r: np.ndarray) -> int:
+    return int(np.sum(r[:, 1] - r[:, 0]))
+
+
 def check_channel(a: np.ndarray, moving: np.ndarray, fs: float, opts: IngestOptions,
                   full_scale: float | None, kind: str | None) -> ChannelQuality:
-    """The checks of the module docstring on one channel ``a`` (m/s^2)."""
+    """The checks of the module docstring on one channel ``a`` (m/s^2), ``(n,)``.
+
+    Working memory: a few boolean ``(n,)`` arrays and the moving samples; no float temporary of the
+    whole channel besides those.
+    """
     q = opts.quality
     out = ChannelQuality()
     finite = np.isfinite(a)
-    drop = ~finite
-    out.dropouts = int(drop.sum())
+    drop = runs(~finite)
+    out.dropouts = _count(drop)
     good = a[finite & moving]
     if good.size == 0:
         out.masks = {"dropouts": drop}
         return out
+    held = np.zeros(a.size, dtype=bool)        # sample equal to the one before
+    np.equal(a[1:], a[:-1], out=held[1:])
     if full_scale is not None:
-        clip = finite & (np.abs(a) >= 0.999 * full_scale)
+        clip_mask = np.abs(a) >= 0.999 * full_scale
     else:   # a saturated sensor holds its extreme value: runs of identical samples near max |a|
-        top = 0.98 * float(np.max(np.abs(good)))
-        held = np.zeros(a.size, dtype=bool)
-        held[1:] = np.diff(a) == 0
-        held[:-1] |= held[1:]
+        top = 0.98 * max(float(good.max()), -float(good.min()))
         with np.errstate(invalid="ignore"):
-            clip = long_runs(held & (np.abs(a) >= top), q.clip_min_run)
-    out.clipped = int(clip.sum())
-    same = np.zeros(a.size, dtype=bool)
-    same[1:] = (np.diff(a) == 0) & moving[1:]
-    flat = long_runs(same, max(2, int(round(q.flat_s * fs))))
-    out.flat = int(flat.sum())
+            clip_mask = (a >= top) | (a <= -top)
+        clip_mask &= held | np.append(held[1:], False)
+    clip = long_runs(clip_mask, q.clip_min_run) if full_scale is None else runs(clip_mask)
+    out.clipped = _count(clip)
+    held &= moving
+    flat = long_runs(held, max(2, int(round(q.flat_s * fs))))
+    out.flat = _count(flat)
     sample = good[:: max(1, good.size // 200_000)]
     med = float(np.median(sample))
     sigma = 1.4826 * float(np.median(np.abs(sample - med)))
-    spikes = np.zeros(a.size, dtype=bool)
+    spikes = np.empty((0, 2), dtype=np.int64)
     if sigma > 0:
         with np.errstate(invalid="ignore"):
-            spikes = finite & (np.abs(a - med) > q.spike_sigma * sigma) & ~clip
-    out.spikes = int(spikes.sum())
-    out.rms_moving = float(np.sqrt(np.mean((good - good.mean()) ** 2)))
+            far = (a > med + q.spike_sigma * sigma) | (a < med - q.spike_sigma * sigma)
+        spikes = runs(far & ~from_runs(clip, a.size))
+    out.spikes = _count(spikes)
+    mean = float(good.mean())
+    out.rms_moving = float(np.sqrt(max(float(good @ good) / good.size - mean ** 2, 0.0)))
     if kind is not None:
         out.rms_range = tuple(q.rms_range[kind])
     out.masks = {"dropouts": drop, "clipping": clip, "flat": flat, "spikes": spikes}
@@ -139,15 +156,16 @@ def check_recording(rec: Recording, opts: IngestOptions, moving: np.ndarray
     return out, warnings
 
 
-def excluded_mask(quality: dict[str, ChannelQuality], opts: IngestOptions, fs: float
+def excluded_mask(quality: dict[str, ChannelQuality], opts: IngestOptions, fs: float, n: int
                   ) -> dict[str, np.ndarray]:
-    """Reason -> samples excluded for it (any channel), grown by ``segments.margin_s``."""
+    """Reason -> ``(n,)`` samples excluded for it (any channel), grown by ``segments.margin_s``."""
     k = int(round(opts.segments.margin_s * fs))
     out = {}
     for reason in opts.quality.exclude:
-        masks = [cq.masks[reason] for cq in quality.values() if reason in cq.masks]
-        if masks:
-            m = np.logical_or.reduce(masks)
-            if m.any():
-                out[reason] = dilate(m, k)
+        flagged = [cq.masks[reason] for cq in quality.values() if reason in cq.masks and len(cq.masks[reason])]
+        if flagged:
+            m = np.zeros(n, dtype=bool)
+            for r in flagged:
+                from_runs(r, n, out=m)
+            out[reason] = dilate(m, k)
     return out

@@ -18,7 +18,7 @@ from suspid.infra.files import pyplot, save_figure, write_json, write_text
 from suspid.interfaces import TrackSegment
 
 from .align import Alignment
-from .load import Recording
+from .load import CHUNK, Recording
 from .options import IngestOptions, kind_of
 from .quality import ChannelQuality
 from .segment import Excluded, Window
@@ -120,6 +120,31 @@ def write(rep: dict[str, Any], out: Path) -> None:
     write_text(out / "ingest.md", markdown(rep))
 
 
+def spectrogram(a: np.ndarray, fs: float, max_columns: int = 1200) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """PSD ``(n_freqs, n_columns)`` of ``a`` ((m/s^2)^2/Hz, NaN as 0) over disjoint windows of about 2 s,
+    neighbouring windows averaged down to at most ``max_columns``; returns (freqs Hz, times s, PSD).
+
+    The windows do not overlap, so the record is taken a block of whole columns at a time: the working
+    memory does not grow with the recording.
+    """
+    nper = int(min(4096, max(64, 2 ** np.round(np.log2(2 * fs)))))
+    n_win = a.size // nper
+    avg = max(1, int(np.ceil(n_win / max_columns)))
+    per_block = max(1, CHUNK // (nper * avg)) * avg * nper      # samples per block: whole columns
+    cols, times = [], []
+    for b0 in range(0, n_win // avg * avg * nper, per_block):
+        x = a[b0:b0 + per_block]
+        x = np.where(np.isfinite(x), x, 0.0)
+        f, tt, s = sps.spectrogram(x, fs=fs, nperseg=nper, noverlap=0)
+        k = tt.size // avg
+        cols.append(s[:, :k * avg].reshape(s.shape[0], k, avg).mean(axis=2))
+        times.append(b0 / fs + tt[:k * avg].reshape(k, avg).mean(axis=1))
+    if not cols:   # shorter than one column: one window over what there is
+        f, tt, s = sps.spectrogram(np.where(np.isfinite(a), a, 0.0), fs=fs, nperseg=min(nper, a.size), noverlap=0)
+        return f, tt, s
+    return f, np.concatenate(times), np.concatenate(cols, axis=1)
+
+
 def figures(opts: IngestOptions, rec: Recording, al: Alignment, kept: Sequence[Window],
             excluded: Sequence[Excluded], out: Path) -> list[Path]:
     """The PNG figures of the module docstring; returns their paths."""
@@ -127,7 +152,7 @@ def figures(opts: IngestOptions, rec: Recording, al: Alignment, kept: Sequence[W
     g = rec.grid
     paths = []
     step = max(1, g.n // 20000)
-    t = g.time[::step]
+    t = g.t0 + np.arange(0, g.n, step) / g.fs
     fig, ax = plt.subplots(figsize=(10, 3.6))
     ax.plot(t, 3.6 * rec.speed[::step], "k-", lw=0.8, label="speed")
     for i, w in enumerate(kept):
@@ -161,16 +186,7 @@ def figures(opts: IngestOptions, rec: Recording, al: Alignment, kept: Sequence[W
         k = kind_of(c, list(opts.quality.rms_range)) or c.split("_")[0]
         kinds.setdefault(k, c)
     for k, c in kinds.items():
-        a = rec.accelerations[rec.channels.index(c)]
-        a = np.where(np.isfinite(a), a, 0.0)
-        nper = int(min(4096, max(64, 2 ** np.round(np.log2(2 * g.fs)))))
-        f, tt, s = sps.spectrogram(a, fs=g.fs, nperseg=nper, noverlap=0)
-        del a
-        avg = int(np.ceil(tt.size / 1200))          # at most 1200 columns: average neighbouring ones
-        if avg > 1:
-            n_col = tt.size // avg
-            s = s[:, :n_col * avg].reshape(s.shape[0], n_col, avg).mean(axis=2)
-            tt = tt[:n_col * avg].reshape(n_col, avg).mean(axis=1)
+        f, tt, s = spectrogram(rec.accelerations[rec.channels.index(c)], g.fs)
         db = 10 * np.log10(s + 1e-20)
         fig, ax = plt.subplots(figsize=(10, 3.6))
         m = ax.imshow(db, origin="lower", aspect="auto", cmap="viridis", vmin=np.percentile(db, 5),

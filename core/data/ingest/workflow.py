@@ -111,10 +111,12 @@ def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, off
     v = (rec.distance[w.i1] - rec.distance[w.i0]) / duration if w.i1 < rec.distance.size else w.v_mean
     n = int(round(v * duration / dx)) + 1
     x = rec.distance[w.i0] + offset + np.arange(n) * dx
-    x_src = track.x0 + np.arange(track.irregularities.shape[1]) * track.dx
-    if x[0] < x_src[0] or x[-1] > x_src[-1]:
+    n_src = track.irregularities.shape[1]
+    k0, k1 = int(np.floor((x[0] - track.x0) / track.dx)), int(np.ceil((x[-1] - track.x0) / track.dx)) + 1
+    if x[0] < track.x0 or k1 > n_src:
         return None
-    irr = np.array([np.interp(x, x_src, row) for row in track.irregularities])
+    x_src = track.x0 + np.arange(k0, k1) * track.dx       # the stretch of the record under the segment
+    irr = np.array([np.interp(x, x_src, row[k0:k1]) for row in track.irregularities])
     if not np.all(np.isfinite(irr)):
         return None
     return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])})
@@ -145,7 +147,9 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
     out.mkdir(parents=True, exist_ok=True)
     if opts.output.format == "hdf5":
         paths = (out / "track.h5", out / "accelerations.h5")
-        for path, write in zip(paths, (lambda p: write_track_h5(segs, p), lambda p: write_accelerations_h5(resps, p))):
+        # the accelerations go straight to disk: an in-memory image would hold them twice more
+        writers = (lambda p: write_track_h5(segs, p), lambda p: write_accelerations_h5(resps, p, in_memory=False))
+        for path, write in zip(paths, writers):
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=out)
             os.close(fd)
             try:
@@ -219,7 +223,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
     log("quality checks")
     quality, qwarn = check_recording(rec, opts, moving)
     warnings += qwarn
-    bad_by = excluded_mask(quality, opts, g.fs)
+    bad_by = excluded_mask(quality, opts, g.fs, g.n)
     log(f"reading the track record {opts.track.path}")
     track, twarn = read_track_record(opts.track, IRREGULARITY_CHANNELS)
     warnings += twarn
@@ -240,7 +244,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
     x_src_end = track.x0 + (track.irregularities.shape[1] - 1) * track.dx
     reasons = _motion_reasons(rec, opts)
     for check, mask in bad_by.items():
-        where = ", ".join(c for c, cq in quality.items() if check in cq.masks and cq.masks[check].any())
+        where = ", ".join(c for c, cq in quality.items() if len(cq.masks.get(check, ())))
         reasons[f"{CHECK_WORDS[check]} in {where}"] = mask
     reasons["outside the track record"] = ((rec.distance + al.offset_m < track.x0)
                                            | (rec.distance + al.offset_m > x_src_end))
@@ -258,6 +262,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         resps.append(Response(tuple(channels), g.fs, rec.accelerations[:, w.i0:w.i1], name))   # a view
         provs.append(_provenance(rec, w, seg, al))
         kept.append(w)
+    del track   # the segments hold what is written of it
     excluded.sort(key=lambda e: e.i0)
     if not segs:
         seconds: dict[str, float] = {}

@@ -388,7 +388,11 @@ class ExudynTrain(Simulator):
         o = self.opts
         features = self._features(segments)
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
-                                newton=features.saturation or features.bump_stops or features.yaw_blow_off)
+                                # a speed record puts the creep forces (f/v, v the odometer's velocity) into a
+                                # symbolic function: a single linear solve would keep the step matrix of the
+                                # starting speed, so it needs Newton iterations like the other nonlinear laws
+                                newton=features.saturation or features.bump_stops or features.yaw_blow_off
+                                or features.variable_speed)
         out = []
         for seg in segments:
             speed = float(seg.mean_speed)

@@ -20,8 +20,13 @@ requested step). The track enters through the symbolic tables of the model
 decimated to fs with a polyphase anti-aliasing filter
 (``scipy.signal.resample_poly``). Linear contact: one linear solve per step
 (``newton.active = False``; the system is linear up to second-order terms in
-the small rotations); creep saturation or bump stops: modified Newton.
-Variable speed: the odometer's velocity follows the speed record.
+the small rotations); creep saturation, bump stops, yaw-damper blow-off or a
+variable speed: modified Newton. Variable speed: the odometer's velocity
+follows the speed record, and the creep forces (creep damping f/v) are
+computed with it in the contact function; a single linear solve would keep
+the step matrix of the starting speed (at 3 m/s the creep damping is 28 times
+the one at 300 km/h), which left the lateral response of a run that starts
+slow wrong by a factor of 2.5.
 
 Frequency solver (:class:`FrequencyResponse`, :func:`simulate_frequency`):
 exudyn's linearisation M, K, D at the segment speed, once per parameter
