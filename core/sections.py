@@ -151,6 +151,8 @@ class StudyOptions(Section):
     compare: list[str] | None = Field(default=None, description="two variant names: a paired test over the seeds")
     checkpoints: list[int] = Field(default=[100, 300], min_length=1, description="simulator calls N at which the worst "
                                    "identifiable error is reported")
+    target_error: float = Field(default=2.0, gt=0, description="worst identifiable error (% of the interval) "
+                                "whose first reach, in simulator calls, study.md reports per variant")
 
     @field_validator("variants")
     @classmethod

@@ -15,7 +15,7 @@ from scipy import stats
 import suspid
 from suspid.errors import ConfigError
 from suspid.infra.ledger import Ledger
-from suspid.workflows.study_stats import anytime_errors, error_at, paired_test, summarize
+from suspid.workflows.study_stats import anytime_errors, calls_to_reach, error_at, paired_test, summarize
 from conftest import run_cli
 from test_study import STUDY
 
@@ -101,6 +101,7 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
             half = stats.t.ppf(0.975, 1) * sd / math.sqrt(2)
             got = [float(row[f"{key}_{s}"]) for s in ("mean", "sd", "ci_low", "ci_high")]
             assert got == pytest.approx([mean, sd, mean - half, mean + half], rel=1e-9, abs=1e-9), key
+    reach: dict[str, list[float]] = {}
     for r in runs:
         result = results[r["variant"], int(r["seed"])]
         assert float(r["worst_error"]) == pytest.approx(expected_measures(result)["worst_error"], rel=1e-9)
@@ -117,6 +118,7 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
                                      for i, n in enumerate(names) if result["identifiable"][n])
             expected.append(worst)
         assert curve == pytest.approx(expected, rel=1e-9, abs=1e-9)
+        reach.setdefault(r["variant"], []).append(calls_to_reach(curve, 2.0))
     text = (out / "study.md").read_text()
     assert "## Over seeds" in text and "## Worst identifiable error at N simulator calls" in text
     assert "## Paired comparison: likelihood against mean-spectrum" in text
@@ -127,6 +129,17 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
     assert f"likelihood lower on {n_down}, mean-spectrum lower on {n_up}" in text
     assert f"Exact sign test (two-sided): p = {p:.3g}." in text
     assert "| N = 7 | N = 1000 |" in text and (out / "study_anytime.png").stat().st_size > 0
+    assert "## Simulator calls to reach a worst identifiable error <= 2 %" in text
+    for variant, calls in reach.items():
+        per_seed = ", ".join(f"{c:.0f}" if math.isfinite(c) else "never" for c in calls)
+        n = sum(math.isfinite(c) for c in calls)
+        assert f"| {variant} | {n} of 2 |" in text and f"| {per_seed} |" in text
+
+
+def test_calls_to_reach_a_target():
+    curve = np.array([9.0, 5.0, 2.5, 2.0, 1.0, 1.0])
+    assert calls_to_reach(curve, 2.0) == 4 and calls_to_reach(curve, 5.0) == 2
+    assert math.isnan(calls_to_reach(curve, 0.5)) and math.isnan(calls_to_reach(np.zeros(0), 1.0))
 
 
 def test_a_bad_compare_is_one_line_naming_the_key(tmp_path):

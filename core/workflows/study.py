@@ -122,7 +122,7 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]], stats: 
     write_variants_csv(study_dir / "study.csv", summaries(stats, checkpoints))
     if any(s.curve.size for s in stats):
         figure_anytime(study_dir / "study_anytime.png", stats)
-    statistics = statistics_markdown(stats, checkpoints, options.compare)
+    statistics = statistics_markdown(stats, checkpoints, options.compare, options.target_error)
     names = rows[0][1]["parameters"]
     has_ref = "w_ref" in rows[0][1]
     measures = ["worst_error", "mean_error", "coverage", *(f"error_at_{n}" for n in checkpoints)] if has_ref else []

@@ -13,7 +13,7 @@ import numpy as np
 
 from suspid.infra.files import atomic_open, pyplot, save_figure
 from suspid.workflows.report import markdown_table
-from suspid.workflows.study_stats import Summary, error_at, paired_test, run_metrics, summarize
+from suspid.workflows.study_stats import Summary, calls_to_reach, error_at, paired_test, run_metrics, summarize
 
 METRICS = {"worst_error": ("worst identifiable error (%)", 2), "mean_error": ("mean identifiable error (%)", 2),
            "n_simulator_calls": ("simulator calls", 1), "coverage": ("coverage of w_ref", 2),
@@ -85,8 +85,10 @@ def _cell(s: Summary, digits: int, interval: bool = True) -> str:
     return text
 
 
-def statistics_markdown(runs: list[RunStats], checkpoints: list[int], compare: list[str] | None) -> str:
-    """The markdown sections: measures over seeds, errors at the checkpoints, the paired comparison."""
+def statistics_markdown(runs: list[RunStats], checkpoints: list[int], compare: list[str] | None,
+                        target: float = 2.0) -> str:
+    """The markdown sections: measures over seeds, errors at the checkpoints, the simulator calls to
+    reach ``target`` %, the paired comparison."""
     table = summaries(runs, checkpoints)
     keys = [k for k in METRICS if k in next(iter(table.values()))]
     rows = [[v, max(s.n for s in summary.values()), *(_cell(summary[k], METRICS[k][1]) for k in keys)]
@@ -104,9 +106,25 @@ def statistics_markdown(runs: list[RunStats], checkpoints: list[int], compare: l
                  "among the first N evaluations, mean ± sd over seeds (a run that stopped before N keeps "
                  "its last value).\n\n" + markdown_table(header, rows)
                  + "\n\n![error against simulator calls](study_anytime.png)\n")
+        text += "\n" + reach_markdown(runs, target) + "\n"
     if compare is not None:
         text += "\n" + paired_markdown(runs, *compare) + "\n"
     return text
+
+
+def reach_markdown(runs: list[RunStats], target: float) -> str:
+    """Per variant: how many seeds reach a worst identifiable error <= ``target`` % and after how many calls."""
+    rows = []
+    for variant, group in by_variant(runs).items():
+        calls = [calls_to_reach(r.curve, target) for r in group if r.curve.size]
+        reached = [c for c in calls if np.isfinite(c)]
+        rows.append([variant, f"{len(reached)} of {len(calls)}",
+                     _cell(summarize(reached), 1, interval=False), ", ".join(
+                         f"{c:.0f}" if np.isfinite(c) else "never" for c in calls)])
+    return (f"## Simulator calls to reach a worst identifiable error <= {target:g} %\n\nThe first N after "
+            f"which the best-J point is within {target:g} % on every identifiable component; mean ± sd over "
+            "the seeds that reach it (a seed that never does is counted apart).\n\n"
+            + markdown_table(["variant", "seeds that reach it", "calls (mean ± sd)", "per seed"], rows))
 
 
 def paired_markdown(runs: list[RunStats], a: str, b: str) -> str:

@@ -130,6 +130,12 @@ def error_at(curve: np.ndarray, n_calls: int) -> float:
     return float(curve[min(n_calls, curve.size) - 1])
 
 
+def calls_to_reach(curve: np.ndarray, target: float) -> float:
+    """The number of simulator calls after which the anytime curve is first ``<= target`` (%), NaN if never."""
+    reached = np.flatnonzero(curve <= target)
+    return float(reached[0] + 1) if reached.size else math.nan
+
+
 @dataclass(frozen=True)
 class PairedTest:
     """A paired comparison of ``a`` and ``b`` (same seeds): differences d = a - b.
