@@ -124,14 +124,15 @@ def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool =
 
 
 def study(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
-          log: Log | None = None) -> _study.StudyResult:
+          log: Log | None = None, report_only: bool = False) -> _study.StudyResult:
     """The variants of the config's ``study:`` section (``suspid study``): one identification each.
 
+    :param report_only: run nothing; write the study outputs from the variants that have finished.
     :returns: the study folder and one :class:`IdentificationResult` per variant (in order).
     """
     cfg = validate(config, overrides).config
     return _study.run_study(_source(config), _override_list(overrides), cfg, fresh=fresh, progress=progress,
-                            log=log or (lambda s: None))
+                            log=log or (lambda s: None), report_only=report_only)
 
 
 def monitor(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,

@@ -179,9 +179,12 @@ def stability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 @app.command()
 def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           fresh: bool = typer.Option(False, "--fresh", help="Start every variant over."),
-          quiet: bool = typer.Option(False, "--quiet", help="No progress bars.")) -> None:
+          quiet: bool = typer.Option(False, "--quiet", help="No progress bars."),
+          report_only: bool = typer.Option(False, "--report-only",
+                                           help="Run nothing: the outputs from the variants that have finished.")
+          ) -> None:
     """Run the variants of the config's study: section, once per seed; study.csv (over seeds), study_runs.csv, study.md."""
-    out = api.study(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet))
+    out = api.study(config, set_ or [], fresh=fresh, progress=not quiet, log=_log(quiet), report_only=report_only)
     console.print((out.study_dir / "study.md").read_text(encoding="utf-8"))
 
 

@@ -87,6 +87,8 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
 
     results = {(v, s): json.loads((out / "variants" / f"{v}-seed{s}" / "result.json").read_text())
                for v in ("likelihood", "mean-spectrum") for s in (1, 2)}
+    for (v, s), result in results.items():  # every run is measured on the first variant's identifiable components
+        result["identifiable"] = dict(results["likelihood", s]["identifiable"])
     table = {r["variant"]: r for r in csv.DictReader(open(out / "study.csv"))}
     assert list(table) == ["likelihood", "mean-spectrum"]
     runs = list(csv.DictReader(open(out / "study_runs.csv")))
@@ -130,6 +132,12 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
     assert f"Exact sign test (two-sided): p = {p:.3g}." in text
     assert "| N = 7 | N = 1000 |" in text and (out / "study_anytime.png").stat().st_size > 0
     assert "## Simulator calls to reach a worst identifiable error <= 2 %" in text
+    # --report-only: the same outputs from the finished runs, without running anything
+    before = {name: (out / name).read_text() for name in ("study.csv", "study_runs.csv")}
+    (out / "study.csv").unlink()
+    again = suspid.study(config, report_only=True)
+    assert {name: (out / name).read_text() for name in before} == before
+    assert again.variants["likelihood-seed1"].J_max == pytest.approx(results["likelihood", 1]["J_max"])
     for variant, calls in reach.items():
         per_seed = ", ".join(f"{c:.0f}" if math.isfinite(c) else "never" for c in calls)
         n = sum(math.isfinite(c) for c in calls)

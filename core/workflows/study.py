@@ -92,24 +92,43 @@ def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[s
 
 
 def run_study(source: str | Path | Mapping[str, Any], overrides: Sequence[str], config: Config, *,
-              fresh: bool = False, progress: bool = False, log: Callable[[str], None] = lambda s: None
-              ) -> StudyResult:
+              fresh: bool = False, progress: bool = False, log: Callable[[str], None] = lambda s: None,
+              report_only: bool = False) -> StudyResult:
     """Run every variant (resuming finished ones from their ledgers), then write the study outputs.
 
     :param config: the study's own config, loaded from ``source`` with ``overrides``.
+    :param report_only: run nothing: write the outputs from the variants that have finished
+        (their ``result.json``), e.g. while a long study is still running elsewhere or after it
+        was interrupted; the others are left out and named in the log.
+    :raises ConfigError: ``report_only`` and no variant has finished.
     """
     results: dict[str, IdentificationResult] = {}
     runs = study_variants(source, overrides, config)
+    if report_only:
+        missing = [r.label for r in runs if not (r.config.run_dir() / "result.json").is_file()]
+        runs = [r for r in runs if r.label not in missing]
+        if not runs:
+            raise config.error("no variant of this study has finished yet (no result.json); nothing to report",
+                               "study")
+        if missing:
+            log(f"left out, not finished: {', '.join(missing)}")
     for r in runs:
         log(f"variant {r.label}")
-        results[r.label] = run(r.config, fresh=fresh, progress=progress, log=log)
+        results[r.label] = IdentificationResult.load(r.config.run_dir()) if report_only else \
+            run(r.config, fresh=fresh, progress=progress, log=log)
     study_dir = config.run_dir()
     study_dir.mkdir(parents=True, exist_ok=True)
+    # Every variant of a seed is measured on the same components: those identifiable in the run of the
+    # study's first variant with that seed (an optimiser's own flags come from a metamodel fitted on
+    # its own points, which differ from method to method).
+    first = config.study.variants[0].name
+    common = {r.seed: results[r.label].identifiable for r in runs if r.variant == first}
     stats = []
     for r in runs:
         result = results[r.label].to_dict()
-        curve = anytime_errors(r.config.run_dir() / "ledger.sqlite", result) if "w_ref" in result else None
-        stats.append(run_stats(r.label, r.variant, r.seed, result, np.zeros(0) if curve is None else curve))
+        measured = {**result, "identifiable": common.get(r.seed, result["identifiable"])}
+        curve = anytime_errors(r.config.run_dir() / "ledger.sqlite", measured) if "w_ref" in result else None
+        stats.append(run_stats(r.label, r.variant, r.seed, measured, np.zeros(0) if curve is None else curve))
     write_study(study_dir, [(label, r.to_dict()) for label, r in results.items()], stats, config.study)
     return StudyResult(study_dir, results)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -156,9 +157,11 @@ def figure_anytime(path: Path, runs: list[RunStats]) -> Path:
         n = max(c.size for c in curves)
         padded = np.array([np.concatenate([c, np.full(n - c.size, c[-1])]) for c in curves])
         calls = np.arange(1, n + 1)
-        line, = ax.plot(calls, np.nanmean(padded, axis=0), label=f"{variant} ({len(curves)} seeds)")
-        ax.fill_between(calls, np.nanmin(padded, axis=0), np.nanmax(padded, axis=0), color=line.get_color(),
-                        alpha=0.2, linewidth=0)
+        with warnings.catch_warnings():  # calls where no seed has an error yet (no identifiable component) are NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean, low, high = (np.nanmean(padded, axis=0), np.nanmin(padded, axis=0), np.nanmax(padded, axis=0))
+        line, = ax.plot(calls, mean, label=f"{variant} ({len(curves)} seeds)")
+        ax.fill_between(calls, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
     ax.set_yscale("log")
     ax.set_xlabel("simulator calls")
     ax.set_ylabel("worst identifiable error (%)")
