@@ -309,18 +309,21 @@ class EIProposer:
       model's mean instead of EI's, when it lies outside the basins set aside,
       away from the evaluated points and above the best J there. EI alone
       keeps spending points on other basins and corners once a basin is found,
-      and reaches the maximum to 1 % slowly; a fixed cycle of exploration and
-      pure exploitation steps is Regis and Shoemaker's remedy for radial-basis
-      surrogates (2007). Without either, with either, with both: evaluations
-      to 1 %, mean over seeds 0-9, Branin 30.4 / - / 23.2, Goldstein-Price
-      (log f) 38.6 / - / 27.3, Hartmann 3 18.0 / 16.3 (warping) / 16.7
-      (``benchmarks/RESULTS.md``).
+      and reaches the maximum to 1 % slowly. A fixed cycle of exploration
+      steps and a pure exploitation step is also how Regis and Shoemaker's
+      CORS-RBF (J. Global Optim., 2005) balances the two.
+
+    Evaluations to 1 %, mean over seeds 0-9 (``benchmarks/RESULTS.md``), with
+    the set-aside rule only / the warped J / the exploitation steps / both:
+    Branin 29.4 / 26.0 / 24.5 / 23.2, Goldstein-Price (log f) 55.8 / 32.8 /
+    25.7 / 27.3, Hartmann 3 17.6 / 16.3 / 18.1 / 16.7.
 
     The records of a budget-mode step carry EI and eps of the warped J.
 
     Determinism: the EI candidates of the iteration that follows the n-th
     evaluation are drawn from ``default_rng([seed, 1, n])`` (``[seed, 1, n, j]``
-    for the j-th point of a batch).
+    for the j-th point of a batch), the starts of an exploitation step from
+    ``default_rng([seed, 3, n])``.
 
     :param surrogate: the run's surrogate, refitted in place (warm starts).
     :param opts: the ``ego:`` options (search fields, ``seed``, ``batch``).
