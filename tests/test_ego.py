@@ -386,3 +386,52 @@ def test_set_aside_searches_outside_the_incumbents_basin():
     p.basins = [(centre, np.full(2, 0.2))]  # a basin that leaves part of the box to search
     u, _ = p._search(model, U, y, y, float(y.max()), np.random.default_rng(1))
     assert p._outside(u[None, :])[0] and np.sqrt(np.sum(((u - centre) / 0.2) ** 2)) >= 1.0
+
+
+# -- budget mode: warped J and a cycle of exploitation steps ---------------------------
+
+def test_warp_values_keeps_the_order_and_removes_a_long_tail():
+    from scipy.stats import skew
+
+    from suspid.optimize.loop import warp_values
+
+    y = -np.exp(np.random.default_rng(0).standard_normal(400))  # J with a long tail of poor values
+    w = warp_values(y)
+    np.testing.assert_array_equal(np.argsort(w), np.argsort(y))
+    assert skew(y) < -4.0 and abs(skew(w)) < 0.5
+    np.testing.assert_array_equal(warp_values(np.full(5, 3.0)), np.zeros(5))
+
+
+def _bowl_state(n):
+    from suspid.optimize.loop import LoopState
+
+    state = LoopState(q=2)
+    for u in np.random.default_rng(0).random((n, 2)):
+        state.add(u, bowl([3 * u[0] - 1, u[1]]))  # maximum 1 at u = (0.5, 0.3)
+    return state
+
+
+def test_budget_mode_exploits_every_third_step():
+    from suspid.optimize.loop import EXPLOIT_PERIOD, EIBelowTolerance, EIProposer
+
+    p = EIProposer(GPyKriging(seed=0), EGOOptions(tol=0.0))
+    state = _bowl_state(8)
+    steps = [p.propose(state, 10, EIBelowTolerance(0.0)).points[0][0] for _ in range(EXPLOIT_PERIOD)]
+    slope = [np.abs(p._warped.predict_gradients(u[None, :])[0]).max() for u in steps]
+    # EI steps go where the model is unsure; the third step is a stationary point of the mean
+    assert min(slope[:-1]) > 0.1 and slope[-1] < 1e-3
+    assert np.allclose(steps[-1], [0.5, 0.3], atol=0.15)  # near the bowl's maximum, from 8 points
+
+
+def test_paper_mode_never_exploits():
+    from suspid.optimize.acquisition import maximize_ei
+    from suspid.optimize.loop import EXPLOIT_PERIOD, EIBelowTolerance, EIProposer
+
+    opts = EGOOptions()  # tol = 1e-4 = explore_tol: the paper's loop
+    p = EIProposer(GPyKriging(seed=0), opts)
+    p.n_steps = EXPLOIT_PERIOD - 1
+    state = _bowl_state(15)
+    u = p.propose(state, 10, EIBelowTolerance(0.0)).points[0][0]
+    rng = np.random.default_rng([opts.seed, 1, state.n_points])
+    u_ei, _ = maximize_ei(p.surrogate, state.U_array, state.y_array, float(state.y_array.max()), opts, rng)
+    np.testing.assert_array_equal(u, u_ei)

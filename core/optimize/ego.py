@@ -50,7 +50,8 @@ Using it in a pipeline
 (e) Budget mode (``tol`` < ``explore_tol`` = 1e-4, e.g. tol = 0): when EI
     falls below explore_tol * (max J - min J) the loop sets the incumbent's
     basin aside and goes on against the best J outside it, so that it does not
-    spend the budget at a local maximum (:class:`suspid.optimize.loop.EIProposer`).
+    spend the budget at a local maximum; EI is maximised on a model of the warped J
+    and every third step maximises the model's mean (:class:`suspid.optimize.loop.EIProposer`).
     With the default tol the paper's stop fires first: the paper's loop is unchanged.
 
 Public API: :class:`EGO`, :func:`run_ego`, :func:`maximize`,

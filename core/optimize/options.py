@@ -84,8 +84,10 @@ class EGOOptions(BaseModel):
         the sensitivity report) when the last point was not yet in it.
     :ivar explore_tol: budget mode (tol below it, e.g. tol = 0): when the EI
         maximiser's EI is below ``explore_tol`` * (max J - min J), the step
-        explores instead (0: never). With the default tol = 1e-4 the paper's
-        stop fires first, so the paper's loop is unchanged.
+        explores instead (0: never); EI is maximised on a model of the warped
+        J, and every third step maximises the model's mean instead
+        (:class:`suspid.optimize.loop.EIProposer`). With the default tol = 1e-4
+        the run is not in budget mode: the paper's loop is unchanged.
     :ivar explore_distance: ... or when the EI maximiser lies within this
         distance (each unit coordinate) of an evaluated point (default 0: never).
     :ivar explore: how it explores: ``"set-aside"`` (default) sets the
