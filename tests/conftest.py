@@ -58,3 +58,16 @@ def run_cli(*args: str, env: dict | None = None, cwd: Path | None = None):
     full_env.update(env or {})
     return subprocess.run([sys.executable, "-m", "suspid", *args], capture_output=True, text=True,
                           env=full_env, cwd=cwd, timeout=300)
+
+
+def count_evaluations(ledger_path: Path) -> int:
+    """Successful evaluations in a run ledger (0 while it does not exist or is locked), read-only."""
+    import sqlite3
+
+    if not Path(ledger_path).exists():
+        return 0
+    try:
+        with sqlite3.connect(f"file:{ledger_path}?mode=ro", uri=True, timeout=5) as conn:
+            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
+    except sqlite3.Error:
+        return 0

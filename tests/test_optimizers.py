@@ -184,15 +184,9 @@ def test_ego_options_in_the_optimizer_section_are_the_ego_section(tmp_path):
 
 
 def _evaluations(ledger_path: Path) -> int:
-    import sqlite3
+    from conftest import count_evaluations
 
-    if not ledger_path.exists():
-        return 0
-    try:
-        with sqlite3.connect(ledger_path, timeout=5) as conn:
-            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
-    except sqlite3.OperationalError:
-        return 0
+    return count_evaluations(ledger_path)
 
 
 def test_sigkill_during_cma_es_then_resume_gives_the_same_result(tmp_path):

@@ -74,15 +74,9 @@ def test_same_config_same_result_and_resume_reuses_ledger(tmp_path):
 
 
 def _evaluations(ledger_path: Path) -> int:
-    import sqlite3
+    from conftest import count_evaluations
 
-    if not ledger_path.exists():
-        return 0
-    try:
-        with sqlite3.connect(ledger_path, timeout=5) as conn:
-            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
-    except sqlite3.OperationalError:
-        return 0
+    return count_evaluations(ledger_path)
 
 
 def test_sigkill_during_design_then_resume_gives_same_result(tmp_path):
