@@ -77,7 +77,7 @@ BAD = [
     ("w_ref outside", GOOD + "data: {w_ref: {k_secondary: 9.0e6}}\n", (), "data.w_ref.k_secondary",
      "outside the admissible interval"),
     ("unknown objective", GOOD.replace("plugin: likelihood", "plugin: chi2"), (), "objective.plugin",
-     "available objectives: likelihood, overlap"),
+     "available objectives: likelihood, mean-spectrum, overlap, wasserstein"),
     ("bad name", GOOD.replace("name: qc", "name: 'a b/c'"), (), "name", "match pattern"),
     # sections read by their own modules, checked before any simulation
     ("ego typo", GOOD + "ego: {max_iters: 3}\n", (), "ego.max_iters", "unknown key; expected one of: batch, explore"),
