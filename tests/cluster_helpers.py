@@ -83,8 +83,9 @@ def start_scheduler(port: int, timeout_s: float = 30.0) -> subprocess.Popen:
     raise RuntimeError(f"the dask scheduler did not listen on port {port} within {timeout_s} s")
 
 
-def start_worker(address: str, *, without_suspid: bool = False) -> subprocess.Popen:
-    """A ``dask worker`` process (no nanny, one thread); ``without_suspid``: one where ``import suspid`` fails.
+def start_worker(address: str, *, without_suspid: bool = False, sleep_s: float = 0.0) -> subprocess.Popen:
+    """A ``dask worker`` process (no nanny, one thread); ``without_suspid``: one where ``import suspid`` fails;
+    ``sleep_s``: each simulation of the test simulator sleeps that long on it (the simulations run there).
 
     ``sys.modules['suspid'] = None`` makes every import of suspid fail in that
     process (what a worker in an environment without suspid sees), while
@@ -93,7 +94,7 @@ def start_worker(address: str, *, without_suspid: bool = False) -> subprocess.Po
     args = ["dask-worker", address, "--no-nanny", "--nthreads", "1", "--no-dashboard"]
     code = (("import sys; sys.modules['suspid'] = None; " if without_suspid else "import sys; ")
             + f"sys.argv = {args!r}; from distributed.cli.dask_worker import main; main()")
-    return subprocess.Popen([sys.executable, "-c", code], env=_env(),
+    return subprocess.Popen([sys.executable, "-c", code], env={**_env(), SLEEP_VAR: str(sleep_s)},
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 

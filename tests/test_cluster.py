@@ -26,7 +26,7 @@ import suspid
 from suspid.errors import ClusterError
 from suspid.plugins.executors.dask import DaskExecutor
 
-from cluster_helpers import (PID_DIR_VAR, SLEEP_VAR, cli, free_port, recorded_pids, register, start_scheduler,
+from cluster_helpers import (PID_DIR_VAR, cli, free_port, recorded_pids, register, start_scheduler,
                              start_worker, stop, wait_for_workers)
 
 TINY = {"name": "tiny", "seed": 4,
@@ -111,7 +111,7 @@ def test_ctrl_c_then_scheduler_killed_mid_run_nothing_failed_and_the_rerun_gives
         tmp_path, processes, serial_result):
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
-    processes += [start_scheduler(port), start_worker(address)]
+    processes += [start_scheduler(port), start_worker(address, sleep_s=0.3)]  # slow enough to interrupt
     config = _config(tmp_path, "run", plugin="dask", options={"address": address, "timeout_s": 10})
     path = tmp_path / "tiny.yaml"
     path.write_text(yaml.safe_dump(config, sort_keys=False))
@@ -120,7 +120,7 @@ def test_ctrl_c_then_scheduler_killed_mid_run_nothing_failed_and_the_rerun_gives
     def run_until(more: int) -> subprocess.Popen:
         """The run, started, once ``more`` simulations more than now are in the ledger."""
         n_ok = _ledger_status(ledger).get("ok", 0) + more
-        run = cli("run", str(path), "--quiet", env={SLEEP_VAR: "0.3"})
+        run = cli("run", str(path), "--quiet")
         deadline = time.monotonic() + 120
         while _ledger_status(ledger).get("ok", 0) < n_ok and run.poll() is None and time.monotonic() < deadline:
             time.sleep(0.1)

@@ -53,7 +53,9 @@ def _evaluations(ledger: Path) -> int:
 
 def test_ctrl_c_on_the_command_exits_130_keeps_the_ledger_and_resumes(tmp_path):
     """A real SIGINT to ``suspid run`` during the design: exit 130, the resume hint, no traceback."""
-    path = _write(tmp_path, design={"n_initial": 40}, ego={"max_iter": 2})
+    # 60 segments: each simulation takes long enough that the signal lands in the design even on a loaded machine
+    path = _write(tmp_path, design={"n_initial": 40}, ego={"max_iter": 2},
+                  data={"track": {"n_segments": 60, "length_m": 1000.0}, "w_ref": {"k_sec_z": 380.0e3}})
     env = dict(os.environ, SUSPID_DISABLE_PLUGIN_AUTOLOAD="1")
     proc = subprocess.Popen([sys.executable, "-m", "suspid", "run", str(path), "--quiet"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

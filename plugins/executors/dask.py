@@ -219,7 +219,18 @@ class DaskExecutor(Executor):
         return max(self._slots(), 1)
 
     def _workers(self) -> dict[str, Any]:
-        return self.client_.scheduler_info(n_workers=-1)["workers"]
+        """The scheduler's record of its workers.
+
+        :raises ClusterError: the connection is lost (the client's last record of the scheduler is empty then).
+        """
+        self._check_connection()
+        info = self.client_.scheduler_info(n_workers=-1)
+        if "workers" not in info:
+            self.lost_ = True
+            raise ClusterError(f"lost the connection to the dask scheduler at {self.address_} (no record of its "
+                               f"workers); the simulations in flight were not recorded: run the same command "
+                               f"again to resume once the scheduler and its workers are back")
+        return info["workers"]
 
     def _slots(self) -> int:
         """Σ over the connected workers of min(threads, ⌊resource held / resource needed⌋)."""
