@@ -116,8 +116,10 @@ def stop(proc: subprocess.Popen) -> None:
 
 def cli(*args: str, env: dict[str, str] | None = None, timeout_s: float = 180.0) -> subprocess.Popen:
     """``suspid ARGS`` with ``PidTrain`` registered, in a subprocess (not waited for)."""
+    from conftest import interruptible  # the tests send it SIGINT
+
     return subprocess.Popen([sys.executable, str(Path(__file__).resolve()), *args], env={**_env(), **(env or {})},
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=interruptible)
 
 
 if __name__ == "__main__":

@@ -71,3 +71,15 @@ def count_evaluations(ledger_path: Path) -> int:
             return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
     except sqlite3.Error:
         return 0
+
+
+def interruptible() -> None:
+    """``preexec_fn`` for a subprocess the test sends SIGINT to: the default disposition of SIGINT.
+
+    A shell without job control starts background commands (``pytest ... &``) with SIGINT
+    ignored, and children inherit that, so Ctrl-C tests would pass or fail with the way
+    pytest was started.
+    """
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

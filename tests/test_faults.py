@@ -57,8 +57,10 @@ def test_ctrl_c_on_the_command_exits_130_keeps_the_ledger_and_resumes(tmp_path):
     path = _write(tmp_path, design={"n_initial": 40}, ego={"max_iter": 2},
                   data={"track": {"n_segments": 60, "length_m": 1000.0}, "w_ref": {"k_sec_z": 380.0e3}})
     env = dict(os.environ, SUSPID_DISABLE_PLUGIN_AUTOLOAD="1")
+    from conftest import interruptible
+
     proc = subprocess.Popen([sys.executable, "-m", "suspid", "run", str(path), "--quiet"], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=interruptible)
     ledger = tmp_path / "runs" / "faults" / "ledger.sqlite"
     deadline = time.monotonic() + 240
     while _evaluations(ledger) < 3 and time.monotonic() < deadline and proc.poll() is None:
