@@ -45,7 +45,7 @@ from suspid.plugins.simulators.exudyn_train import ExudynTrain
 
 from test_ingest import GEN
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.long]   # 130 s on 2 cores: run with -m long
 
 PARAMETERS = ["k_sec_z", "c_sec_z"]
 W_REF = {"k_sec_z": 290.0e3, "c_sec_z": 15.0e3}   # -17 % and -25 % of the conventional car's nominal values
