@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -42,13 +41,9 @@ def _suspid(*args: str, preexec=None, timeout: float = 300) -> subprocess.Comple
 
 
 def _evaluations(ledger: Path) -> int:
-    if not ledger.exists():
-        return 0
-    try:
-        with sqlite3.connect(f"file:{ledger}?mode=ro", uri=True, timeout=1) as db:
-            return db.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
-    except sqlite3.Error:
-        return 0
+    from conftest import count_evaluations
+
+    return count_evaluations(ledger)
 
 
 def test_ctrl_c_on_the_command_exits_130_keeps_the_ledger_and_resumes(tmp_path):
