@@ -7,7 +7,6 @@ with code 130 and keeps what is already in the run ledger.
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import sqlite3
 import sys
@@ -285,15 +284,10 @@ _CLICK = _click_exceptions()
 
 def _kept() -> str:
     """What an interrupted command leaves: the finished simulations in the ledgers it opened."""
+    from suspid.infra.ledger import count_finished
     from suspid.infra.lock import OPENED_LEDGERS
 
-    counts = []
-    for path in OPENED_LEDGERS:
-        try:
-            with contextlib.closing(sqlite3.connect(f"file:{path}?mode=ro", uri=True)) as db:
-                counts.append(db.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0])
-        except sqlite3.Error:
-            pass
+    counts = [n for n in map(count_finished, OPENED_LEDGERS) if n is not None]
     if not counts:
         return "every finished simulation is kept in the run ledger"
     where = OPENED_LEDGERS[0] if len(OPENED_LEDGERS) == 1 else f"{len(OPENED_LEDGERS)} run ledgers"

@@ -62,15 +62,9 @@ def run_cli(*args: str, env: dict | None = None, cwd: Path | None = None):
 
 def count_evaluations(ledger_path: Path) -> int:
     """Successful evaluations in a run ledger (0 while it does not exist or is locked), read-only."""
-    import sqlite3
+    from suspid.infra.ledger import count_finished
 
-    if not Path(ledger_path).exists():
-        return 0
-    try:
-        with sqlite3.connect(f"file:{ledger_path}?mode=ro", uri=True, timeout=5) as conn:
-            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
-    except sqlite3.Error:
-        return 0
+    return count_finished(ledger_path) or 0
 
 
 def interruptible() -> None:

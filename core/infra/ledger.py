@@ -137,6 +137,25 @@ def write_error(path: Path, exc: sqlite3.Error, timeout_s: float) -> LedgerError
     return LedgerError(f"{path}: run ledger error ({reason})")
 
 
+def count_finished(path: str | Path) -> int | None:
+    """Successful evaluations in the ledger at ``path``, read without opening it for writing.
+
+    For another process's view of a run (the CLI after Ctrl-C, tests watching a run):
+    :returns: the count, or None when the file is absent, locked past the timeout or not readable.
+    """
+    path = Path(path)
+    if not path.exists():
+        return None
+    try:
+        conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=5.0)
+        try:
+            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return None
+
+
 def check_ledger_file(path: str | Path) -> None:
     """Check, without changing anything, that ``path`` is absent, empty or a sound suspid ledger.
 
