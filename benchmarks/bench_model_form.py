@@ -17,6 +17,7 @@ Usage (from the repository root)::
 
     python benchmarks/bench_model_form.py OUT_DIR [--seeds 7 8 11] [--w-refs quickstart other w0]
         [--objectives overlap likelihood] [--jobs 2] [--segments 24] [--summary]
+        [--nuisance k_yaw_s=5e6:20e6 kalker_scale=0.6:1.0]
 
 A finished run (its result.json) is kept: running again completes a cut grid;
 ``--summary`` prints the table of the runs finished so far.
@@ -48,7 +49,7 @@ W_REFS = {
 """Measurement-date suspensions (SI): the quickstart's damaged one, a stiffer/more damped one, and w0."""
 
 
-def write_config(case: Path, seed: int, objective: str) -> Path:
+def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None) -> Path:
     cfg = {"name": objective, "seed": seed,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": protocol.VEHICLE}},
            "parameters": {n: {} for n in W_REFS["quickstart"]},
@@ -58,6 +59,8 @@ def write_config(case: Path, seed: int, objective: str) -> Path:
            "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200},
            "objective": {"plugin": objective}, "surrogate": {"plugin": "gpy-kriging"},
            "design": {"method": "maximin-lhs", "n_initial": 30}, "ego": {"max_iter": 40, "tol": 1.0e-4}}
+    if nuisance:
+        cfg["identifiability"] = {"model_error": {"nuisance": {"parameters": nuisance}}}
     path = case / f"{objective}.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     return path
@@ -105,13 +108,16 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--segments", type=int, default=24)
     ap.add_argument("--summary", action="store_true", help="only summarise the runs already finished")
+    ap.add_argument("--nuisance", nargs="*", default=[], metavar="NAME=LOW:HIGH",
+                    help="nuisance parameters of the model-error check, e.g. k_yaw_s=5e6:20e6")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
+    nuisance = {text.split("=")[0]: [float(v) for v in text.split("=")[1].split(":")] for text in a.nuisance}
     cfgs = []
     for obj in a.objectives:       # the runs most needed first: a cut grid still covers every w_ref
         for seed in a.seeds:
             for w_ref in a.w_refs:
-                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj))
+                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj, nuisance))
     with ThreadPoolExecutor(a.jobs) as pool:
         for cfg, wall, err in ([] if a.summary else pool.map(run_one, cfgs)):
             print(f"{cfg.parent.name}/{cfg.stem}: {wall:.0f} s{' FAILED: ' + err if err else ''}", flush=True)

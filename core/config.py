@@ -329,6 +329,7 @@ def check_config_plugins(config: Config) -> None:
                              key=f"data.{date}.simulator_options", lines=config._lines, base_dir=base_dir)
     simulator = build_simulator(config)
     check_parameters(config, simulator)
+    check_nuisance(config, simulator)
     channels = simulator.channels()
     channel_weights(config, channels)
     figure_channel(config, channels)
@@ -428,6 +429,25 @@ def check_parameters(config: Config, simulator) -> None:
             raise ConfigError(f"w_ref value {value:g} lies outside the admissible interval "
                               f"[{lower:g}, {upper:g}] {known[name].unit}",
                               file=file, key=f"data.w_ref.{name}", line=lines.get(("data", "w_ref", name)))
+
+
+def check_nuisance(config: Config, simulator) -> None:
+    """``identifiability.model_error.nuisance.parameters``: the simulator's, not identified, low < high in its domain."""
+    known = {p.name: p for p in simulator.parameters()}
+    identified = set(config.parameters) or set(simulator.default_parameters())
+    for name, (low, high) in config.identifiability.model_error.nuisance.parameters.items():
+        key = f"identifiability.model_error.nuisance.parameters.{name}"
+        line = config._lines.get(tuple(key.split(".")))
+        if name not in known:
+            raise ConfigError(f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
+                              f"known: {', '.join(sorted(known))}", file=config.file, key=key, line=line)
+        if name in identified:
+            raise ConfigError(f"'{name}' is identified: a nuisance parameter is one the run does not identify",
+                              file=config.file, key=key, line=line)
+        domain = known[name].domain
+        if not (domain[0] < low < high < domain[1]):
+            raise ConfigError(f"expected low < high inside the physical domain ({domain[0]:g}, {domain[1]:g}) "
+                              f"{known[name].unit}, got [{low:g}, {high:g}]", file=config.file, key=key, line=line)
 
 
 def identified_bounds(config: Config, simulator) -> dict[str, tuple[float, float]]:

@@ -74,6 +74,19 @@ class AdequacyOptions(Section):
     group_evaluations: int = Field(default=20, ge=2, description="simulations per free parameter and group")
 
 
+class NuisanceOptions(Section):
+    """``identifiability.model_error.nuisance``: w_opt's dependence on assumed model parameters
+    (:mod:`suspid.workflows.nuisance`)."""
+
+    parameters: dict[str, tuple[float, float]] = Field(
+        default_factory=dict, description="not-identified model parameters whose value is uncertain, each with "
+        "its plausible range [low, high] in SI units; empty: the check is not run")
+    max_shift: float = Field(default=0.05, gt=0, le=1, description="largest move of w_opt, fraction of the "
+                             "admissible interval, when one of them takes an end of its range, of a trustworthy "
+                             "component")
+    max_evaluations: int = Field(default=0, ge=0, description="simulations per re-identification; 0: 20 q")
+
+
 class ModelErrorOptions(Section):
     """``identifiability.model_error``: when a component is *not trustworthy under model error*."""
 
@@ -85,6 +98,7 @@ class ModelErrorOptions(Section):
     widen: bool = Field(default=True, description="widen the intervals by the self-check bias (in quadrature)")
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)
+    nuisance: NuisanceOptions = Field(default_factory=NuisanceOptions)
 
 
 class IdentifiabilityOptions(Section):

@@ -25,6 +25,7 @@ from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
+from suspid.workflows.nuisance import nuisance_shifts
 from suspid.workflows.reference import self_check
 
 
@@ -276,12 +277,15 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
       (:mod:`suspid.method.adequacy`); or
     - the data groups that inform it (channel directions, frequency halves) give estimates more
       than ``adequacy.max_spread`` apart, and further apart than 2√2 sampling standard deviations
-      ``sd`` (:mod:`suspid.workflows.adequacy`).
+      ``sd`` (:mod:`suspid.workflows.adequacy`); or
+    - a nuisance parameter (``nuisance.parameters``: a not-identified model parameter with a
+      plausible range) moves it by more than ``nuisance.max_shift`` at an end of its range
+      (:mod:`suspid.workflows.nuisance`).
 
     :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
     :returns: ``{"trustworthy": name -> bool, "reasons": name -> [str], "widen": (q,) or None, the
-        model-error part of the intervals' half-widths in [0, 1] (self-check bias and half the group
-        spread), "report": the JSON-able details for result.json}``.
+        model-error part of the intervals' half-widths in [0, 1] (self-check bias, half the group
+        spread and the largest nuisance shift, in quadrature), "report": the JSON-able details for result.json}``.
     """
     names = problem.names
     q = problem.q
@@ -368,5 +372,24 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                       f"read from, it lies at {parts} of its interval (spread "
                                       f"{100 * spread[k]:.0f} %, threshold {100 * ad_opt.max_spread:.0f} %): "
                                       f"the model's sensitivity to it differs from the vehicle's")
+    nu_opt = options.nuisance
+    if nu_opt.parameters:
+        check = nuisance_shifts(problem, ledger, u_opt, nu_opt, options.self_check.initial_step, executor=executor)
+        if check is None:
+            report["nuisance"] = {"status": "not run: the reference date's data are not part of this run "
+                                            "(give noise.reference)"}
+        else:
+            largest, rows = check.largest()
+            report["nuisance"] = {**check.to_dict(names), "max_shift_percent": 100 * nu_opt.max_shift,
+                                  "largest_shift_percent": {n: float(100 * v) for n, v in zip(names, largest)}}
+            widen = largest if widen is None else np.sqrt(widen ** 2 + largest ** 2)
+            for k in range(q):
+                if largest[k] > nu_opt.max_shift:
+                    name, value = check.values[rows[k]]
+                    lo, hi = nu_opt.parameters[name]
+                    reasons[k].append(
+                        f"rests on an assumed model parameter: with {name} = {value:g} (plausible {lo:g} to {hi:g}) "
+                        f"it is identified {100 * check.shifts[rows[k], k]:+.1f} % of its interval away "
+                        f"(threshold {100 * nu_opt.max_shift:.0f} %)")
     return {"trustworthy": {n: not r for n, r in zip(names, reasons)},
             "reasons": {n: r for n, r in zip(names, reasons) if r}, "widen": widen, "report": report}

@@ -51,6 +51,52 @@ from suspid.workflows.problem import Problem, segments_digest
 from suspid.workflows.tasks import SpectraTask, run_one
 
 
+def local_search(neg_j: Callable[[np.ndarray], float], u0: np.ndarray, initial_step: float,
+                 max_evaluations: int) -> np.ndarray:
+    """A bounded Nelder-Mead search of min ``neg_j`` over [0, 1]^q from ``u0 (q,)``; returns the minimiser.
+
+    The initial simplex steps ``initial_step`` along each axis, towards the box's
+    middle, so that every vertex is inside the box.
+    """
+    simplex = np.vstack([u0] + [np.clip(u0 + initial_step * e * (1 if u0[i] < 0.5 else -1), 0, 1)
+                                for i, e in enumerate(np.eye(u0.size))])
+    res = minimize(neg_j, u0, method="Nelder-Mead",
+                   options={"initial_simplex": simplex, "maxfev": max_evaluations, "xatol": 2e-3, "fatol": 1e-6})
+    return np.clip(res.x, 0, 1)
+
+
+class SearchObjective:
+    """−J at u ∈ [0, 1]^q for a local search: ``task`` simulated at u on ``executor``, J by ``fn``.
+
+    Values are cached by u (rounded to 1e-6); a point whose simulation fails
+    (an unstable vehicle) is +inf, simply a bad one for the search.
+
+    :param extra: SI values of not-identified model parameters added to every w.
+    :ivar n_simulations: simulations made so far.
+    """
+
+    def __init__(self, problem: Problem, task: SpectraTask, fn: ObjectiveFunction, executor: Executor | None,
+                 extra: dict[str, float] | None = None) -> None:
+        self.problem, self.task, self.fn, self.executor = problem, task, fn, executor
+        self.extra = dict(extra or {})
+        self.cache: dict[bytes, float] = {}
+        self.n_simulations = 0
+
+    def __call__(self, u: np.ndarray) -> float:
+        u = np.clip(u, 0.0, 1.0)
+        k = np.round(u, 6).tobytes()
+        if k not in self.cache:
+            w = self.problem.w_of(self.problem.from_unit(u)) | self.extra
+            try:
+                self.cache[k] = -float(self.fn.evaluate(run_one(self.executor, self.task, w))[0])
+            except ClusterError:
+                raise
+            except SuspidError:
+                self.cache[k] = np.inf
+            self.n_simulations += 1
+        return self.cache[k]
+
+
 @dataclass
 class SelfCheck:
     """Result of the self-check; arrays ``(q,)`` in fractions of the admissible interval.
@@ -117,28 +163,9 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
         fn = ObjectiveFunction(problem.objective, y_mes0[b], problem.freqs, paths, weights=problem.weights,
                                channels=problem.channels)
         task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
-        cache: dict[bytes, float] = {}
-
-        def neg_j(u: np.ndarray) -> float:
-            nonlocal n_sims
-            u = np.clip(u, 0.0, 1.0)
-            k = np.round(u, 6).tobytes()
-            if k not in cache:
-                w = problem.w_of(problem.from_unit(u))
-                try:
-                    cache[k] = -float(fn.evaluate(run_one(executor, task, w))[0])
-                except ClusterError:
-                    raise
-                except SuspidError:  # an unstable point is simply a bad one for the search
-                    cache[k] = np.inf
-                n_sims += 1
-            return cache[k]
-
-        simplex = np.vstack([u0] + [np.clip(u0 + options.initial_step * e * (1 if u0[i] < 0.5 else -1), 0, 1)
-                                    for i, e in enumerate(np.eye(q))])
-        res = minimize(neg_j, u0, method="Nelder-Mead",
-                       options={"initial_simplex": simplex, "maxfev": max_eval, "xatol": 2e-3, "fatol": 1e-6})
-        shifts[s] = np.clip(res.x, 0, 1) - u0
+        neg_j = SearchObjective(problem, task, fn, executor)
+        shifts[s] = local_search(neg_j, u0, options.initial_step, max_eval) - u0
+        n_sims += neg_j.n_simulations
         log(f"self-check split {s + 1}/{options.n_splits}: shift "
             + ", ".join(f"{n} {100 * d:+.1f} %" for n, d in zip(problem.names, shifts[s])))
     ledger.put_array(key, np.column_stack([shifts, np.full(options.n_splits, n_sims)]))

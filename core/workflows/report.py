@@ -171,6 +171,17 @@ def model_error_section(result: dict[str, Any]) -> str:
                                     + [f"{groups['spread_percent'][n]:.1f}"] for n in names])]
     else:
         out.append(f"Adequacy at w_opt: {ad.get('status', 'not run')}.")
+    nu = me.get("nuisance")
+    if nu and nu.get("status") == "done":
+        out += ["", f"Nuisance parameters: w identified again, from w_opt, with each assumed model parameter at an "
+                    f"end of its plausible range (B fitted again at the reference date); shift against the nominal "
+                    f"model in % of the interval. A component moved by more than {nu['max_shift_percent']:.0f} % "
+                    f"rests on the assumption, not on the data.", "",
+                markdown_table(["nuisance parameter", "value"] + names,
+                               [[row["parameter"], f"{row['value']:g}"] + [f"{row[n]:+.1f}" for n in names]
+                                for row in nu["shifts_percent"]])]
+    elif nu:
+        out += ["", f"Nuisance parameters: {nu['status']}."]
     return "\n".join(out) + "\n"
 
 
