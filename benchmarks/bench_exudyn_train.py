@@ -27,6 +27,9 @@ low-disturbance track at 300 km/h, the influence of a 30 % change of c_yaw on
 the carbody vertical spectra, time vs frequency solver, creep saturation.
 
     python benchmarks/bench_exudyn_train.py --physics [--vehicle manchester-coach]
+
+``--c-yaw-shift`` prints only that influence and the critical speed, for a
+preset with other nominal values (``--set k_trac=10e6``, repeatable).
 """
 
 from __future__ import annotations
@@ -59,9 +62,21 @@ def main() -> None:
     ap.add_argument("--physics", action="store_true", help="print the physics figures of docs/model.md instead")
     ap.add_argument("--vehicle", default="conventional-hs", help="vehicle preset")
     ap.add_argument("--frequency-only", action="store_true", help="time the frequency solver only")
+    ap.add_argument("--c-yaw-shift", action="store_true",
+                    help="print only the c_yaw influence on the carbody spectra and the critical speed")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="with --c-yaw-shift: another nominal value of a vehicle parameter (repeatable)")
     args = ap.parse_args()
     if args.physics:
         physics(args.vehicle)
+        return
+    if args.c_yaw_shift:
+        overrides = {k: float(v) for k, v in (item.split("=", 1) for item in args.set)}
+        sim = ExudynTrain(vehicle={"preset": args.vehicle, **overrides}, fs_hz=FS_HZ)
+        segs = synthetic_segments({"spectrum": "german-low", "n_segments": 3, "length_m": 1500.0,
+                                   "speed_kmh": 300.0, "seed": 2})
+        print(f"# vehicle {args.vehicle} {overrides}: linear critical speed {3.6 * sim.critical_speed():.0f} km/h")
+        c_yaw_shift(sim, segs, sim.simulate({}, segs))
         return
 
     import exudyn
