@@ -27,6 +27,9 @@ low-disturbance track at 300 km/h, the influence of a 30 % change of c_yaw on
 the carbody vertical spectra, time vs frequency solver, creep saturation.
 
     python benchmarks/bench_exudyn_train.py --physics [--vehicle manchester-coach]
+
+``--c-yaw-shift`` prints only that influence and the critical speed, for a
+preset with other nominal values (``--set k_trac=10e6``, repeatable).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ import numpy as np  # noqa: E402
 
 from bench_objectives import best_time as timed  # noqa: E402  (same folder: best/median wall, best CPU)
 from suspid.plugins.simulators.exudyn_train import ExudynTrain  # noqa: E402
+from suspid.plugins.simulators.exudyn_train.contact import creep_usage  # noqa: E402
 from suspid.data.track import synthetic_segments  # noqa: E402
 
 LENGTH_M, SPEED_KMH, FS_HZ, STEP_S = 2000.0, 300.0, 100.0, 0.002
@@ -58,9 +62,21 @@ def main() -> None:
     ap.add_argument("--physics", action="store_true", help="print the physics figures of docs/model.md instead")
     ap.add_argument("--vehicle", default="conventional-hs", help="vehicle preset")
     ap.add_argument("--frequency-only", action="store_true", help="time the frequency solver only")
+    ap.add_argument("--c-yaw-shift", action="store_true",
+                    help="print only the c_yaw influence on the carbody spectra and the critical speed")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="with --c-yaw-shift: another nominal value of a vehicle parameter (repeatable)")
     args = ap.parse_args()
     if args.physics:
         physics(args.vehicle)
+        return
+    if args.c_yaw_shift:
+        overrides = {k: float(v) for k, v in (item.split("=", 1) for item in args.set)}
+        sim = ExudynTrain(vehicle={"preset": args.vehicle, **overrides}, fs_hz=FS_HZ)
+        segs = synthetic_segments({"spectrum": "german-low", "n_segments": 3, "length_m": 1500.0,
+                                   "speed_kmh": 300.0, "seed": 2})
+        print(f"# vehicle {args.vehicle} {overrides}: linear critical speed {3.6 * sim.critical_speed():.0f} km/h")
+        c_yaw_shift(sim, segs, sim.simulate({}, segs))
         return
 
     import exudyn
@@ -167,6 +183,28 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
     return out
 
 
+IDENTIFICATION_SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200}
+"""The spectra grid of configs/quickstart.yaml and configs/table1.yaml (the identification band)."""
+
+
+def c_yaw_shift(sim, segs, base) -> None:
+    """Shift of the segment-averaged carbody spectra (identification band) for c_yaw x 0.7 and x 1.3:
+    mean over the band / largest bin (its frequency, and how far below the channel's spectral peak it lies)."""
+    from suspid.method.spectra import compute_spectra
+
+    y0, f = compute_spectra(base, IDENTIFICATION_SPECTRA)
+    level = y0.mean(axis=0)
+    c_yaw = {p.name: p.nominal for p in sim.parameters()}["c_yaw"]
+    for factor in (0.7, 1.3):
+        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * c_yaw}, segs), IDENTIFICATION_SPECTRA)
+        d = np.abs(np.mean(y1 - y0, axis=0))
+        k = d.argmax(axis=1)
+        print(f"c_yaw x {factor}: spectrum shift (dB, mean / largest bin at Hz, that bin's level below the "
+              "channel's peak, 0.4-20 Hz, 200 bins): " + "  ".join(
+                  f"{c}: {d[i].mean():.2f}/{d[i, k[i]]:.2f} at {f[k[i]]:.1f} Hz ({level[i].max() - level[i, k[i]]:.0f} dB)"
+                  for i, c in enumerate(sim.channels()) if c.startswith("carbody")))
+
+
 def physics(vehicle: str) -> None:
     """The figures of docs/model.md for one vehicle preset (see the module docstring)."""
     from suspid.workflows.simulate import format_modes, modes_report
@@ -194,12 +232,7 @@ def physics(vehicle: str) -> None:
     print("\nride rms at 300 km/h, German low disturbance, 3 x 1.5 km, fs 100 Hz (m/s^2):")
     print("  " + "  ".join(f"{c}: {v:.3f}" for c, v in zip(ch, rms)))
     y0, _ = compute_spectra(base)
-    c_yaw = {p.name: p.nominal for p in sim.parameters()}["c_yaw"]
-    for factor in (0.7, 1.3):
-        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * c_yaw}, segs))
-        d = np.abs(np.mean(y1 - y0, axis=0))
-        print(f"c_yaw x {factor}: spectrum shift (dB, mean / max over 0.4-20 Hz): " + "  ".join(
-            f"{c}: {d[i].mean():.2f}/{d[i].max():.2f}" for i, c in enumerate(ch) if c.startswith("carbody")))
+    c_yaw_shift(sim, segs, base)
 
     load = dynamic_wheel_load(vehicle, segs)
     print("dynamic wheel load (wheelset 1, left wheel, fs 400 Hz), rms / static: "
@@ -212,6 +245,11 @@ def physics(vehicle: str) -> None:
     db = np.median(np.abs(yt[0] - y0[0]), axis=1)
     print(f"\ntime vs frequency solver (1.5 km): rms difference max {100 * np.max(np.abs(rel)):.2f} %, "
           f"median |dB| max {np.max(db):.2f} dB")
+    usage = creep_usage(sim, segs[0], 0.4)
+    print("linear creep forces against mu N (friction 0.4, static wheel load), per wheelset: "
+          + "  ".join(f"{j + 1}: N {u['wheel_load_n'] / 1e3:.1f} kN, Fx {u['fx_rms_n'] / 1e3:.2f} / Fy "
+                      f"{u['fy_rms_n'] / 1e3:.2f} kN rms, u rms {u['u_rms']:.2f} max {u['u_max']:.2f}"
+                      for j, u in enumerate(usage)))
     for mu in (0.4, 0.3):
         ssim = ExudynTrain(vehicle=vehicle, solver="time", fs_hz=FS_HZ,
                            contact={"creep_saturation": True, "friction": mu})

@@ -19,7 +19,8 @@ this model happened to produce:
   damped mode above 30 Hz (track support);
 - ride on German low-disturbance track at 300 km/h: carbody rms 0.05-0.35 m/s^2;
 - creep saturation at friction 0.4 changes the carbody responses by < 10 % rms
-  on good track (creep forces stay far below mu N).
+  on good track (creep forces stay far below mu N), but for the leading
+  carbody of the articulated section, whose end bogie is lightly loaded.
 """
 
 from __future__ import annotations
@@ -163,20 +164,35 @@ def test_ride_on_german_low_disturbance_track_at_300_kmh(sim):
             assert 0.05 <= value <= 0.35, (name, value)
 
 
+IDENTIFICATION_SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200}
+"""The spectra grid of configs/quickstart.yaml and configs/table1.yaml."""
+
+
 def test_yaw_damping_barely_moves_the_carbody_vertical_spectra(sim):
-    """A 30 % change of c_yaw moves each carbody vertical spectrum by < 0.3 dB on average over the band
-    (0.4-20 Hz); the lateral channels move more (the yaw dampers' business)."""
+    """A 30 % change of c_yaw moves each carbody vertical spectrum (segment-averaged, identification band)
+    by < 0.3 dB on average over the band; the lateral channels move more (the yaw dampers' business).
+    Single vertical bins move by more than 0.3 dB only where the vertical spectrum is low (bogie pitch
+    near 9-13 Hz strokes the longitudinal links, which sit below the carbody's centre of mass): at least
+    12 dB below the channel's spectral peak, and those bins hold less than 3 % of its power in the band."""
     segs = track()
-    y0, _ = compute_spectra(sim.simulate({}, segs))
+    y0, _ = compute_spectra(sim.simulate({}, segs), IDENTIFICATION_SPECTRA)
+    level = y0.mean(axis=0)                                        # (n_channels, n_freqs) dB
     ch = sim.channels()
     vertical = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("vertical")]
     lateral = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("lateral")]
     assert vertical and lateral
     for factor in (0.7, 1.3):
-        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * bounds(sim, "c_yaw")[0]}, segs))
-        shift = np.abs(np.mean(y1 - y0, axis=0)).mean(axis=1)     # (n_channels,) dB
+        y1, _ = compute_spectra(sim.simulate({"c_yaw": factor * bounds(sim, "c_yaw")[0]}, segs),
+                                IDENTIFICATION_SPECTRA)
+        bins = np.abs(np.mean(y1 - y0, axis=0))                   # (n_channels, n_freqs) dB
+        shift = bins.mean(axis=1)
         assert np.all(shift[vertical] < 0.3), dict(zip(ch, shift))
         assert shift[lateral].max() > shift[vertical].max()
+        for i in vertical:
+            moved = bins[i] > 0.3
+            power = 10 ** (level[i] / 10)
+            assert np.all(level[i, moved] <= level[i].max() - 12.0), (ch[i], factor)
+            assert power[moved].sum() < 0.03 * power.sum(), (ch[i], factor)
 
 
 def test_gravity_roll_is_in_the_lateral_channels_by_default():
@@ -190,16 +206,48 @@ def test_gravity_roll_is_in_the_lateral_channels_by_default():
     assert lin_on.C_disp[ch.index("carbody_middle_vertical")].any() == False  # noqa: E712
 
 
+SATURATION_EXCEPTIONS = {"tgv-articulated": {"carbody_1_middle_lateral": (0.80, 0.90)}}
+"""Carbody channels where creep saturation at friction 0.4 changes the rms by more than 10 %: the ratio
+saturated / linear expected there. The leading carbody of the articulated section rides on the section's
+end bogie, which carries one carbody end (10.2 t axle load against 17 t on the Jacobs bogies): its wheels use
+about 1.6 times as much of mu N (``test_light_end_bogies_use_more_of_the_friction_limit``)."""
+
+
 @pytest.mark.slow
-def test_creep_saturation_at_friction_0_4_is_close_to_linear():
+@pytest.mark.parametrize("preset", PRESETS)
+def test_creep_saturation_at_friction_0_4_is_close_to_linear(preset):
+    """Shen-Hedrick-Elkins saturation at friction 0.4 (time solver) against linear creep on 1 km of German
+    low-disturbance track at 300 km/h: every carbody channel within 10 % rms, but the documented exceptions."""
     seg = track(n=1, length_m=1000.0, seed=5)
-    lin = ExudynTrain(solver="time").simulate({}, seg)[0]
-    sat = ExudynTrain(solver="time", contact={"creep_saturation": True, "friction": 0.4}).simulate({}, seg)[0]
-    ch = ExudynTrain().channels()
-    for i, name in enumerate(ch):
-        if name.startswith("carbody"):
-            rel = np.std(sat.accelerations[i]) / np.std(lin.accelerations[i])
+    lin = ExudynTrain(solver="time", vehicle=preset).simulate({}, seg)[0]
+    sat = ExudynTrain(solver="time", vehicle=preset,
+                      contact={"creep_saturation": True, "friction": 0.4}).simulate({}, seg)[0]
+    exceptions = SATURATION_EXCEPTIONS.get(preset, {})
+    for i, name in enumerate(lin.channels):
+        rel = np.std(sat.accelerations[i]) / np.std(lin.accelerations[i])
+        if name in exceptions:
+            lo, hi = exceptions[name]
+            assert lo < rel < hi, (name, rel)
+        elif name.startswith("carbody"):
             assert abs(rel - 1) < 0.10, (name, rel)
+
+
+def test_light_end_bogies_use_more_of_the_friction_limit(tgv):
+    """Linear creep forces against mu N (friction 0.4) at 300 km/h: far from full slip on every wheelset
+    (rms u = |F| / (mu N) < 0.3); Kalker's coefficients scale with the contact area, f ~ N^(2/3) (Hertz),
+    so f / (mu N) ~ N^(-1/3), and the end bogies' wheelsets (one carbody end) use more of mu N than the
+    Jacobs bogies' (two carbody ends) by more than that ratio: their creepages are larger too."""
+    from suspid.plugins.simulators.exudyn_train.contact import creep_usage
+
+    usage = creep_usage(tgv, track(n=1)[0], 0.4)
+    load = np.array([u["wheel_load_n"] for u in usage])
+    u_rms = np.array([u["u_rms"] for u in usage])
+    end, jacobs = [0, 1, 6, 7], [2, 3, 4, 5]
+    assert np.all(u_rms < 0.3), u_rms
+    p = {q.name: q.nominal for q in tgv.parameters()}
+    f_end, f_jacobs = P.creep_coefficients(p, load[0])[1], P.creep_coefficients(p, load[2])[1]
+    assert f_end / f_jacobs == pytest.approx((load[0] / load[2]) ** (2 / 3), rel=0.02)
+    assert u_rms[end].min() > (load[2] / load[0]) ** (1 / 3) * u_rms[jacobs].max(), u_rms
 
 
 # ------------------------------------------------------------------------------------------ presets and options

@@ -21,7 +21,9 @@ Solvers (:mod:`.solvers`): ``solver: time`` integrates the exudyn system
 ``solver: frequency`` uses exudyn's linearisation (M, K, D) and a batched
 frequency response. Modes (:mod:`.modes`): eigenvalues, damping, dominant
 body and motion, stability, linear critical speed and its sweep over
-conicity and parameters. The class is :class:`.simulator.ExudynTrain`.
+conicity and parameters. Contact (:mod:`.contact`): every coordinate of the
+linear model on a track segment, and its creep forces against the friction
+limit. The class is :class:`.simulator.ExudynTrain`.
 
 Modes of the default car at 300 km/h (``suspid modes``; all damped): carbody
 lower sway 0.53 Hz, bounce 0.81 Hz, yaw 0.82 Hz, upper sway 1.04 Hz, pitch
