@@ -14,8 +14,8 @@ Peers (optional benchmark dependencies, not dependencies of suspid)::
 - ``suspid``: :func:`suspid.optimize.ego.maximize` with its defaults
   (``gpy-kriging``, maximin LHS, the EI search of ``EGOOptions``) and tol = 0,
   i.e. in budget mode (EI on a model of the warped J, every third step at the
-  maximiser of the mean, stalled basins set aside; see
-  :class:`suspid.optimize.loop.EIProposer`);
+  maximiser of the mean and once more after such a step missed by a hair,
+  stalled basins set aside; see :class:`suspid.optimize.loop.EIProposer`);
 - ``suspid-sklearn``: the same with the ``sklearn-gp`` surrogate;
 - ``optuna-gp``: Optuna's ``GPSampler`` (log EI on a Matérn 5/2 GP with
   priors), ``n_startup_trials = m0`` random points;

@@ -423,6 +423,35 @@ def test_budget_mode_exploits_every_third_step():
     assert np.allclose(steps[-1], [0.5, 0.3], atol=0.15)  # near the bowl's maximum, from 8 points
 
 
+def test_near_miss_is_a_cycle_exploitation_step_that_missed_by_less_than_explore_tol():
+    from suspid.optimize.loop import EIProposer
+
+    p = EIProposer(None, EGOOptions(tol=0.0))  # budget mode, explore_tol = 1e-4
+    U = np.array([[0.1, 0.1], [0.5, 0.5], [0.9, 0.9]])
+    assert not p.near_miss(U, np.array([0.0, 1.0, 1.0 - 1e-5]))  # no exploitation step yet
+    p._exploited = (U[2].copy(), 1.0)  # (0.9, 0.9) was proposed when J_max was 1; range of J: 1
+    assert p.near_miss(U, np.array([0.0, 1.0, 1.0 - 0.5e-4]))  # missed by 0.5e-4 < 1e-4 * 1
+    assert not p.near_miss(U, np.array([0.0, 1.0, 1.0 - 2e-4]))  # missed by more
+    assert not p.near_miss(U, np.array([0.0, 1.0, 1.0 + 1e-5]))  # improved
+    assert not p.near_miss(U[:2], np.array([0.0, 1.0]))  # its evaluation failed
+
+
+@pytest.mark.parametrize("miss, exploits", [(0.5e-4, True), (0.1, False)])
+def test_budget_mode_exploits_again_after_a_near_miss(miss, exploits):
+    from suspid.optimize.loop import EXPLOIT_PERIOD, EIBelowTolerance, EIProposer
+
+    p = EIProposer(GPyKriging(seed=0), EGOOptions(tol=0.0))
+    state = _bowl_state(8)
+    for _ in range(EXPLOIT_PERIOD):  # the last one is the cycle's exploitation step
+        u = p.propose(state, 10, EIBelowTolerance(0.0)).points[0][0]
+    y = state.y_array
+    state.add(u, float(y.max()) - miss * float(y.max() - y.min()))
+    u_next = p.propose(state, 10, EIBelowTolerance(0.0)).points[0][0]
+    slope = np.abs(p._warped.predict_gradients(u_next[None, :])[0]).max()
+    # after a near miss a stationary point of the mean again; after a clear miss, EI's choice
+    assert (slope < 1e-3) == exploits
+
+
 def test_paper_mode_never_exploits():
     from suspid.optimize.acquisition import maximize_ei
     from suspid.optimize.loop import EXPLOIT_PERIOD, EIBelowTolerance, EIProposer

@@ -85,7 +85,9 @@ class EGOOptions(BaseModel):
     :ivar explore_tol: budget mode (tol below it, e.g. tol = 0): when the EI
         maximiser's EI is below ``explore_tol`` * (max J - min J), the step
         explores instead (0: never); EI is maximised on a model of the warped
-        J, and every third step maximises the model's mean instead
+        J, and every third step maximises the model's mean instead, as does
+        the step after one of those that missed the best J by less than
+        ``explore_tol`` * (max J - min J)
         (:class:`suspid.optimize.loop.EIProposer`). With the default tol = 1e-4
         the run is not in budget mode: the paper's loop is unchanged.
     :ivar explore_distance: ... or when the EI maximiser lies within this
