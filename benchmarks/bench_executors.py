@@ -146,8 +146,8 @@ def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
           f"ego.batch = 1 (asynchronous with 2 workers); load average at the start "
           f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print(f"{'executor':<10} {'design (s)':>10} {'x':>5} {'EGO (s)':>8} {'x':>5} {'run (s)':>8} {'x':>5} "
-          f"{'sim (s)':>8} {'fit (s)':>8} {'load':>5}  same w_opt as serial")
-    first = None
+          f"{'sim (s)':>8} {'fit (s)':>8} {'load':>5} {'max err %':>9}  w_opt")
+    first, w_opts = None, {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, (executor, options) in enumerate(WHOLE_RUN_EXECUTORS):
             cfg = Path(tmp) / f"{executor}.yaml"
@@ -169,12 +169,16 @@ def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
             if first is None:
                 first = (times, r.w_opt)
             speedups = [a / b for a, b in zip(first[0], times)]
+            same = [name for name, w in w_opts.items() if w == r.w_opt]
+            w_opts[executor] = r.w_opt
             print(f"{executor:<10} {design:10.1f} {speedups[0]:5.2f} {ego:8.1f} {speedups[1]:5.2f} {wall:8.1f} "
-                  f"{speedups[2]:5.2f} {sim:8.2f} {fit:8.2f} {os.getloadavg()[0]:5.2f}  "
-                  f"{'yes' if r.w_opt == first[1] else 'no (asynchronous EGO: other points)'}", flush=True)
+                  f"{speedups[2]:5.2f} {sim:8.2f} {fit:8.2f} {os.getloadavg()[0]:5.2f} {r.max_error_percent:9.2f}  "
+                  f"{'the same as ' + ', '.join(same) if same else 'its own'}", flush=True)
     print("sim: median time between two design results (x 2 with two workers): one simulation and its J; "
           "fit: mean time of one EGO proposal in the driver (Kriging fits and EI search; asynchronous: the "
-          "believer's two fits); x: speed-up against serial; load: 1-min load average at the end of the run")
+          "believer's two fits); x: speed-up against serial; load: 1-min load average at the end of the run; "
+          "max err %: largest error of w_opt in % of the admissible intervals; w_opt: asynchronous EGO (2 workers) "
+          "chooses other points than the serial loop, the same on processes and dask")
 
 
 @dataclass(frozen=True)

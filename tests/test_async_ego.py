@@ -84,6 +84,15 @@ def test_serial_and_synchronous_processes_run_the_papers_loop(tmp_path, runs):
           runs["serial"])
 
 
+def test_the_refinement_continues_after_asynchronous_ego(tmp_path, runs):
+    """After the asynchronous EGO phase (the same points as without a refinement), the trust-region
+    steps, one at a time (each starts from the best point so far), through the same executor."""
+    out = _run(tmp_path / "refine", PROCESSES, refine={"enabled": True, "max_iter": 3})
+    assert out["anytime"]["w_normalized"][:M0 + M1] == runs["async"]["anytime"]["w_normalized"]
+    n_refine = out["n_refine_iterations"]
+    assert 1 <= n_refine <= 3 and out["n_simulator_calls"] == M0 + M1 + n_refine
+
+
 def test_sigkill_mid_ego_then_rerun_gives_the_uninterrupted_result(tmp_path, runs):
     out = tmp_path / "run"
     path = tmp_path / "tiny.yaml"
