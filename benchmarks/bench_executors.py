@@ -159,12 +159,13 @@ def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
             r = run(load_config(cfg), progress=False, log=lambda s: None)
             wall = time.time() - t0
             ledger = Ledger(r.run_dir / "ledger.sqlite")
-            finished = sorted(e.finished_at for e in ledger.evaluations())
+            evaluations = sorted(ledger.evaluations(), key=lambda e: e.finished_at)
+            finished = [e.finished_at for e in evaluations]
             design = finished[m0 - 1] - t0  # start-up, the reference and measurement dates, the m0 design points
             ego = finished[-1] - finished[m0 - 1]  # the m1 EGO points
+            sim = float(np.median([e.wall_time_s for e in evaluations[m0:]]))  # EGO points: one simulation each
             steps = ledger.iterations("ego")
             fit = float(np.mean([row["fit_s"] + row["search_s"] for row in steps])) if steps else float("nan")
-            sim = float(np.median(np.diff(finished[:m0]))) * (1 if executor == "serial" else 2)  # 2 at a time
             times = (design, ego, wall)
             if first is None:
                 first = (times, r.w_opt)
@@ -174,7 +175,7 @@ def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
             print(f"{executor:<10} {design:10.1f} {speedups[0]:5.2f} {ego:8.1f} {speedups[1]:5.2f} {wall:8.1f} "
                   f"{speedups[2]:5.2f} {sim:8.2f} {fit:8.2f} {os.getloadavg()[0]:5.2f} {r.max_error_percent:9.2f}  "
                   f"{'the same as ' + ', '.join(same) if same else 'its own'}", flush=True)
-    print("sim: median time between two design results (x 2 with two workers): one simulation and its J; "
+    print("sim: median wall time of one EGO point's simulation, from its submission to its J; "
           "fit: mean time of one EGO proposal in the driver (Kriging fits and EI search; asynchronous: the "
           "believer's two fits); x: speed-up against serial; load: 1-min load average at the end of the run; "
           "max err %: largest error of w_opt in % of the admissible intervals; w_opt: asynchronous EGO (2 workers) "
