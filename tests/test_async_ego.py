@@ -77,6 +77,15 @@ def test_asynchronous_ego_proposes_beside_the_point_in_flight(runs):
     assert runs["async"]["J_max"] > max(asynchronous["J"][:M0])  # EGO improved on the design
 
 
+def test_asynchronous_ego_stops_on_the_papers_ei_rule_reproducibly(tmp_path):
+    """With the paper's stop (EI < eps) instead of a fixed m1: a point whose EI is below eps beside the
+    points in flight is not asked; with none in flight, the paper's step stops the loop."""
+    ego = {"tol": 1e-2, "explore_tol": 1e-4, "max_iter": 20}
+    a, b = (_run(tmp_path / name, PROCESSES, **ego) for name in ("a", "b"))
+    _same(a, b)
+    assert a["stop_reason"] == "ei_below_tol" and M0 < a["n_simulator_calls"] < M0 + 20
+
+
 def test_serial_and_synchronous_processes_run_the_papers_loop(tmp_path, runs):
     """``asynchronous: false`` with 2 workers, and any single worker, is the paper's loop: the serial result."""
     _same(_run(tmp_path / "sync", PROCESSES, asynchronous=False), runs["serial"])
