@@ -8,10 +8,14 @@
    the frequency solver and the ``processes`` executor: simulator calls,
    EGO iterations (batches), wall time and the largest error in % of the
    admissible interval.
-3. ``--whole-run``: one identification (time solver, ``ego.batch: 2``) with the
-   serial, ``processes`` (2) and ``dask`` (LocalCluster, 2) executors in the
-   same script run: wall time of the design phase and of the whole run, and
-   the speed-ups against serial.
+3. ``--whole-run``: one quickstart-sized identification (q = 5, exudyn time
+   solver, ``ego.batch: 1``) with the serial, ``processes`` (2 workers) and
+   ``dask`` (LocalCluster, 2 workers of one thread) executors in the same
+   script run; with two workers EGO runs asynchronously (one point in flight
+   per worker). Wall time of the design phase, of the EGO phase and of the
+   whole run, the speed-ups against serial, the time of one simulation and of
+   one EGO proposal in the driver (the Kriging fits must stay small beside the
+   simulations), and the load average. About 6 minutes on 2 idle cores.
 4. ``--scheduler-memory``: the resident memory (psutil) of a real ``dask
    scheduler`` process, with two ``dask worker`` processes, while ``--tasks``
    tasks of ``configs/table1.yaml`` run, each task sending its track with its
@@ -23,7 +27,7 @@
    task specifications, data sizes and results as in a run.
 
     python benchmarks/bench_executors.py [--points 8] [--quick]
-    python benchmarks/bench_executors.py --whole-run
+    python benchmarks/bench_executors.py --whole-run [--segments 8] [--segment-m 1000] [--m0 20] [--m1 16]
     python benchmarks/bench_executors.py --scheduler-memory [--tasks 500] [--tasks-before 30]
 """
 
@@ -111,44 +115,71 @@ WHOLE_RUN = """\
 name: bench-whole-{executor}
 seed: 7
 simulator: {{plugin: exudyn-train, options: {{solver: time, fs_hz: 100.0}}}}
-parameters: {{k_sec_z: {{}}, c_sec_z: {{}}, c_sec_y: {{}}}}
+parameters: {{k_sec_z: {{}}, c_sec_z: {{}}, k_prim_z: {{}}, c_sec_y: {{}}, c_yaw: {{}}}}
 data:
   source: experiment
-  track: {{spectrum: german-low, n_segments: {segments}, length_m: 500.0, speed_kmh: 300.0}}
-  w_ref: {{k_sec_z: 280.0e3, c_sec_z: 14.0e3, c_sec_y: 21.0e3}}
-spectra: {{f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 100}}
+  track: {{spectrum: german-low, n_segments: {segments}, length_m: {length_m}, speed_kmh: 300.0}}
+  w_ref: {{k_sec_z: 280.0e3, c_sec_z: 14.0e3, k_prim_z: 1.28e6, c_sec_y: 21.0e3, c_yaw: 210.0e3}}
+  reference: {{model_error_db: 1.5, model_error_scatter_db: 1.0, sensor_noise_rms: 0.005}}
+spectra: {{f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 200}}
+objective: {{plugin: overlap}}
 design: {{n_initial: {m0}}}
-ego: {{max_iter: {m1}, batch: 2}}
-identifiability: {{n_redraws: 20}}
+ego: {{max_iter: {m1}, tol: 0.0, explore_tol: 0.0}}
+identifiability: {{n_redraws: 4}}
 executor: {{plugin: {executor}, options: {options}}}
 output: {{dir: {out}}}
 """
+WHOLE_RUN_EXECUTORS = (("serial", "{}"), ("processes", "{workers: 2}"),
+                       ("dask", "{n_workers: 2, threads_per_worker: 1}"))
 
 
-def whole_run(segments: int, m0: int, m1: int) -> None:
+def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
     """Section 3 of the module docstring."""
+    import os
+
     from suspid.config import load_config
     from suspid.infra.ledger import Ledger
     from suspid.workflows.identify import run
 
-    print(f"\n3. whole run, time solver, {segments} segments of 500 m at 300 km/h, q = 3, m0 = {m0}, m1 = {m1}, "
-          f"ego.batch = 2")
-    print(f"{'executor':<10} {'design (s)':>10} {'speed-up':>9} {'run (s)':>8} {'speed-up':>9}  same w_opt")
-    reference = None
+    print(f"\n3. whole run, quickstart's q = 5 and numerical experiment, exudyn time solver, {segments} segments of "
+          f"{length_m:g} m at 300 km/h, m0 = {m0}, m1 = {m1} (tol = 0: every run makes m0 + m1 evaluations), "
+          f"ego.batch = 1 (asynchronous with 2 workers); load average at the start "
+          f"{' '.join(f'{v:.2f}' for v in os.getloadavg())}")
+    print(f"{'executor':<10} {'design (s)':>10} {'x':>5} {'EGO (s)':>8} {'x':>5} {'run (s)':>8} {'x':>5} "
+          f"{'sim (s)':>8} {'fit (s)':>8} {'load':>5} {'max err %':>9}  w_opt")
+    first, w_opts = None, {}
     with tempfile.TemporaryDirectory() as tmp:
-        for executor, options in (("serial", "{}"), ("processes", "{workers: 2}"), ("dask", "{n_workers: 2}")):
+        for i, (executor, options) in enumerate(WHOLE_RUN_EXECUTORS):
             cfg = Path(tmp) / f"{executor}.yaml"
-            cfg.write_text(WHOLE_RUN.format(executor=executor, options=options, segments=segments, m0=m0, m1=m1,
-                                            out=Path(tmp) / executor))
+            cfg.write_text(WHOLE_RUN.format(executor=executor, options=options, segments=segments,
+                                            length_m=length_m, m0=m0, m1=m1, out=Path(tmp) / executor))
+            if i == 0:
+                load_config(cfg)  # the plugins' imports, once, outside the timings
             t0 = time.time()
             r = run(load_config(cfg), progress=False, log=lambda s: None)
             wall = time.time() - t0
-            finished = sorted(e.finished_at for e in Ledger(r.run_dir / "ledger.sqlite").evaluations())
-            design = finished[m0 - 1] - t0  # the reference and measurement dates, then the m0 design points
-            if reference is None:
-                reference = (design, wall, r.w_opt)
-            print(f"{executor:<10} {design:10.1f} {reference[0] / design:9.2f} {wall:8.1f} {reference[1] / wall:9.2f}"
-                  f"  {r.w_opt == reference[2]}", flush=True)
+            ledger = Ledger(r.run_dir / "ledger.sqlite")
+            evaluations = sorted(ledger.evaluations(), key=lambda e: e.finished_at)
+            finished = [e.finished_at for e in evaluations]
+            design = finished[m0 - 1] - t0  # start-up, the reference and measurement dates, the m0 design points
+            ego = finished[-1] - finished[m0 - 1]  # the m1 EGO points
+            sim = float(np.median([e.wall_time_s for e in evaluations[m0:]]))  # EGO points: one simulation each
+            steps = ledger.iterations("ego")
+            fit = float(np.mean([row["fit_s"] + row["search_s"] for row in steps])) if steps else float("nan")
+            times = (design, ego, wall)
+            if first is None:
+                first = (times, r.w_opt)
+            speedups = [a / b for a, b in zip(first[0], times)]
+            same = [name for name, w in w_opts.items() if w == r.w_opt]
+            w_opts[executor] = r.w_opt
+            print(f"{executor:<10} {design:10.1f} {speedups[0]:5.2f} {ego:8.1f} {speedups[1]:5.2f} {wall:8.1f} "
+                  f"{speedups[2]:5.2f} {sim:8.2f} {fit:8.2f} {os.getloadavg()[0]:5.2f} {r.max_error_percent:9.2f}  "
+                  f"{'the same as ' + ', '.join(same) if same else 'its own'}", flush=True)
+    print("sim: median wall time of one EGO point's simulation, from its submission to its J; "
+          "fit: mean time of one EGO proposal in the driver (Kriging fits and EI search; asynchronous: the "
+          "believer's two fits); x: speed-up against serial; load: 1-min load average at the end of the run; "
+          "max err %: largest error of w_opt in % of the admissible intervals; w_opt: asynchronous EGO (2 workers) "
+          "chooses other points than the serial loop, the same on processes and dask")
 
 
 @dataclass(frozen=True)
@@ -248,8 +279,9 @@ def main() -> None:
     parser.add_argument("--m1", type=int, default=16)
     parser.add_argument("--quick", action="store_true", help="design part only")
     parser.add_argument("--whole-run", action="store_true", help="only section 3: a whole run per executor")
-    parser.add_argument("--segments", type=int, default=4, help="section 3: track segments")
-    parser.add_argument("--m0", type=int, default=10, help="section 3: initial design size")
+    parser.add_argument("--segments", type=int, default=8, help="section 3: track segments")
+    parser.add_argument("--segment-m", type=float, default=1000.0, help="section 3: length of each segment, m")
+    parser.add_argument("--m0", type=int, default=20, help="section 3: initial design size")
     parser.add_argument("--scheduler-memory", action="store_true", help="only section 4")
     parser.add_argument("--tasks", type=int, default=500, help="section 4: tasks, track once per worker")
     parser.add_argument("--tasks-before", type=int, default=30, help="section 4: tasks, track with every task")
@@ -258,7 +290,7 @@ def main() -> None:
         scheduler_memory(args.tasks, args.tasks_before)
         return
     if args.whole_run:
-        whole_run(args.segments, args.m0, args.m1 if args.m1 != 16 else 6)
+        whole_run(args.segments, args.segment_m, args.m0, args.m1)
         return
     design_speedup(args.points, args.length_m)
     if not args.quick:

@@ -419,6 +419,16 @@ class Optimizer(ABC):
     def done(self) -> bool:
         """True when the optimiser asks nothing more (budget spent or its own stopping rule)."""
 
+    def asynchronous(self, n_workers: int) -> bool:
+        """Whether the driver should keep ``n_workers`` points in flight, one :meth:`ask` at a time.
+
+        An optimiser that answers True takes ``ask(1, pending=X_p)``: one more point beside the
+        points ``X_p (p, q)`` SI being evaluated, or ``(0, q)`` when it has none to add before one
+        of them is told; and it takes points told one at a time, oldest first
+        (:func:`suspid.workflows.asynchronous.drive_async`). Default False: ask, evaluate together, tell.
+        """
+        return False
+
     @abstractmethod
     def result(self) -> OptimizerResult:
         """The :class:`OptimizerResult` (after at least one value was told)."""

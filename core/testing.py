@@ -186,26 +186,50 @@ OPTIMIZER_BOX = np.array([[-2.0, 3.0], [10.0, 20.0]])
 
 
 def _run_optimizer(cls: type, options: dict[str, Any], budget: int, seed: int,
-                   fail_every: int) -> tuple[list[np.ndarray], Any]:
+                   fail_every: int, asynchronous: bool = False) -> tuple[list[np.ndarray], Any]:
     """Drive one optimiser on a concave quadratic (maximiser (1, 16)) whose every ``fail_every``-th
-    evaluation fails; returns the points in the order told and the result."""
+    evaluation fails; returns the points in the order told and the result. ``asynchronous``: with
+    two points in flight, on the schedule of :func:`suspid.workflows.asynchronous.drive_async`."""
     from suspid.optimize.design import DesignOptions  # the conformance kit only
 
     opt = cls(OPTIMIZER_BOX, budget=budget, seed=seed, design=DesignOptions(n_initial=6, seed=seed), **options)
     told: list[np.ndarray] = []
-    for _ in range(10 * budget):
-        if opt.done:
-            break
-        X = np.asarray(opt.ask(n=2), dtype=float)
-        assert X.ndim == 2 and X.shape[1] == 2 and X.shape[0] >= 1, \
-            f"ask() must return (k >= 1, q) points while not done, got shape {X.shape}"
+    flights: list[np.ndarray] = []  # asynchronous: asked, not told, oldest first
+
+    def asked(X: np.ndarray, least: int) -> np.ndarray:
+        X = np.asarray(X, dtype=float)
+        X = X.reshape(-1, 2) if X.size == 0 else X
+        assert X.ndim == 2 and X.shape[1] == 2 and X.shape[0] >= least, \
+            f"ask() must return (k >= {least}, q) points here, got shape {X.shape}"
         assert np.all(X >= OPTIMIZER_BOX[:, 0] - 1e-9) and np.all(X <= OPTIMIZER_BOX[:, 1] + 1e-9), \
             f"ask() returned points outside the bounds: {X.tolist()}"
-        assert len(told) + len(X) <= budget, f"asked {len(told) + len(X)} points for a budget of {budget}"
-        values = [None if (len(told) + i + 1) % fail_every == 0 else
-                  float(-((x[0] - 1.0) / 5.0) ** 2 - ((x[1] - 16.0) / 10.0) ** 2) for i, x in enumerate(X)]
-        opt.tell(X, values)
+        assert len(told) + len(flights) + len(X) <= budget, \
+            f"asked {len(told) + len(flights) + len(X)} points for a budget of {budget}"
+        return X
+
+    def tell(X: np.ndarray) -> None:
+        opt.tell(X, [None if (len(told) + i + 1) % fail_every == 0 else
+                     float(-((x[0] - 1.0) / 5.0) ** 2 - ((x[1] - 16.0) / 10.0) ** 2) for i, x in enumerate(X)])
         told.extend(X)
+
+    for _ in range(10 * budget):
+        if not flights:
+            if opt.done:
+                break
+            X = asked(opt.ask(n=2), 1)
+            if not asynchronous or len(X) > 1:
+                tell(X)
+                continue
+            flights.append(X[0])
+        while len(flights) < 2:
+            X = asked(opt.ask(n=1, pending=np.array(flights)), 0)
+            assert len(X) <= 1, f"ask(1, pending=...) must return at most one point, got {len(X)}"
+            if not len(X):
+                break
+            assert not any(np.allclose(X[0], x, rtol=1e-12, atol=0) for x in flights), \
+                "ask(1, pending=...) returned a point that is in flight"
+            flights.append(X[0])
+        tell(flights.pop(0)[None, :])
     else:
         raise AssertionError(f"not done after {10 * budget} ask/tell rounds")
     return told, opt.result()
@@ -220,6 +244,9 @@ def check_optimizer(cls: type, options: Mapping[str, Any] | None = None, budget:
     in all; a point not asked is refused by ``tell``; ``result()`` holds every
     point told, in order, with NaN where it failed, and its best point; it
     improves on the first point told; the same seed gives the same points.
+    An optimiser whose ``asynchronous(2)`` is True is also driven with two points
+    in flight (``ask(1, pending=...)``, oldest told first): at most one new point
+    per ask, never one in flight, the budget kept, the same points for the same seed.
     """
     from suspid.interfaces import Optimizer  # the conformance kit only
 
@@ -240,6 +267,13 @@ def check_optimizer(cls: type, options: Mapping[str, Any] | None = None, budget:
     again, _ = _run_optimizer(cls, opts, budget, seed=3, fail_every=5)
     assert len(again) == len(told) and np.array_equal(np.array(again), np.array(told)), \
         "the same seed must give the same points"
+    if cls(OPTIMIZER_BOX, budget=budget, seed=3, **opts).asynchronous(2):
+        runs = [_run_optimizer(cls, opts, budget, seed=3, fail_every=5, asynchronous=True) for _ in range(2)]
+        for points, res in runs:
+            assert np.allclose(np.asarray(res.X), np.array(points), rtol=1e-12, atol=0), \
+                "asynchronous: result().X must be the points in the order told"
+        assert np.array_equal(np.array(runs[0][0]), np.array(runs[1][0])), \
+            "asynchronous: the same seed must give the same points"
     opt = cls(OPTIMIZER_BOX, budget=budget, seed=3, **opts)
     X = np.asarray(opt.ask(), dtype=float)
     try:

@@ -91,6 +91,29 @@ def test_no_simulation_of_a_run_in_the_driver(tmp_path, monkeypatch, pid_train, 
     assert any(line.startswith("dask executor: scheduler tcp://") and "dashboard http" in line for line in lines), lines
 
 
+@pytest.mark.slow
+def test_asynchronous_ego_on_dask_simulates_nothing_in_the_driver_and_repeats_on_processes(
+        tmp_path, monkeypatch, pid_train):
+    """``ego.batch: 1`` on 2 workers: asynchronous EGO, every simulation on a worker, and the schedule
+    (not the timing) fixes the points: a pool of 2 processes gives the same run."""
+    ego = {"max_iter": 4, "tol": 0.0, "explore_tol": 0.0}
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    monkeypatch.setenv(PID_DIR_VAR, str(pids))  # inherited by the LocalCluster's worker processes
+    config = _config(tmp_path, "dask", plugin="dask", options={"n_workers": 2, "threads_per_worker": 1})
+    out = suspid.identify({**config, "ego": ego})
+    assert out.ego.stop_reason == "max_iter" and out.n_simulator_calls == 6 + 4
+    seen = recorded_pids(pids)
+    assert len(seen) == 3 + out.n_simulator_calls + 2 * 2 + 1, sorted(seen)
+    assert os.getpid() not in seen, "a simulation ran in the driver process"
+    assert len(set(seen)) == 2, f"both workers should have simulated: {sorted(set(seen))}"
+    monkeypatch.delenv(PID_DIR_VAR)
+    pool = suspid.identify({**_config(tmp_path, "processes", plugin="processes", options={"workers": 2}),
+                            "ego": ego}).to_dict()
+    for key in ("w_opt", "anytime", "interval"):
+        assert out.to_dict()[key] == pool[key], key
+
+
 # -- faults of a real scheduler ---------------------------------------------------------------------
 def _ledger_status(path: Path) -> dict[str, int]:
     for _ in range(50):

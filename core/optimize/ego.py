@@ -86,6 +86,9 @@ __all__ = ["EGO", "EGOOptions", "RefineOptions", "IterationRecord", "EGOResult",
 
 Callback = Callable[[IterationRecord], "bool | None"]
 
+BELIEVED = -1
+"""``EIProposer.fitted_on`` after :meth:`EGO.ask_beside`: the surrogate's last fit saw believed values."""
+
 
 @dataclass
 class _Slot:
@@ -247,16 +250,20 @@ class EGO:
         The kriging believer (:class:`suspid.optimize.loop.EIProposer`): the pending
         points enter the fit with the surrogate's mean as their J, so EI looks
         elsewhere. The point joins the points waiting for a value (tell it like
-        any other) and counts as one EGO iteration. Only in the ``"ego"`` phase;
-        elsewhere, and once m1 points are asked, :meth:`ask` answers instead.
-        EI candidates of the p-th pending point after n evaluations come from
+        any other) and counts as one EGO iteration. No point is added outside
+        the ``"ego"`` phase, once m1 points are asked, or when the point's EI
+        is below the paper's eps (as a later point of a batch): the caller then
+        waits for a pending point, tells it and asks again; with nothing
+        pending, :meth:`ask` takes the paper's step, and its stop. EI
+        candidates of the p-th pending point after n evaluations come from
         ``default_rng([seed, 3, n, p])``.
 
-        :returns: ``(1, q)`` SI, or what :meth:`ask` returns when no point can be added.
+        :returns: ``(1, q)`` SI, or ``(0, q)`` when no point can be added now.
         """
         self._start()
+        q = self.state_.q
         if self.phase != "ego" or self._iteration >= self.options_.max_iter:
-            return self.ask()
+            return np.empty((0, q))
         st, model, opts = self.state_, self.surrogate_, self.options_
         U_p = to_unit(np.atleast_2d(np.asarray(pending, dtype=float)), self.bounds_)
         U, y = self.proposer_._data(st)
@@ -264,15 +271,18 @@ class EGO:
         model.fit(U, y)
         U_b, y_b = np.vstack([U, U_p]), np.concatenate([y, model.predict(U_p)[0]])
         model.fit(U_b, y_b)
-        self.proposer_.fitted_on = 0  # the next regular step refits on the real data
+        self.proposer_.fitted_on = BELIEVED  # not a fit on the data: result() refits
         t_fit = time.perf_counter() - t0
         j_max = float(st.y_array.max())
         rng = np.random.default_rng([opts.seed, 3, st.n_points, len(U_p)])
         t0 = time.perf_counter()
         u, log_ei = self.proposer_._search(model, U_b, y_b, st.y_array, j_max, rng)
+        epsilon = self.ei_rule_.epsilon(st.y_array)
+        if self.ei_rule_.should_stop(log_ei, epsilon):
+            return np.empty((0, q))
         self._iteration += 1
         self._pending.append(_Slot(u=u, phase="ego", iteration=self._iteration, log_ei=log_ei, j_max=j_max,
-                                   epsilon=self.ei_rule_.epsilon(st.y_array),
+                                   epsilon=epsilon,
                                    hyperparameters=dict(model.hyperparameters_ or {}), fit_seconds=t_fit,
                                    search_seconds=time.perf_counter() - t0))
         return from_unit(u[None, :], self.bounds_)
@@ -304,7 +314,8 @@ class EGO:
         finished = self.phase_ == "done"
         Ua, ya = st.U_array, st.y_array
         model = self.proposer_
-        if finished and opts.refit_final and model.fitted_on not in (0, st.n_points) and st.n_points >= 2:
+        refit = opts.refit_final or model.fitted_on == BELIEVED  # a fit on believed values is no result
+        if finished and refit and model.fitted_on not in (0, st.n_points) and st.n_points >= 2:
             self.surrogate_.fit(Ua, ya)
             model.fitted_on = st.n_points
         best = int(np.argmax(ya))

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator
 
 from suspid import registry
 from suspid.interfaces import Surrogate
@@ -97,6 +97,11 @@ class EGOOptions(BaseModel):
         against the best J there; ``"random"`` evaluates a uniformly random
         point. See :class:`suspid.optimize.loop.EIProposer`.
     :ivar batch: points per iteration (kriging believer, see :class:`suspid.optimize.loop.EIProposer`).
+    :ivar asynchronous: with ``batch = 1``, keep one point in flight per worker of the executor:
+        ``"auto"`` (default) when the executor runs more than one task at once, ``true`` likewise
+        (an error with ``batch`` > 1), ``false`` never (one simulation at a time, the paper's loop).
+        See :func:`suspid.workflows.asynchronous.drive_async` for the schedule, which keeps the run
+        reproducible.
     :ivar refine: the local refinement after the loop (:class:`RefineOptions`, off by default).
     """
 
@@ -115,7 +120,16 @@ class EGOOptions(BaseModel):
     explore_distance: float = Field(default=0.0, ge=0, le=1)
     explore: Literal["set-aside", "random"] = "set-aside"
     batch: int = Field(default=1, ge=1, description="points per iteration (kriging believer); 1 = the paper's loop")
+    asynchronous: Literal["auto", True, False] = "auto"
     refine: RefineOptions = Field(default_factory=RefineOptions)
+
+    @field_validator("asynchronous")
+    @classmethod
+    def _one_point_at_a_time(cls, value: str | bool, info: ValidationInfo) -> str | bool:
+        if value is True and info.data.get("batch", 1) > 1:
+            raise ValueError(f"asynchronous EGO proposes one point at a time; with batch = {info.data['batch']} "
+                             f"set asynchronous: false (or auto), or batch: 1")
+        return value
 
 
 def make_surrogate(surrogate: str | Surrogate = "gpy-kriging",

@@ -15,12 +15,13 @@ a run, not only the evaluations of J, goes through the run's executor
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from suspid import registry
-from suspid.errors import SimulatorError, SuspidError
+from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger, evaluation_key
 from suspid.interfaces import Executor
 from suspid.method.objective import ObjectiveFunction
@@ -73,33 +74,60 @@ def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: 
     out: list[Evaluation | None] = [None] * len(X_si)
     todo, keys = [], {}
     for i, x in enumerate(np.asarray(X_si, float)):
-        key, w = evaluation_key_of(problem, x)
-        found = ledger.get(key)
-        if found is not None and (found.ok or not retry_failed):
-            out[i] = found if found.ok else None
+        key, w, found = from_ledger(problem, ledger, x, retry_failed)
+        if found:
+            out[i] = found.ev
             on_done(i, out[i], True)
         else:
             keys[len(todo)] = (i, key, w)
             todo.append(w)
-    task = SpectraTask.of(problem.simulator, problem.segments, problem.config.spectra)
     t0 = time.perf_counter()
-    for j, result in executor.map_unordered(task, todo) if todo else ():
+    for j, result in executor.map_unordered(evaluation_task(problem), todo) if todo else ():
         i, key, w = keys[j]
-        wall = time.perf_counter() - t0
-        if isinstance(result, SimulatorError):
-            ledger.put(Evaluation(key, w, None, None, status="failed", error=str(result), wall_time_s=wall))
-            on_done(i, None, False)
-            continue
-        if isinstance(result, SuspidError):  # bad data or options, a plugin's bug: the run cannot go on
-            raise result
-        if isinstance(result, BaseException):  # the executor lost the task (a worker died, ...)
-            raise result
-        J, psi = j_of_spectra(problem, result)
-        ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=wall)
-        ledger.put(ev)
-        out[i] = ev
-        on_done(i, ev, False)
+        out[i] = record_outcome(problem, ledger, key, w, result, time.perf_counter() - t0)
+        on_done(i, out[i], False)
     return out
+
+
+@dataclass(frozen=True)
+class Found:
+    """An evaluation the ledger holds: ``ev`` None for a recorded failure."""
+
+    ev: Evaluation | None
+
+
+def from_ledger(problem: Problem, ledger: Ledger, x_si: np.ndarray, retry_failed: bool = False
+                ) -> tuple[str, dict[str, float], Found | None]:
+    """``(key, w, found)`` of ``x_si (q,)`` SI: ``found`` when the ledger answers for it (a recorded
+    failure too, unless ``retry_failed``), None when it must be simulated."""
+    key, w = evaluation_key_of(problem, x_si)
+    ev = ledger.get(key)
+    if ev is not None and (ev.ok or not retry_failed):
+        return key, w, Found(ev if ev.ok else None)
+    return key, w, None
+
+
+def evaluation_task(problem: Problem) -> SpectraTask:
+    """The executor task of an evaluation: ``task(w) -> y_sim`` on the run's segments."""
+    return SpectraTask.of(problem.simulator, problem.segments, problem.config.spectra)
+
+
+def record_outcome(problem: Problem, ledger: Ledger, key: str, w: dict[str, float], result: object,
+                   wall_s: float) -> Evaluation | None:
+    """A task's outcome (y_sim or an exception) as J, committed to the ledger; None for a failed simulation.
+
+    :raises SuspidError: bad data or options, a plugin's bug (not recorded): the run cannot go on.
+    :raises BaseException: the executor lost the task (the exception it returned).
+    """
+    if isinstance(result, SimulatorError):
+        ledger.put(Evaluation(key, w, None, None, status="failed", error=str(result), wall_time_s=wall_s))
+        return None
+    if isinstance(result, BaseException):  # a SuspidError, or the executor lost the task (a worker died, ...)
+        raise result
+    J, psi = j_of_spectra(problem, result)
+    ev = Evaluation(key, w, J, psi.tolist(), wall_time_s=wall_s)
+    ledger.put(ev)
+    return ev
 
 
 def evaluate(problem: Problem, ledger: Ledger, x_si: np.ndarray, retry_failed: bool = False) -> Evaluation:

@@ -42,6 +42,7 @@ from suspid.interfaces import Executor, OptimizerResult
 from suspid.optimize.design import min_distance
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.analysis import analyse
+from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import write_report
@@ -237,11 +238,17 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, p
 
 def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_failed: bool = False
           ) -> tuple[OptimizerResult, list[dict[str, Any]]]:
-    """Run an optimiser through ask/tell, every J through :func:`evaluate_many` (ledger, executor, failures).
+    """Run an optimiser through ask/tell, every J through the executor and the ledger (failures kept).
+
+    Each step asks as many points as the executor has workers and evaluates them
+    together (:func:`evaluate_many`); an optimiser that asks for it
+    (:meth:`suspid.interfaces.Optimizer.asynchronous`: ``ego.asynchronous`` with
+    ``ego.batch = 1`` and several workers) keeps one point in flight per worker
+    instead (:func:`suspid.workflows.asynchronous.drive_async`).
 
     Every evaluation is recorded in the ledger's ``evaluations`` rows (index -> w and J, None for a
-    failed point) in evaluation order: the anytime history of the run. The optimiser's own rows
-    (:attr:`suspid.interfaces.Optimizer.on_record`) go to the ledger with ``x`` given as w.
+    failed point) in the order the optimiser is told: the anytime history of the run. The optimiser's
+    own rows (:attr:`suspid.interfaces.Optimizer.on_record`) go to the ledger with ``x`` given as w.
 
     :returns: the optimiser's result and the failed points (phase, w and the simulator's message).
     """
@@ -256,24 +263,33 @@ def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_
     task = bars.add_task(label, total=optimizer.budget, status="")
     failed: list[dict[str, Any]] = []
     n, j_max = 0, -np.inf
-    while not optimizer.done:
-        X = np.atleast_2d(optimizer.ask(n=executor.n_workers))
-        if X.size == 0:
-            break
+
+    def tell(X: np.ndarray, evs: list) -> None:
+        nonlocal n, j_max
         phase = "design" if n == 0 and len(X) > 1 else label
-        evs = evaluate_many(problem, ledger, X, executor, lambda i, ev, reused: bars.update(task, advance=1),
-                            retry_failed=retry_failed)
-        values = []
         for x, ev in zip(X, evs):
             if ev is None:
                 failed.append(failure(problem, ledger, phase, x))
             else:
                 j_max = max(j_max, ev.J)
             ledger.put_iteration("evaluations", n, {"w": problem.w_of(x), "J": ev.J if ev else None})
-            values.append(ev.J if ev is not None else None)
             n += 1
-        optimizer.tell(X, values)
+        optimizer.tell(X, [ev.J if ev is not None else None for ev in evs])
         bars.update(task, completed=n, status=f"J_max {j_max:.4g}" if np.isfinite(j_max) else "failed points")
+
+    def together(X: np.ndarray) -> None:
+        tell(X, evaluate_many(problem, ledger, X, executor, lambda i, ev, reused: bars.update(task, advance=1),
+                              retry_failed=retry_failed))
+
+    n_workers = executor.n_workers
+    if optimizer.asynchronous(n_workers):
+        drive_async(optimizer, problem, ledger, executor, n_workers, tell, together, retry_failed=retry_failed)
+    else:
+        while not optimizer.done:
+            X = np.atleast_2d(optimizer.ask(n=n_workers))
+            if X.size == 0:
+                break
+            together(X)
     bars.update(task, total=max(n, 1), completed=max(n, 1))
     if not np.isfinite(j_max):
         raise SimulatorError(f"none of the {n} points could be simulated; see the failures in {ledger.path}")

@@ -8,10 +8,14 @@ of it; then the EGO points (a batch of ``ego.batch``) and the refinement's.
 The budget (default: m0 + m1 + the refinement's points) stops it when reached first.
 
 ``ask(n, pending=X_p)``: for an asynchronous driver that asks one point while
-others run. ``X_p (p, q)`` SI are points being evaluated: the kriging believer
-treats them as known (the surrogate's mean as their J), so the new point goes
-elsewhere (:meth:`suspid.optimize.ego.EGO.ask_beside`). Points may then be told
-one at a time, in any order.
+others run (``ego.asynchronous``, :func:`suspid.workflows.asynchronous.drive_async`).
+``X_p (p, q)`` SI are points being evaluated: the kriging believer treats them
+as known (the surrogate's mean as their J), so the new point goes elsewhere
+(:meth:`suspid.optimize.ego.EGO.ask_beside`). It returns no point (``(0, q)``)
+during the design, in the refinement, once the budget or m1 is asked, or when
+the point's EI is below the paper's eps: the driver then waits for a pending
+point, and with none pending asks without ``pending``. Points may be told one
+at a time, in any order.
 """
 
 from __future__ import annotations
@@ -64,7 +68,8 @@ class EGOOptimizer(Optimizer):
         """The design first (all of it), then the EGO points.
 
         :param pending: ``(p, q)`` SI points being evaluated (asked before, not told yet):
-            one more point is proposed beside them (:meth:`suspid.optimize.ego.EGO.ask_beside`).
+            one more point is proposed beside them (:meth:`suspid.optimize.ego.EGO.ask_beside`),
+            or none (``(0, q)``) when none can be added now (module docstring).
         """
         with single_blas_thread():  # the fits and the EI search work on small matrices
             return self._ask(pending)
@@ -73,7 +78,9 @@ class EGOOptimizer(Optimizer):
         self._start()
         q = self.bounds_.shape[0]
         room = self.budget - len(self.y_) - len(self._out)
-        if self.ego_ is not None and pending is not None and len(pending) and room > 0:
+        if pending is not None and len(pending):
+            if self.ego_ is None or room <= 0:
+                return np.empty((0, q))
             X = self.ego_.ask_beside(pending)[:1]
             self._out.extend(X)
             return X
@@ -117,6 +124,11 @@ class EGOOptimizer(Optimizer):
             res = self.ego_.result()
         return OptimizerResult(x_opt=res.x_opt, y_opt=res.y_opt, X=np.array(self.X_), y=np.array(self.y_),
                                stop_reason=res.stop_reason, n_initial=res.n_initial, details=res)
+
+    def asynchronous(self, n_workers: int) -> bool:
+        """``ego.asynchronous``: ``auto`` or ``true``, ``ego.batch`` 1 and more than one worker."""
+        self._start()
+        return self.options_.asynchronous is not False and self.options_.batch == 1 and n_workers > 1
 
     # -- internals ---------------------------------------------------------------
     def _begin(self, X0: np.ndarray, y0: np.ndarray) -> None:
