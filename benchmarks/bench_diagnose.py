@@ -13,7 +13,9 @@ the independent train (``tests/independent/effects.py``: data suspid's code
 did not make; identification before and after, joint fit) instead.
 
     python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
-    python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5]
+    python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5] [--floor auto]
+
+``--floor`` sets ``noise.floor`` of the reference-date noise model of the independent experiments.
 """
 
 from __future__ import annotations
@@ -82,9 +84,11 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="*", default=[3], help="experiment seeds (the tests use 3)")
     ap.add_argument("--independent", action="store_true", help="the experiments on the independent train")
     ap.add_argument("--cases", nargs="*", default=None, help="independent cases (default: all)")
+    ap.add_argument("--floor", default="none", choices=["none", "auto"],
+                    help="noise.floor of the independent experiments' noise model")
     args = ap.parse_args()
     if args.independent:
-        return independent(args.seeds, args.cases)
+        return independent(args.seeds, args.cases, args.floor)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"# bench_diagnose  {datetime.date.today()}  python {platform.python_version()}  {platform.machine()}  "
           f"{os.cpu_count()} cpus  load average {load:.2f}")
@@ -125,12 +129,12 @@ def main() -> None:
                   f"{json.dumps({k: round(v, 2) for k, v in ga['errors_percent'].items()})}")
 
 
-def independent(seeds: list[int], cases: list[str] | None) -> None:
+def independent(seeds: list[int], cases: list[str] | None, floor: str = "none") -> None:
     """The table of the experiments on the independent train (docs/diagnose.md, section 2)."""
     from independent import effects as HE
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"# bench_diagnose --independent  {datetime.date.today()}  {os.cpu_count()} cpus  load average {load:.2f}")
+    print(f"# bench_diagnose --independent --floor {floor}  {datetime.date.today()}  {os.cpu_count()} cpus  load average {load:.2f}")
     print("| case (seed) | named (steps) | effect parameters | flagged before → after each step | "
           "errors before → after (% of interval) | unexplained (first) | s |")
     print("|---|---|---|---|---|---|---|")
@@ -139,7 +143,8 @@ def independent(seeds: list[int], cases: list[str] | None) -> None:
             for case in cases or list(HE.CASES):
                 hidden, speeds = HE.CASES[case]
                 t0 = time.perf_counter()
-                path = HE.prepare(Path(tmp) / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds)
+                path = HE.prepare(Path(tmp) / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds,
+                                  noise={"floor": floor})
                 d = suspid.diagnose(path).diagnosis
                 res = json.loads((path.parent / "runs" / "config" / "before" / "result.json").read_text())
                 truth = json.loads((path.parent / "measurement" / "truth.json").read_text())["parameters"]
