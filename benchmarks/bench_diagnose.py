@@ -15,7 +15,9 @@ did not make; identification before and after, joint fit) instead.
     python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
     python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5] [--floor auto]
 
-``--floor`` sets ``noise.floor`` of the reference-date noise model of the independent experiments.
+``--floor`` sets ``noise.floor`` of the reference-date noise model of the independent experiments:
+``none``, ``auto``, or ``spec=<density>`` (the sensors' noise density, (m/s²)²/Hz one-sided; the
+independent train's sensors have 1e-8).
 """
 
 from __future__ import annotations
@@ -84,8 +86,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="*", default=[3], help="experiment seeds (the tests use 3)")
     ap.add_argument("--independent", action="store_true", help="the experiments on the independent train")
     ap.add_argument("--cases", nargs="*", default=None, help="independent cases (default: all)")
-    ap.add_argument("--floor", default="none", choices=["none", "auto"],
-                    help="noise.floor of the independent experiments' noise model")
+    ap.add_argument("--floor", default="none", help="noise.floor of the independent experiments' noise model: "
+                    "none, auto or spec=<density in (m/s²)²/Hz>")
     args = ap.parse_args()
     if args.independent:
         return independent(args.seeds, args.cases, args.floor)
@@ -144,7 +146,7 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none") 
                 hidden, speeds = HE.CASES[case]
                 t0 = time.perf_counter()
                 path = HE.prepare(Path(tmp) / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds,
-                                  noise={"floor": floor})
+                                  noise=_noise_options(floor))
                 d = suspid.diagnose(path).diagnosis
                 res = json.loads((path.parent / "runs" / "config" / "before" / "result.json").read_text())
                 truth = json.loads((path.parent / "measurement" / "truth.json").read_text())["parameters"]
@@ -164,6 +166,13 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none") 
                 first = d["unexplained"][0]["text"] if d["unexplained"] else "-"
                 print(f"| {case} ({seed}) | {', '.join(d['named_effects']) or 'nothing'} | {params} | {seq} | "
                       f"{errs} | {first} | {time.perf_counter() - t0:.0f} |", flush=True)
+
+
+def _noise_options(floor: str) -> dict:
+    """``noise:`` options of ``--floor``: none, auto, spec=<density>."""
+    if floor.startswith("spec="):
+        return {"floor": "spec", "sensor_noise_density": float(floor[5:])}
+    return {"floor": floor}
 
 
 def _describe(hidden: dict) -> str:
