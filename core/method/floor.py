@@ -155,6 +155,19 @@ def estimate_floor(y_mes: np.ndarray, y_sim: np.ndarray, freqs: np.ndarray | Non
     return NoiseFloor(power=np.where(keep, power, 0.0), gain_db=np.where(keep, gain, m0))
 
 
+def density_problem(density: float | Mapping[str, float] | None, channels: Sequence[str]) -> str | None:
+    """What is wrong with a per-channel ``sensor_noise_density`` for these channels, or None."""
+    if not isinstance(density, Mapping):
+        return None
+    names = list(channels)
+    unknown = sorted(set(density) - set(names))
+    missing = [c for c in names if c not in density]
+    if not (unknown or missing):
+        return None
+    return (f"per-channel densities must name every channel once ({', '.join(names)}); "
+            f"unknown: {', '.join(unknown) or '-'}, missing: {', '.join(missing) or '-'}")
+
+
 def spec_floor(y_mes: np.ndarray, y_sim: np.ndarray, density: float | Mapping[str, float],
                channels: Sequence[str] | None) -> NoiseFloor:
     """The floor from a sensor specification (module docstring, ``spec``), m fitted with N fixed.
@@ -166,14 +179,11 @@ def spec_floor(y_mes: np.ndarray, y_sim: np.ndarray, density: float | Mapping[st
     y_sim = np.asarray(y_sim, dtype=float)
     _, n_ch, n_f = y_mes.shape
     if isinstance(density, Mapping):
-        names = list(channels) if channels is not None else []
-        unknown = sorted(set(density) - set(names))
-        missing = [c for c in names if c not in density]
-        if unknown or missing or not names:
-            raise ConfigError(f"per-channel densities must name every channel once ({', '.join(names)}); "
-                              f"unknown: {', '.join(unknown) or '-'}, missing: {', '.join(missing) or '-'}",
+        problem = density_problem(density, channels or [])
+        if problem is not None or not channels:
+            raise ConfigError(problem or "per-channel densities need the channel names",
                               key="noise.sensor_noise_density")
-        one_sided = np.array([float(density[c]) for c in names])
+        one_sided = np.array([float(density[c]) for c in channels])
     else:
         one_sided = np.full(n_ch, float(density))
     floor = np.broadcast_to(one_sided[:, None] / 2.0, (n_ch, n_f)).copy()
