@@ -135,3 +135,33 @@ def test_floor_is_saved_and_old_files_load_without_one(tmp_path):
     # and a model without a floor is still written as version 1, readable by suspid before the floor
     with np.load(plain.save(tmp_path / "plain.npz")) as content:
         assert json.loads(str(content["meta"]))["format_version"] == 1 and "floor_power" not in content.files
+
+
+def test_diagnosis_sees_no_discrepancy_where_the_floor_dominates():
+    """Measurement date: the simulated response drops by 10 dB where the floor dominates (a parameter or
+    speed change), the measured levels barely move. Through the floor nothing is flagged there; with
+    today's model (additive in dB) those cells are flagged."""
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells
+
+    y_mes0, y_sim0 = data(seed=1)
+    y_mes1, y_sim1 = data(seed=2, scatter_db=0.0)
+    level = y_sim0.mean(axis=0) + GAIN_DB[:, None]
+    noisy = np.zeros(level.shape, bool)
+    noisy[:2] = level[:2] < np.array(FLOOR_DB[:2], dtype=float)[:, None] - 5
+    y_sim1 = np.where(noisy[None], y_sim1 - 10.0, y_sim1)
+    power = np.array([0.0 if d is None else 10 ** (d / 5) for d in FLOOR_DB])[:, None]
+    rng = np.random.default_rng(7)
+    y_mes1 = 5 * np.log10(10 ** ((y_sim1 + GAIN_DB[:, None]) / 5) + power) + rng.normal(0, 0.4, y_sim1.shape)
+    flagged = {}
+    for mode in ("auto", "none"):
+        model = fit_noise_model(y_mes0, y_sim0, {"floor": mode}, freqs=FREQS, channels=CHANNELS)
+        grid = make_cells(list(CHANNELS), FREQS, [80.0] * V0)
+        null = calibrate_null(grid, model, 100, np.random.default_rng(4))
+        dmap = locate(grid, null, y_mes1, model.effective(y_sim1), model.mean_)
+        in_noise = (grid.cell_means(noisy[None].astype(float).repeat(V0, axis=0)) > 0.5)
+        worst = max(abs(r["magnitude_db"]) for r, n in zip(dmap.rows(), in_noise) if n)
+        flagged[mode] = int((dmap.flagged & in_noise).sum()), int(in_noise.sum()), worst
+    assert flagged["none"][0] >= 0.8 * flagged["none"][1] > 3      # additive in dB: the floor cells move
+    assert flagged["none"][2] > 5.0                                # by several dB
+    # with the floor the residual there is what the floor's estimate leaves (about 0.1-0.3 dB with v0 = 40)
+    assert flagged["auto"][2] < 0.4 and flagged["auto"][0] <= 0.25 * flagged["auto"][1]

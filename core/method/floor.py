@@ -31,6 +31,12 @@ density ``sensor_noise_density`` in (m/s²)²/Hz, one-sided as data sheets
 give it, for all channels or per channel; N is half of it (two-sided) at every
 frequency, and m is fitted with N fixed.
 
+Where the floor dominates every segment m is not identified by the data (the
+fit has no sensitivity to it, :data:`MIN_INFORMATION`); there m is
+interpolated over frequency from the cells of the channel where it is, so
+that a later rise of y_sim above the floor is modelled with the model error
+of the neighbouring frequencies, not with a value the noise chose.
+
 Either way the GP paths are then b_i = m + e_i with e_i = y_mes_i -
 5 log10(10^{(y_sim_i + m)/5} + N), and :class:`NoiseFloor.effective` maps
 y_sim to the spectrum that plays the role of y_sim in y_mod = y_sim + b.
@@ -50,6 +56,10 @@ LR_THRESHOLD = 10.83
 
 N_GRID = 48
 """Candidate floors per channel (log-spaced), plus N = 0."""
+
+MIN_INFORMATION = 0.25
+"""Mean of a_i² = (g P_sim_i / (g P_sim_i + N))² below which m is not identified in a cell (the floor
+dominates the segments there: on average the signal is below the floor)."""
 
 
 @dataclass(frozen=True)
@@ -112,6 +122,19 @@ def _fit_gain(y_mes: np.ndarray, y_sim: np.ndarray, floor: np.ndarray, m0: np.nd
     return m, (r * r).sum(axis=0)
 
 
+def _fill_unidentified(y_sim: np.ndarray, floor: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """m where the data identify it; elsewhere (:data:`MIN_INFORMATION`) interpolated over the frequency
+    index from the identified cells of the channel (held constant beyond them; left as is without any)."""
+    gp = 10.0 ** ((y_sim + m) / 5.0)
+    known = ((gp / (gp + floor)) ** 2).mean(axis=0) >= MIN_INFORMATION
+    out = m.copy()
+    idx = np.arange(m.shape[1])
+    for k in range(m.shape[0]):
+        if known[k].any() and not known[k].all():
+            out[k, ~known[k]] = np.interp(idx[~known[k]], idx[known[k]], m[k, known[k]])
+    return out
+
+
 def _window(freqs: np.ndarray | None, n_f: int, octaves: float) -> np.ndarray:
     """``(n_f, n_f)`` 0/1: frequencies within ±octaves/2 of each other (the identity without freqs)."""
     if freqs is None or octaves <= 0:
@@ -152,7 +175,8 @@ def estimate_floor(y_mes: np.ndarray, y_sim: np.ndarray, freqs: np.ndarray | Non
         power = np.where(better, floor, power)
         gain = np.where(better, m, gain)
     keep = best_lr > LR_THRESHOLD
-    return NoiseFloor(power=np.where(keep, power, 0.0), gain_db=np.where(keep, gain, m0))
+    power = np.where(keep, power, 0.0)
+    return NoiseFloor(power=power, gain_db=_fill_unidentified(y_sim, power, np.where(keep, gain, m0)))
 
 
 def density_problem(density: float | Mapping[str, float] | None, channels: Sequence[str]) -> str | None:
@@ -189,4 +213,4 @@ def spec_floor(y_mes: np.ndarray, y_sim: np.ndarray, density: float | Mapping[st
     floor = np.broadcast_to(one_sided[:, None] / 2.0, (n_ch, n_f)).copy()
     m0 = (y_mes - y_sim).mean(axis=0)
     m, _ = _fit_gain(y_mes, y_sim, floor, m0)
-    return NoiseFloor(power=floor, gain_db=m)
+    return NoiseFloor(power=floor, gain_db=_fill_unidentified(y_sim, floor, m))
