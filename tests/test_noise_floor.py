@@ -165,3 +165,25 @@ def test_diagnosis_sees_no_discrepancy_where_the_floor_dominates():
     assert flagged["none"][2] > 5.0                                # by several dB
     # with the floor the residual there is what the floor's estimate leaves (about 0.1-0.3 dB with v0 = 40)
     assert flagged["auto"][2] < 0.4 and flagged["auto"][0] <= 0.25 * flagged["auto"][1]
+
+
+def test_run_with_a_specified_floor_reports_and_saves_it(tmp_path):
+    """A whole (small) identification with the sensors' density given: the floor reaches the run's noise
+    model file, result.json and report.md, and w_ref is still recovered."""
+    from test_pipeline import _write
+
+    from suspid.config import load_config
+    from suspid.workflows.identify import run
+
+    cfg = _write(tmp_path)
+    # the experiment's reference sensors: 0.005 m/s² rms white at 100 Hz, one-sided 2 σ² / fs
+    cfg.write_text(cfg.read_text() + "noise: {floor: spec, sensor_noise_density: 5.0e-7}\n")
+    out = run(load_config(cfg), progress=False, log=lambda s: None)
+    r = out.result
+    assert max(r["errors_percent"].values()) < 8.0, r["errors_percent"]
+    assert r["noise_floor"]["mode"] == "spec"
+    assert all(row["share"] == 1.0 and row["median_db"] == pytest.approx(5 * np.log10(2.5e-7))
+               for row in r["noise_floor"]["channels"].values())
+    assert json.loads((out.run_dir / "result.json").read_text())["noise_floor"] == r["noise_floor"]
+    assert "## Sensor-noise floor" in (out.run_dir / "report.md").read_text()
+    np.testing.assert_allclose(NoiseModel.load(out.run_dir / "noise_model.npz").floor_.power, 2.5e-7)
