@@ -187,3 +187,20 @@ def test_run_with_a_specified_floor_reports_and_saves_it(tmp_path):
     assert json.loads((out.run_dir / "result.json").read_text())["noise_floor"] == r["noise_floor"]
     assert "## Sensor-noise floor" in (out.run_dir / "report.md").read_text()
     np.testing.assert_allclose(NoiseModel.load(out.run_dir / "noise_model.npz").floor_.power, 2.5e-7)
+
+
+def test_model_error_keeps_a_given_systematic_gain():
+    """Two dates of one vehicle through apply_model_error share its systematic gain when it is passed on;
+    without it the first draw of rng is that gain, as before."""
+    from suspid.data.experiment import ReferenceOptions, apply_model_error, smooth_gain_db, systematic_grid
+    from suspid.interfaces import Response
+
+    fs = 100.0
+    a = np.random.default_rng(0).standard_normal((2, 2000))
+    r = [Response(["x", "y"], fs, a, "s1")]
+    opt = ReferenceOptions(model_error_db=1.5, model_error_scatter_db=0.0, sensor_noise_rms=0.0)
+    drawn = apply_model_error(r, opt, np.random.default_rng(3))[0].accelerations
+    sys_db = smooth_gain_db(np.random.default_rng(3), systematic_grid(fs), 2, 1.5, opt.correlation_octaves)
+    given = apply_model_error(r, opt, np.random.default_rng(99), sys_db)[0].accelerations
+    np.testing.assert_allclose(given, drawn, atol=1e-12)
+    assert not np.allclose(drawn, a)
