@@ -284,7 +284,7 @@ class NoiseModel:
         self._check_fitted()
         path = Path(path)
         arrays = {name: getattr(self, name + "_") for name in self._ARRAYS}
-        floor = getattr(self, "floor_", None)
+        floor = self.floor_
         if floor is not None:
             arrays |= {"floor_power": floor.power, "floor_gain_db": floor.gain_db}
         meta = {"format": FORMAT, "format_version": FORMAT_VERSION if floor is not None else 1,
@@ -327,7 +327,7 @@ class NoiseModel:
             raise DataError(f"noise model file {path} is not a suspid noise model")
         if meta.get("format_version") not in (1, FORMAT_VERSION):
             raise DataError(f"noise model file {path} has format version {meta.get('format_version')}; "
-                            f"this suspid reads version {FORMAT_VERSION}: identify the noise model again")
+                            f"this suspid reads versions 1 to {FORMAT_VERSION}: identify the noise model again")
         model = cls(**(meta.get("options") or {}))
         for name in cls._ARRAYS:
             setattr(model, name + "_", np.asarray(content[name], dtype=float))
