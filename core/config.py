@@ -31,6 +31,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 from suspid import registry
 from suspid.errors import ConfigError, UnknownPluginError
 from suspid.infra.seeds import seed_for
+from suspid.method.floor import density_problem
 from suspid.method.identifiability import IdentifiabilityOptions
 from suspid.method.objective import validate_weights
 from suspid.method.spectra import SpectraOptions
@@ -333,6 +334,9 @@ def check_config_plugins(config: Config) -> None:
     channels = simulator.channels()
     channel_weights(config, channels)
     figure_channel(config, channels)
+    problem = density_problem(config.noise.sensor_noise_density, channels)
+    if problem is not None:
+        raise config.error(problem, "noise.sensor_noise_density")
     for i, name in enumerate(config.diagnose.effects or []):
         if name not in registry.names("effect"):
             raise config.error(f"unknown effect '{name}'; effects: {', '.join(registry.names('effect'))}",

@@ -87,6 +87,10 @@ BAD = [
     ("design size", GOOD + "design: {n_initial: 1}\n", (), "design.n_initial", "greater than or equal to 2"),
     ("spectra band", GOOD + "spectra: {f_min_hz: -1}\n", (), "spectra.f_min_hz", "greater than 0"),
     ("track speed", GOOD + "data: {track: {speed_kmh: -5}}\n", (), "data.track.speed_kmh", "greater than 0"),
+    ("noise floor literal", GOOD + "noise: {floor: loud}\n", (), "noise.floor", "'none', 'auto' or 'spec'"),
+    ("noise floor spec", GOOD + "noise: {floor: spec}\n", (), "noise", "floor: spec needs sensor_noise_density"),
+    ("noise density", GOOD + "noise: {floor: spec, sensor_noise_density: {roof: 1.0e-8}}\n", (),
+     "noise.sensor_noise_density", "unknown: roof, missing: body_vertical, wheel_vertical"),
 ]
 
 

@@ -80,19 +80,27 @@ def smooth_gain_db(rng: np.random.Generator, freqs: np.ndarray, n_channels: int,
     return np.array([np.interp(np.log2(f), grid, d) for d in draws])
 
 
+def systematic_grid(fs: float) -> np.ndarray:
+    """``(512,)`` Hz: the grid on which :func:`apply_model_error` draws the systematic gain."""
+    return np.geomspace(0.05, fs / 2, 512)
+
+
 def apply_model_error(responses: list[Response], options: ReferenceOptions,
-                      rng: np.random.Generator) -> list[Response]:
+                      rng: np.random.Generator, systematic: np.ndarray | None = None) -> list[Response]:
     """Turn simulated responses into reference-date 'measurements' (see the module docstring).
 
     :param responses: simulations at w0, accelerations ``(n_channels, n_t)`` m/s^2.
+    :param systematic: ``(n_channels, 512)`` dB, the systematic gain on :func:`systematic_grid`
+        (another date of the same vehicle keeps it); default: drawn first from ``rng``.
     :returns: new responses of the same shapes.
     """
     if not responses:
         return []
     n_ch = responses[0].accelerations.shape[0]
     # the systematic gain is drawn on a reference grid common to all segments
-    f_ref = np.geomspace(0.05, responses[0].fs / 2, 512)
-    systematic = smooth_gain_db(rng, f_ref, n_ch, options.model_error_db, options.correlation_octaves)
+    f_ref = systematic_grid(responses[0].fs)
+    if systematic is None:
+        systematic = smooth_gain_db(rng, f_ref, n_ch, options.model_error_db, options.correlation_octaves)
     out = []
     for r in responses:
         n_t = r.accelerations.shape[1]

@@ -89,7 +89,7 @@ def band_residuals(y_mes: np.ndarray, y_sim: np.ndarray, noise: NoiseModel, band
     :param y_sim: ``(v, n_channels, n_freqs)`` dB simulated at w_opt on the same segments.
     :param noise: the fitted noise model B (mean, covariance, number of paths v0).
     """
-    d = np.asarray(y_mes, float) - np.asarray(y_sim, float) - noise.mean_[None]
+    d = np.asarray(y_mes, float) - noise.effective(np.asarray(y_sim, float)) - noise.mean_[None]
     v, n_ch, n_f = d.shape
     n_b = len(bands)
     mean, se = np.empty((n_ch, n_b)), np.empty((n_ch, n_b))

@@ -32,6 +32,12 @@ e standard normal. The model is identified once at the reference date and
 reused at later dates: :meth:`NoiseModel.save` / :meth:`NoiseModel.load`
 keep it in a ``.npz`` file with a format version, together with the grid
 (frequencies, channels) it belongs to.
+
+Beyond the paper, ``noise.floor`` adds an additive sensor-noise floor in
+power under the multiplicative (dB) model error, y_mod = 5 log10(10^{(y_sim + m)/5} + N) + e
+(:mod:`suspid.method.floor`); the fitted model then carries it as ``floor_``
+and every use of y_sim + b goes through :func:`modelled_spectra`. With
+``floor: none`` (the default) ``floor_`` is None and nothing changes.
 """
 
 from __future__ import annotations
@@ -43,14 +49,16 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Mapping, Sequence
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from suspid.infra.files import atomic_open
+from suspid.method.floor import NoiseFloor, estimate_floor, spec_floor
 from suspid.options import parse_options
 from suspid.errors import DataError
 
 FORMAT = "suspid-noise-model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""Version 2 adds the floor arrays; a model without a floor is still written as version 1, and both are read."""
 
 
 class NoiseOptions(BaseModel):
@@ -64,6 +72,28 @@ class NoiseOptions(BaseModel):
                                      description="fraction of the total variance the kept components explain")
     shrinkage: Annotated[float, Field(ge=0.0, le=1.0)] | Literal["auto"] = Field(
         default=0.0, description="γ in [0, 1] towards the diagonal, or 'auto' (Schäfer-Strimmer)")
+    floor: Literal["none", "auto", "spec"] = Field(
+        default="none", description="additive sensor-noise floor in power: none, auto (estimated from the "
+        "reference date) or spec (from sensor_noise_density)")
+    sensor_noise_density: Annotated[float, Field(gt=0.0)] | dict[str, Annotated[float, Field(gt=0.0)]] | None = \
+        Field(default=None, description="sensor noise density, (m/s²)²/Hz one-sided, for all channels or "
+              "per channel name (floor: spec)")
+    floor_octaves: float = Field(default=0.5, ge=0.0, le=4.0,
+                                 description="width (octaves) of the window over which the floor is smoothed")
+
+    @model_validator(mode="after")
+    def _spec_needs_density(self) -> "NoiseOptions":
+        if self.floor == "spec" and self.sensor_noise_density is None:
+            raise ValueError("floor: spec needs sensor_noise_density ((m/s²)²/Hz, one-sided)")
+        return self
+
+
+def modelled_spectra(y_sim: np.ndarray, b: np.ndarray, floor: NoiseFloor | None = None) -> np.ndarray:
+    """y_mod = y_sim + b (eq. 4), or with a noise floor 5 log10(10^{(y_sim + m)/5} + N) + b - m.
+
+    :param y_sim: ``(v, n_channels, n_freqs)`` dB; ``b``: the same shape (or broadcastable), dB.
+    """
+    return y_sim + b if floor is None else floor.effective(y_sim) + b
 
 
 def noise_samples(y_mes: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
@@ -120,8 +150,11 @@ class NoiseModel:
     - ``variance_`` ``(n_channels, n_freqs)`` dB², the sample variance of B at each point;
     - ``residual_variance_`` ``(n_channels, n_freqs)`` dB², the diagonal remainder d_γ;
     - ``shrinkage_`` γ, ``n_samples_`` v0, ``explained_variance_ratio_`` ``(r,)``;
-    - ``freqs_`` ``(n_freqs,)`` Hz and ``channels_`` when given to :meth:`fit`.
+    - ``freqs_`` ``(n_freqs,)`` Hz and ``channels_`` when given to :meth:`fit`;
+    - ``floor_`` the :class:`~suspid.method.floor.NoiseFloor` (set by :func:`fit_noise_model`), or None.
     """
+
+    floor_: NoiseFloor | None = None
 
     def __init__(self, **options: Any) -> None:
         self.options = options
@@ -170,7 +203,13 @@ class NoiseModel:
         self.shrinkage_ = gamma
         self.n_samples_ = v0
         self.explained_variance_ratio_ = lam[:r] / total if total > 0 else lam[:r]
+        self.floor_ = None
         return self
+
+    def effective(self, y_sim: np.ndarray) -> np.ndarray:
+        """What stands for y_sim in y_mod = y_sim + b: ``y_sim`` itself without a floor, else
+        :meth:`NoiseFloor.effective`."""
+        return y_sim if self.floor_ is None else self.floor_.effective(y_sim)
 
     def _set_grid(self, freqs, channels, n_ch: int, n_f: int) -> None:
         self.freqs_ = None if freqs is None else np.asarray(freqs, dtype=float)
@@ -245,9 +284,14 @@ class NoiseModel:
         self._check_fitted()
         path = Path(path)
         arrays = {name: getattr(self, name + "_") for name in self._ARRAYS}
-        meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "shrinkage": self.shrinkage_,
+        floor = self.floor_
+        if floor is not None:
+            arrays |= {"floor_power": floor.power, "floor_gain_db": floor.gain_db}
+        meta = {"format": FORMAT, "format_version": FORMAT_VERSION if floor is not None else 1,
+                "shrinkage": self.shrinkage_,
                 "n_samples": self.n_samples_,
-                "options": parse_options(NoiseOptions, self.options, "noise").model_dump(),
+                "options": parse_options(NoiseOptions, self.options, "noise").model_dump(
+                    exclude=None if floor is not None else {"floor", "sensor_noise_density", "floor_octaves"}),
                 "channels": list(self.channels_) if self.channels_ is not None else None}
         try:
             with atomic_open(path, "wb", fsync=True) as fh:  # a later date needs this file: never truncated
@@ -281,9 +325,9 @@ class NoiseModel:
             raise DataError(f"noise model file {path} has a corrupt header") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise DataError(f"noise model file {path} is not a suspid noise model")
-        if meta.get("format_version") != FORMAT_VERSION:
+        if meta.get("format_version") not in (1, FORMAT_VERSION):
             raise DataError(f"noise model file {path} has format version {meta.get('format_version')}; "
-                            f"this suspid reads version {FORMAT_VERSION}: identify the noise model again")
+                            f"this suspid reads versions 1 to {FORMAT_VERSION}: identify the noise model again")
         model = cls(**(meta.get("options") or {}))
         for name in cls._ARRAYS:
             setattr(model, name + "_", np.asarray(content[name], dtype=float))
@@ -292,6 +336,10 @@ class NoiseModel:
         freqs = content["freqs"]
         model.freqs_ = np.asarray(freqs, dtype=float) if freqs.size else None
         model.channels_ = tuple(meta["channels"]) if meta.get("channels") is not None else None
+        model.floor_ = None
+        if "floor_power" in content and "floor_gain_db" in content:
+            model.floor_ = NoiseFloor(np.asarray(content["floor_power"], dtype=float),
+                                      np.asarray(content["floor_gain_db"], dtype=float))
         model._check_consistent(path)
         return model
 
@@ -304,7 +352,11 @@ class NoiseModel:
               and (self.freqs_ is None or self.freqs_.shape == (grid[1],))
               and (self.channels_ is None or len(self.channels_) == grid[0])
               and 0.0 <= self.shrinkage_ <= 1.0
-              and all(np.all(np.isfinite(getattr(self, n + "_"))) for n in self._ARRAYS))
+              and all(np.all(np.isfinite(getattr(self, n + "_"))) for n in self._ARRAYS)
+              and (self.floor_ is None or (self.floor_.power.shape == grid and self.floor_.gain_db.shape == grid
+                                           and np.all(self.floor_.power >= 0)
+                                           and np.all(np.isfinite(self.floor_.power))
+                                           and np.all(np.isfinite(self.floor_.gain_db)))))
         if not ok:
             raise DataError(f"noise model file {path} is inconsistent (array shapes or values do not match)")
 
@@ -313,8 +365,21 @@ def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions 
                     freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> NoiseModel:
     """Eq. 3 then the Gaussian model: the noise model of a reference date in one call.
 
+    With ``floor: auto`` or ``spec`` the floor N and gain m are fitted first and
+    the Gaussian model is fitted to the paths b_i = m + e_i (:mod:`suspid.method.floor`).
+
     :param y_mes: ``(v0, n_channels, n_freqs)`` dB measured spectra.
     :param y_sim: ``(v0, n_channels, n_freqs)`` dB spectra simulated at w0.
     """
     opt = parse_options(NoiseOptions, options, "noise")
-    return NoiseModel(**opt.model_dump()).fit(noise_samples(y_mes, y_sim), freqs=freqs, channels=channels)
+    b = noise_samples(y_mes, y_sim)
+    floor = None
+    if opt.floor == "auto":
+        floor = estimate_floor(y_mes, y_sim, freqs, opt.floor_octaves)
+    elif opt.floor == "spec":
+        floor = spec_floor(y_mes, y_sim, opt.sensor_noise_density, channels)
+    if floor is not None:
+        b = floor.paths(y_mes, y_sim)
+    model = NoiseModel(**opt.model_dump()).fit(b, freqs=freqs, channels=channels)
+    model.floor_ = floor
+    return model

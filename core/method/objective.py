@@ -22,7 +22,8 @@ import numpy as np
 
 from suspid.errors import ConfigError, DataError
 from suspid.interfaces import Objective
-from suspid.method.noise import NoiseModel
+from suspid.method.floor import NoiseFloor
+from suspid.method.noise import NoiseModel, modelled_spectra
 
 
 def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, channels: Sequence[str],
@@ -77,6 +78,8 @@ class ObjectiveFunction:
         for the run; v is the number of simulated spectra per evaluation.
     :param weights: α_k as accepted by :func:`validate_weights` (default 1/n).
     :param channels: channel names, needed when ``weights`` is a mapping.
+    :param floor: the noise model's sensor-noise floor, or None (y_mod = y_sim + b_i, eq. 4);
+        with one, y_mod follows :func:`~suspid.method.noise.modelled_spectra`.
 
     The constructor stores; :meth:`evaluate` validates and computes. Build it
     from a noise model with :meth:`from_noise_model`.
@@ -84,8 +87,9 @@ class ObjectiveFunction:
 
     def __init__(self, objective: Objective, y_mes: np.ndarray, freqs: np.ndarray, noise_paths: np.ndarray,
                  weights: Sequence[float] | Mapping[str, float] | None = None,
-                 channels: Sequence[str] | None = None) -> None:
+                 channels: Sequence[str] | None = None, floor: NoiseFloor | None = None) -> None:
         self.objective = objective
+        self.floor = floor
         self.y_mes = y_mes
         self.freqs = freqs
         self.noise_paths = noise_paths
@@ -112,7 +116,7 @@ class ObjectiveFunction:
             raise DataError(f"the noise model is on a {noise_model.shape} (channels, frequencies) grid, "
                             f"the measured spectra on {y_mes.shape[1:]}")
         paths = noise_model.sample(y_mes.shape[0] if n_paths is None else n_paths, seed)
-        return cls(objective, y_mes, freqs, paths, weights=weights, channels=channels)
+        return cls(objective, y_mes, freqs, paths, weights=weights, channels=channels, floor=noise_model.floor_)
 
     @cached_property
     def alpha(self) -> np.ndarray:
@@ -148,7 +152,8 @@ class ObjectiveFunction:
                             f"noise paths of shape {np.shape(self.noise_paths)} (v, n_channels, n_freqs)")
         wants_variance = getattr(self.objective, "uses_noise_variance", False)
         extra = {"noise_variance": self.noise_variance} if wants_variance else {}
-        psi = np.asarray(self.objective.psi(self.y_mes, y_sim + self.noise_paths, self.freqs, **extra), dtype=float)
+        y_mod = modelled_spectra(y_sim, self.noise_paths, self.floor)
+        psi = np.asarray(self.objective.psi(self.y_mes, y_mod, self.freqs, **extra), dtype=float)
         if psi.shape != self.alpha.shape:
             raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "
                             f"{psi.shape}, expected {self.alpha.shape}")

@@ -120,7 +120,8 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
         ch, fr = g.channels, g.freqs
         w = problem.weights * ch
         fn = ObjectiveFunction(problem.objective, problem.y_mes[:, :, fr], problem.freqs[fr],
-                               problem.b[:, :, fr], weights=w / w.sum(), channels=problem.channels)
+                               problem.b[:, :, fr], weights=w / w.sum(), channels=problem.channels,
+                               floor=None if problem.noise_model.floor_ is None else problem.noise_model.floor_.at(fr))
 
         def neg_j(x: np.ndarray) -> float:
             u = u_opt.copy()

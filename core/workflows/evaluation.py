@@ -2,7 +2,7 @@
 
 One evaluation is one parameter vector w through the simulator on the run's
 segments, its spectra y_sim (v, n_channels, n_freqs) dB and J = Σ α_k Ψ_k
-with Y_mod = y_sim + b_i. Each result is committed to the ledger the moment
+with Y_mod = y_sim + b_i (through the noise model's floor when it has one). Each result is committed to the ledger the moment
 it arrives, keyed by the simulator's identity, w and the data identity, so
 that a resumed run reads it instead of simulating it again.
 
@@ -33,7 +33,8 @@ def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = Non
                  y_mes: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra)."""
     fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
-                           problem.b if b is None else b, weights=problem.weights, channels=problem.channels)
+                           problem.b if b is None else b, weights=problem.weights, channels=problem.channels,
+                           floor=problem.noise_model.floor_)
     J, psi = fn.evaluate(y_sim)
     return J, psi
 

@@ -231,6 +231,10 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, p
         "anytime": {"J": [None if not np.isfinite(v) else float(v) for v in opt_result.y],
                     "w_normalized": problem.to_unit(opt_result.X).tolist() if len(opt_result.X) else []},
     })
+    floor = problem.noise_model.floor_
+    if floor is not None:
+        result["noise_floor"] = {"mode": config.noise.floor if config.noise.path is None else "file",
+                                 "channels": floor.summary(problem.freqs, problem.channels)}
     write_json(run_dir / "result.json", result)
     write_report(run_dir, problem, ego, result, ei_history, executor)
     return IdentificationResult.from_dict(result, run_dir, problem, ego)

@@ -103,7 +103,7 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
         model = fit_noise_model(ref["y_mes0"], y_sim0, noise_options, freqs=problem.freqs, channels=problem.channels)
         paths = model.sample(len(problem.segments), named_rng(config.seed, "nuisance"))  # the same draws each time
         fn = ObjectiveFunction(problem.objective, problem.y_mes, problem.freqs, paths, weights=problem.weights,
-                               channels=problem.channels)
+                               channels=problem.channels, floor=model.floor_)
         neg_j = SearchObjective(problem, task, fn, executor, extra)
         found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_eval)
         n_sims += neg_j.n_simulations

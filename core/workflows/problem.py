@@ -34,7 +34,7 @@ from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.seeds import seed_for
 from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
-from suspid.method.noise import NoiseModel, fit_noise_model
+from suspid.method.noise import NoiseModel, fit_noise_model, modelled_spectra
 from suspid.method.spectra import compute_spectra
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -309,7 +309,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
         b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
                                                             + segments_digest(segments)[:16]))
-        y_mes = y_sim_ref + b_ref
+        y_mes = modelled_spectra(y_sim_ref, b_ref, noise_model.floor_)
     else:
         w_ref = None
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,

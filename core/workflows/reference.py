@@ -161,7 +161,7 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
                                 channels=problem.channels)
         paths = model.sample(b.size, rng)
         fn = ObjectiveFunction(problem.objective, y_mes0[b], problem.freqs, paths, weights=problem.weights,
-                               channels=problem.channels)
+                               channels=problem.channels, floor=model.floor_)
         task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
         neg_j = SearchObjective(problem, task, fn, executor)
         shifts[s] = local_search(neg_j, u0, options.initial_step, max_eval) - u0

@@ -16,6 +16,7 @@ from suspid.config import figure_channel
 from suspid.infra.files import pyplot, save_figure, write_text
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
+from suspid.method.noise import modelled_spectra
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.problem import Problem
 from suspid.workflows.tasks import SpectraTask, run_one
@@ -185,6 +186,17 @@ def model_error_section(result: dict[str, Any]) -> str:
     return "\n".join(out) + "\n"
 
 
+def noise_floor_section(floor: dict[str, Any]) -> str:
+    """The report's section on the sensor-noise floor of the noise model (``result['noise_floor']``)."""
+    rows = [[ch, f"{100 * r['share']:.0f} %", f"{r['median_db']:.1f}" if "median_db" in r else "-",
+             "{:.3g}-{:.3g}".format(*r["f_hz"]) if "f_hz" in r else "-"] for ch, r in floor["channels"].items()]
+    return ("\n## Sensor-noise floor\n\nThe noise model separates a multiplicative model error (dB) from an "
+            "additive floor N in power: y_mod = 5 log10(10^((y_sim + m)/5) + N) + e "
+            f"(`noise.floor: {floor['mode']}`). Where N is given, the modelled level does not follow y_sim below "
+            "it.\n\n" + markdown_table(["channel", "frequencies with a floor", "median 5 log10 N (dB)",
+                                           "range (Hz)"], rows) + "\n")
+
+
 def search_line(result: dict[str, Any]) -> str:
     """How the optimiser searched: the paper's design and iterations, or another optimiser's evaluations."""
     if result.get("optimizer", "ego") == "ego":
@@ -212,7 +224,8 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
         y_mes0 = problem.y_mes
         y_sim0 = run_one(executor, SpectraTask.of(problem.simulator, problem.segments, config.spectra), {})
         date = "measurement date"
-    y_mod0 = y_sim0 + problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1"))
+    y_mod0 = modelled_spectra(y_sim0, problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1")),
+                              problem.noise_model.floor_)
     figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, y_mes0, y_sim0, y_mod0, k, problem.channels[k])
     w_ref_n = np.array([result["w_ref_normalized"][n] for n in names]) if "w_ref" in result else None
     figure_parameters(run_dir / "figure2_parameters.png", names,
@@ -271,6 +284,8 @@ bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn 
     if result.get("correlated_with"):
         text += "\n## Correlated components\n\n" + "\n".join(
             f"- `{n}` with {', '.join(c)}" for n, c in result["correlated_with"].items()) + "\n"
+    if result.get("noise_floor"):
+        text += noise_floor_section(result["noise_floor"])
     if result.get("failed_points"):
         rows = [[p["phase"], ", ".join(f"{k} = {v:.4g}" for k, v in p["w"].items()), p["error"]]
                 for p in result["failed_points"]]

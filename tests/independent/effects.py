@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -189,7 +189,7 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
             n_reference: int = 32, speeds_kmh: Sequence[float] = (300.0,),
             w_ref: Mapping[str, float] | None = None, w_reference: Mapping[str, float] | None = None,
             identified: Sequence[str] = tuple(VERTICAL_W_REF), diagnose: Mapping | None = None,
-            ego: Mapping | None = None) -> Path:
+            ego: Mapping | None = None, noise: Mapping | None = None) -> Path:
     """Both dates (the reference date without ``hidden``, at ``w_reference``, default w0; the measurement date
     with it, at ``w_ref``, default w0 too), the reference noise model and a ``suspid diagnose`` config; returns
     its path.
@@ -199,7 +199,8 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
     (``VERTICAL_W_REF``: 15-25 % of the cells flagged without any hidden effect), which is not what these
     experiments are about.
 
-    The consumer side: uses suspid to fit the noise model and reads nothing of the truth.
+    The consumer side: uses suspid to fit the noise model (with the ``noise:`` options ``noise``, e.g. a
+    sensor-noise floor) and reads nothing of the truth.
     """
     from .protocol import fit_reference_noise, write_config
     import yaml
@@ -210,8 +211,8 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
                         speeds_kmh=speeds_kmh, instrument_seed=seed)
     mes = generate_date(out / "measurement", w_mes, hidden, seed=2 * seed + 2, n_segments=n_segments,
                         speeds_kmh=speeds_kmh, instrument_seed=seed, chainage_m=200_000.0)
-    noise = fit_reference_noise(ref, out / "noise.npz", spectra=SPECTRA)
-    path = write_config(out / "config.yaml", mes, noise, seed=seed, objective="likelihood", n_initial=16,
+    noise_path = fit_reference_noise(ref, out / "noise.npz", spectra=SPECTRA, noise=noise)
+    path = write_config(out / "config.yaml", mes, noise_path, seed=seed, objective="likelihood", n_initial=16,
                         max_iter=20, identified=tuple(identified))
     cfg = yaml.safe_load(path.read_text())
     cfg["spectra"] = dict(SPECTRA)

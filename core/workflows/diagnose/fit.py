@@ -58,7 +58,8 @@ class Candidate:
 
 class Discrepancy:
     """The fit criterion D = Σ (m / σ)² over every (speed group, channel, frequency bin), and over the bins
-    of the flagged cells; m the group mean of y_mes - y_sim - μ_B (dB), σ its null sd (``null.bin_sd``).
+    of the flagged cells; m the group mean of y_mes - y_sim - μ_B (dB), σ its null sd (``null.bin_sd``);
+    y_sim passes through the noise model's sensor-noise floor when it has one.
 
     ``D0`` and ``D0_flagged`` are the base model's (``y_base``).
     """
@@ -66,10 +67,11 @@ class Discrepancy:
     def __init__(self, grid: CellGrid, null: NullCalibration, y_mes: np.ndarray, noise_model,
                  flagged: np.ndarray, y_base: np.ndarray) -> None:
         self.grid = grid
+        self.effective = noise_model.effective
         self.target = grid.group_means(y_mes - noise_model.mean_[None])          # m = target - mean(y_sim)
         self.scale = null.bin_sd
         self.flagged = grid.cell_to_bins(flagged.astype(float)) > 0
-        self.base_means = grid.group_means(y_base)
+        self.base_means = grid.group_means(self.effective(y_base))
         self.D0, self.D0_flagged = self.of_means(self.target - self.base_means)
 
     @property
@@ -81,7 +83,7 @@ class Discrepancy:
         return float(z2.sum()), float(z2[self.flagged].sum())
 
     def __call__(self, y_sim: np.ndarray) -> tuple[float, float]:
-        return self.of_means(self.target - self.grid.group_means(y_sim))
+        return self.of_means(self.target - self.grid.group_means(self.effective(y_sim)))
 
     def within(self, bins: np.ndarray, means: np.ndarray) -> float:
         """D over the bins ``bins`` ``(G, K, F)`` bool, for model group means ``means`` ``(G, K, F)``."""

@@ -49,10 +49,11 @@ def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | Non
     mu = p.noise_model.mean_[channel]
     fig, ax = plt.subplots(figsize=(8, 4))
     ax.plot(f, p.y_mes[:, channel].mean(axis=0), color="black", lw=1.5, label="Y_mes (mean)")
-    ax.plot(f, stage_before.y_sim[:, channel].mean(axis=0) + mu, color="tab:red", lw=1.2,
+    ax.plot(f, p.noise_model.effective(stage_before.y_sim)[:, channel].mean(axis=0) + mu, color="tab:red", lw=1.2,
             label="Y_sim + μ_B, base model")
     if stage_after is not None:
-        ax.plot(f, stage_after.y_sim[:, channel].mean(axis=0) + stage_after.problem.noise_model.mean_[channel],
+        noise = stage_after.problem.noise_model
+        ax.plot(f, noise.effective(stage_after.y_sim)[:, channel].mean(axis=0) + noise.mean_[channel],
                 color="tab:blue", lw=1.2, ls="--", label="Y_sim + μ_B, augmented model")
     grid = dmap.grid
     for c in np.nonzero(dmap.flagged)[0]:

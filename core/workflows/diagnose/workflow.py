@@ -271,7 +271,8 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
 
 
 def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
-    stage.dmap = locate(grid, null, stage.problem.y_mes, stage.y_sim, stage.problem.noise_model.mean_, alpha)
+    noise = stage.problem.noise_model
+    stage.dmap = locate(grid, null, stage.problem.y_mes, noise.effective(stage.y_sim), noise.mean_, alpha)
     stage.dmap.J = j_of_spectra(stage.problem, stage.y_sim)[0]
 
 
