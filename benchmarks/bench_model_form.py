@@ -49,10 +49,15 @@ W_REFS = {
 """Measurement-date suspensions (SI): the quickstart's damaged one, a stiffer/more damped one, and w0."""
 
 
+BOUNDS = {n: {"lower": 0.5 * protocol.VEHICLE[n], "upper": 1.5 * protocol.VEHICLE[n]} for n in ("c_sec_y", "c_yaw")}
+"""The preset's bounds of c_sec_y and c_yaw (16-48 kN s/m, 150-800 kN s/m) put the shared nominal values of the
+independent train (16 and 800 kN s/m) on a bound: the interval is centred on them instead, as the preset's is."""
+
+
 def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None) -> Path:
     cfg = {"name": objective, "seed": seed,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": protocol.VEHICLE}},
-           "parameters": {n: {} for n in W_REFS["quickstart"]},
+           "parameters": {n: BOUNDS.get(n, {}) for n in W_REFS["quickstart"]},
            "data": {"source": "measured", "measurements": "measurement/accelerations",
                     "track_file": "measurement/track"},
            "noise": {"reference": {"measurements": "reference/accelerations", "track_file": "reference/track"}},
