@@ -259,6 +259,15 @@ def test_dask_gives_up_on_a_task_that_always_kills_its_worker():
     assert got[0] == 1.0 and got[1] == 4.0
 
 
+def test_dask_local_workers_run_without_the_profiler_unless_asked():
+    import dask
+
+    for profile in (False, True):
+        with DaskExecutor(n_workers=1, timeout_s=30, **({"profile": True} if profile else {})) as executor:
+            seen = executor.client_.run(dask.config.get, "distributed.worker.profile.enabled")
+        assert list(seen.values()) == [profile]
+
+
 # -- an existing scheduler: from the environment, resources ----------------------------------------
 def test_dask_existing_scheduler_from_env_and_resources(monkeypatch):
     from distributed import LocalCluster
