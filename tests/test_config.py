@@ -80,7 +80,7 @@ BAD = [
      "available objectives: likelihood, mean-spectrum, overlap, wasserstein"),
     ("bad name", GOOD.replace("name: qc", "name: 'a b/c'"), (), "name", "match pattern"),
     # sections read by their own modules, checked before any simulation
-    ("ego typo", GOOD + "ego: {max_iters: 3}\n", (), "ego.max_iters", "unknown key; expected one of: batch, explore"),
+    ("ego typo", GOOD + "ego: {max_iters: 3}\n", (), "ego.max_iters", "unknown key; expected one of: asynchronous, batch, explore"),
     ("refine range", GOOD, ("--set", "ego.refine.radius=2"), "ego.refine.radius", "less than or equal to 0.5 (got 2)"),
     ("bootstrap literal", GOOD + "identifiability: {bootstrap: pairs}\n", (), "identifiability.bootstrap",
      "'paired' or 'independent'"),

@@ -92,8 +92,9 @@ class DaskOptions(BaseModel):
     threads_per_worker: int = Field(
         default=1, ge=1, description="LocalCluster only: threads per worker (1: the simulator is CPU-bound)")
     processes: bool = Field(default=True, description="LocalCluster only: workers in processes (false: threads)")
-    profile: bool = Field(default=False, description="LocalCluster only: dask's statistical profiler in the workers "
-                          "(it samples the running task's stack every 10 ms, which slows CPU-bound simulations)")
+    profile: bool = Field(default=False, description="LocalCluster of processes only: dask's statistical profiler "
+                          "in the workers (it samples the running task's stack every 10 ms, which slows CPU-bound "
+                          "simulations)")
     retries: int = Field(default=0, ge=0,
                          description="tries more for a task that raises (client.submit retries=); "
                                      "worker deaths are allowed_failures' business")
@@ -302,11 +303,12 @@ class DaskExecutor(Executor):
         if opts.allowed_failures is not None:
             scheduler_kwargs["allowed_failures"] = opts.allowed_failures
         worker_resources = {"resources": dict(opts.resources)} if opts.resources else {}
+        # the dask config of worker processes (their nannies pass it on); threads share the driver's
+        profiler = {"config": {"distributed.worker.profile.enabled": opts.profile}} if opts.processes else {}
         self.cluster_ = distributed.LocalCluster(
             n_workers=n_workers, threads_per_worker=opts.threads_per_worker, processes=opts.processes,
             dashboard_address=":0",  # a free port: never collides with another run's dashboard
-            scheduler_kwargs=scheduler_kwargs, config={"distributed.worker.profile.enabled": opts.profile},
-            **worker_resources)
+            scheduler_kwargs=scheduler_kwargs, **worker_resources, **profiler)
         self.client_ = distributed.Client(self.cluster_, timeout=opts.timeout_s)
         self.client_.wait_for_workers(n_workers, timeout=opts.timeout_s)
 
