@@ -83,7 +83,8 @@ def test_local_model_takes_a_one_channel_bump_and_a_flat_gain():
     grid = make_cells(["a", "b", "c"], f, [80.0] * 4)
     null = Null()
     null.bin_sd = np.full((1, 3, f.size), 0.2)
-    nm = type("NM", (), {"mean_": np.zeros((3, f.size))})()
+    nm = type("NM", (), {"mean_": np.zeros((3, f.size)), "floor_": None,  # a noise model without a floor
+                         "effective": lambda self, y_sim: y_sim})()
     y_mes = np.zeros((4, 3, f.size))
     y_mes[:, 0] += 6.0 * np.exp(-0.5 * (np.log2(f / 14.0) / (1 / 6)) ** 2)   # a bracket on a
     y_mes[:, 2] += 1.9                                                        # a gain on c
