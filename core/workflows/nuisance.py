@@ -92,7 +92,6 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
         return NuisanceCheck(values, cached[:, :q], int(cached[0, q]))
     noise_options = config.noise.model_dump(exclude={"path", "reference"})
     max_eval = options.max_evaluations or 20 * q
-    w0 = {n: problem.w0[n] for n in problem.names}
     ref_task = SpectraTask.of(problem.simulator, ref_segments, config.spectra)
     task = SpectraTask.of(problem.simulator, problem.segments, config.spectra)
     n_sims = 0
@@ -101,19 +100,22 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
         """w re-identified from u_opt with the model at ``extra`` and its own B."""
         nonlocal n_sims
         model = fit_noise_model(ref["y_mes0"], y_sim0, noise_options, freqs=problem.freqs, channels=problem.channels)
-        paths = model.sample(len(problem.segments), named_rng(config.seed, "nuisance"))  # the same draws each time
-        fn = ObjectiveFunction(problem.objective, problem.y_mes, problem.freqs, paths, weights=problem.weights,
-                               channels=problem.channels, floor=model.floor_)
+        fn = ObjectiveFunction.from_noise_model(problem.objective, problem.y_mes, problem.freqs, model,
+                                                named_rng(config.seed, "nuisance"),  # the same draws each time
+                                                weights=problem.weights, channels=problem.channels)
         neg_j = SearchObjective(problem, task, fn, executor, extra)
         found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_eval)
         n_sims += neg_j.n_simulations
         return found
 
+    nominal = {p.name: p.nominal for p in problem.simulator.parameters()}
     base = identify({}, ref["y_sim0"])
-    shifts = np.empty((len(values), q))
+    shifts = np.zeros((len(values), q))
     for i, (name, value) in enumerate(values):
+        if value == nominal.get(name):  # the nominal model again: the same search, no shift
+            continue
         extra = {name: value}
-        y_sim0 = run_one(executor, ref_task, w0 | extra)
+        y_sim0 = run_one(executor, ref_task, problem.w0 | extra)
         n_sims += 1
         shifts[i] = identify(extra, y_sim0) - base
         log(f"nuisance {name} = {value:g}: w_opt moves by "

@@ -159,9 +159,8 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
         a, b = np.sort(perm[:n_fit]), np.sort(perm[n_fit:])
         model = fit_noise_model(y_mes0[a], ref["y_sim0"][a], noise_options, freqs=problem.freqs,
                                 channels=problem.channels)
-        paths = model.sample(b.size, rng)
-        fn = ObjectiveFunction(problem.objective, y_mes0[b], problem.freqs, paths, weights=problem.weights,
-                               channels=problem.channels, floor=model.floor_)
+        fn = ObjectiveFunction.from_noise_model(problem.objective, y_mes0[b], problem.freqs, model, rng,
+                                                weights=problem.weights, channels=problem.channels)
         task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
         neg_j = SearchObjective(problem, task, fn, executor)
         shifts[s] = local_search(neg_j, u0, options.initial_step, max_eval) - u0
