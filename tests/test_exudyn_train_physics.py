@@ -150,7 +150,7 @@ def test_no_lightly_damped_contact_or_track_mode(sim):
 def test_modes_list_carbody_and_bogie_first(sim):
     modes = sim.modes(speed=300 * KMH)["modes"]
     groups = [m["group"] for m in modes]
-    order = ["carbody", "bogie", "wheelset", "articulation", "track/contact", "internal"]
+    order = ["carbody", "bogie", "wheelset", "articulation", "track/contact", "internal", "relaxation"]
     assert groups == sorted(groups, key=order.index)
     assert groups[0] == "carbody"
 

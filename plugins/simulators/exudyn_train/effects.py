@@ -128,6 +128,23 @@ class ExudynEffect:
         return []
 
 
+def maxwell_element(w_spring: np.ndarray, w_damper: np.ndarray, stiffness: float, c: float, damped: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(n, n)`` of a Maxwell element: a spring ``stiffness`` (N/m) in series with a damper ``c`` (N s/m).
+
+    The element's last coordinate is its internal node u (m); ``w_spring`` and
+    ``w_damper`` ``(n,)`` give the elongation of the spring and of the damper per
+    coordinate (each with +1 on u). Energy ½ k (w_spring·q)², dissipation
+    ½ c (w_damper·q')²; the internal mass c / (2π :data:`MAXWELL_FAST_HZ`) keeps the
+    system second order. ``damped=False`` leaves the damper out.
+    """
+    n = len(w_spring)
+    M = np.zeros((n, n))
+    M[n - 1, n - 1] = c / (2 * math.pi * MAXWELL_FAST_HZ)
+    D = c * np.outer(w_damper, w_damper) if damped else np.zeros((n, n))
+    return M, stiffness * np.outer(w_spring, w_spring), D
+
+
 def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: float, damped: bool = True
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(M, K, D) ``(13, 13)`` of one Maxwell yaw damper on (bogie, carbody, internal coordinate u).
@@ -135,9 +152,9 @@ def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: 
     ``end``: +1 for a bogie under the carbody's front pivot, -1 under its rear pivot; ``side``: +1 left, -1 right.
 
     Energy ½ k_s (u - d_bogie)², dissipation ½ c_yaw (u' - d'_carbody)², d the
-    longitudinal displacement of the attachment points; the internal mass
-    c_yaw / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order. ``damped=False`` leaves the
-    damper out (the time solver's blow-off law then supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
+    longitudinal displacement of the attachment points (:func:`maxwell_element`).
+    ``damped=False`` leaves the damper out (the time solver's blow-off law then
+    supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
     """
     n = 13
     xb = end * q["a_bogie"]
@@ -147,10 +164,26 @@ def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: 
     wd = np.zeros(n)
     wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
     wd[12] = 1.0
-    M = np.zeros((n, n))
-    M[12, 12] = q["c_yaw"] / (2 * math.pi * MAXWELL_FAST_HZ)
-    D = q["c_yaw"] * np.outer(wd, wd) if damped else np.zeros((n, n))
-    return M, stiffness * np.outer(ws, ws), D
+    return maxwell_element(ws, wd, stiffness, q["c_yaw"], damped)
+
+
+def maxwell_secondary_damper(q: dict[str, float], end: float, side: float) -> tuple[np.ndarray, np.ndarray,
+                                                                                       np.ndarray]:
+    """(M, K, D) ``(13, 13)`` of one secondary vertical damper on (bogie, carbody, internal coordinate u).
+
+    The damper c_sec_z in series with the stiffness k_sec_z_s of its rubber end
+    mounts, at the secondary spring's place (±a_bogie on the carbody, ±b_sec,
+    h_sec): energy ½ k_sec_z_s (u - z_bogie)², dissipation ½ c_sec_z (u' - z'_carbody)²,
+    z the vertical displacement of the attachment points.
+    """
+    n = 13
+    ws = np.zeros(n)
+    ws[0:6] = -point_jacobian((0.0, side * q["b_sec"], q["h_sec"] - q["h_bogie"]))[2]
+    ws[12] = 1.0
+    wd = np.zeros(n)
+    wd[6:12] = -point_jacobian((end * q["a_bogie"], side * q["b_sec"], q["h_sec"] - q["h_car"]))[2]
+    wd[12] = 1.0
+    return maxwell_element(ws, wd, q["k_sec_z_s"], q["c_sec_z"])
 
 
 def _symmetric_outer(u: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -161,13 +194,15 @@ def _symmetric_outer(u: np.ndarray, e: np.ndarray) -> np.ndarray:
 class CarbodyBending(ExudynEffect):
     """First vertical bending mode of the carbody: one modal coordinate q (mid-car deflection, m).
 
-    Element on (carbody, front bogie, rear bogie, q), 19 coordinates:
+    Element on (carbody, front bogie, rear bogie, q, the internal coordinates of
+    the four secondary vertical dampers), 23 coordinates:
     m_q q'' + c_q q' + k_q q with k_q = m_q (2π f)², c_q = 2 ζ m_q 2π f, and the
-    secondary vertical springs and dampers (per side, k_sec_z and c_sec_z) seeing
-    the carbody point at the pivot x_p = ±a_bogie move by φ(x_p) q more: the
-    energy ½ k (δ_rigid + φ_p q)² adds k (φ_p (u e_q^T + e_q u^T) + φ_p² e_q e_q^T)
+    secondary vertical springs (per side, k_sec_z) and Maxwell dampers (c_sec_z)
+    seeing the carbody point at the pivot x_p = ±a_bogie move by φ(x_p) q more:
+    the energy ½ k (δ_rigid + φ_p q)² adds k (φ_p (u e_q^T + e_q u^T) + φ_p² e_q e_q^T)
     to the rigid terms the secondary suspension already has (u: δ_rigid per
-    coordinate). Sensors on the carbody at x move by φ(x) q more (every direction
+    coordinate), and the damper's dissipation ½ c (δ_d - φ_p q')² adds
+    c (-φ_p (w e_q^T + e_q w^T) + φ_p² e_q e_q^T) (w: the damper's elongation u_d - z_carbody). Sensors on the carbody at x move by φ(x) q more (every direction
     row gets it in the vertical component). Linearised about the sagged shape:
     the static deflection of the mode does not enter.
     """
@@ -187,7 +222,7 @@ class CarbodyBending(ExudynEffect):
         return float(m) if m else beam_modal_mass_ratio() * values["m_car"]
 
     def matrices(self, q: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        n = 19
+        n = 23
         M, K, D = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
         m = self.modal_mass(q)
         w = 2 * math.pi * self.get(q, "frequency_hz")
@@ -198,13 +233,16 @@ class CarbodyBending(ExudynEffect):
         e[18] = 1.0
         for b, xb in enumerate((q["a_bogie"], -q["a_bogie"])):
             phi = float(self._shape(xb))
-            for side in (1.0, -1.0):
+            for k, side in enumerate((1.0, -1.0)):
+                car_z = point_jacobian((xb, side * q["b_sec"], q["h_sec"] - q["h_car"]))[2]
                 u = np.zeros(n)
-                u[0:6] = point_jacobian((xb, side * q["b_sec"], q["h_sec"] - q["h_car"]))[2]
+                u[0:6] = car_z
                 u[6 + 6 * b: 12 + 6 * b] = -point_jacobian((0.0, side * q["b_sec"], q["h_sec"] - q["h_bogie"]))[2]
-                add = phi * _symmetric_outer(u, e) + phi * phi * np.outer(e, e)
-                K += q["k_sec_z"] * add
-                D += q["c_sec_z"] * add
+                K += q["k_sec_z"] * (phi * _symmetric_outer(u, e) + phi * phi * np.outer(e, e))
+                w_damper = np.zeros(n)                 # elongation u_damper - z_carbody of the Maxwell damper
+                w_damper[0:6] = -car_z
+                w_damper[19 + 2 * b + k] = 1.0
+                D += q["c_sec_z"] * (-phi * _symmetric_outer(w_damper, e) + phi * phi * np.outer(e, e))
         return M, K, D
 
     def build(self, model) -> None:
@@ -213,7 +251,9 @@ class CarbodyBending(ExudynEffect):
                              "articulated preset has several carbodies")
         node = model.add_effect_node(self.name, ("bending",))
         nodes = [model.nodes["carbody"], model.nodes["bogie_front"], model.nodes["bogie_rear"], node]
-        model.add_linear_element(nodes, 19, self.matrices)
+        nodes += [model.secondary_damper_nodes[(bogie, side)]
+                  for bogie in ("bogie_front", "bogie_rear") for side in (1.0, -1.0)]
+        model.add_linear_element(nodes, 23, self.matrices)
 
     def kinematic_rows(self, model, R, values) -> None:
         col = model.free_position[(self.name, "bending")]

@@ -136,7 +136,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import parameters as P
-from .effects import maxwell_yaw_damper, point_jacobian
+from .effects import maxwell_secondary_damper, maxwell_yaw_damper, point_jacobian
 from .layout import SINGLE, Layout
 from suspid.infra.threads import single_blas_thread
 
@@ -394,7 +394,8 @@ class TrainModel:
                                     lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
                                     lambda q: (q["c_prim_x"], 0.0, q["c_prim_z"]),
                                     lambda q, b=b: (0.0, 0.0, lay.axlebox_load(q, b) / q["k_prim_z"]))
-            # --- secondary suspension, per carbody end and side (springs, vertical and lateral dampers)
+            # --- secondary suspension, per carbody end and side (springs and lateral dampers; the vertical
+            #     dampers are Maxwell elements, :meth:`_add_secondary_dampers`)
             for c, end in ends:
                 for side in (1.0, -1.0):
                     m0 = self._marker(self.objects[bogie], (0.0, side * p["b_sec"], p["h_sec"] - p["h_bogie"]))
@@ -402,7 +403,7 @@ class TrainModel:
                                       (end * p["a_bogie"], side * p["b_sec"], p["h_sec"] - p["h_car"]))
                     self._cartesian(m0, m1,
                                     lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
-                                    lambda q: (0.0, q["c_sec_y"], q["c_sec_z"]),
+                                    lambda q: (0.0, q["c_sec_y"], 0.0),
                                     lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
             # --- traction rod: longitudinal link bogie frame - carrying carbody at the bogie centre
             m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_trac"] - p["h_bogie"]))
@@ -447,6 +448,7 @@ class TrainModel:
             if s.direction not in DIRECTIONS:
                 raise ValueError(f"sensor '{s.name}': unknown direction '{s.direction}'")
         # --- yaw dampers (Maxwell elements) and track support, unless an effect replaces them
+        self._add_secondary_dampers()
         if "yaw_damper" not in self.replaced:
             self._add_yaw_dampers()
         self.track_nodes: list[object] = []
@@ -474,6 +476,25 @@ class TrainModel:
         self.point_jacobians_xyz = self._sensor_jacobians()
         self.point_jacobians = np.array([self.point_jacobians_xyz[i, DIRECTIONS[s.direction]]
                                          for i, s in enumerate(self.sensors)]).reshape(len(self.sensors), 6)
+
+    def _add_secondary_dampers(self) -> None:
+        """Secondary vertical dampers, one per side of each carbody end: Maxwell elements (c_sec_z in series with
+        the stiffness k_sec_z_s of their rubber end mounts), :func:`.effects.maxwell_secondary_damper`.
+
+        One internal coordinate per damper (vertical, m, labelled ("secondary_damper",
+        "<bogie>_<carbody>_<side>")); ``secondary_damper_nodes[(bogie, side)]`` is the
+        node of the damper under the bogie's first carried carbody.
+        """
+        self.secondary_damper_nodes: dict[tuple[str, float], object] = {}
+        for b, bogie in enumerate(self.layout.bogies):
+            for k, (c, end) in enumerate(self.layout.bogie_cars(b)):
+                car = self.layout.carbodies[c]
+                for side, side_name in ((1.0, "left"), (-1.0, "right")):
+                    node = self.add_effect_node("secondary_damper", (f"{bogie}_{car}_{side_name}",))
+                    if k == 0:
+                        self.secondary_damper_nodes[(bogie, side)] = node
+                    self.add_linear_element([self.nodes[bogie], self.nodes[car], node], 13,
+                                            lambda q, e=end, s=side: maxwell_secondary_damper(q, e, s))
 
     def _add_yaw_dampers(self) -> None:
         """Yaw dampers, one per side of each bogie: Maxwell elements (spring k_yaw_s in series with c_yaw).

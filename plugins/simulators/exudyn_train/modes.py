@@ -36,8 +36,9 @@ import numpy as np
 
 from .model import LinearSystem
 
-GROUPS = ("carbody", "bogie", "wheelset", "articulation", "track/contact", "internal")
-"""Mode groups in the order of the listing."""
+GROUPS = ("carbody", "bogie", "wheelset", "articulation", "track/contact", "internal", "relaxation")
+"""Mode groups in the order of the listing; "relaxation": real (overdamped, non-oscillating) poles, such as
+those of the Maxwell dampers' series springs relaxing through the damper."""
 
 CONTACT_HZ = 30.0
 """Wheelset-dominated modes at or above this frequency count as track/contact modes."""
@@ -83,8 +84,10 @@ def state_matrix(linear: LinearSystem) -> np.ndarray:
     return A
 
 
-def mode_group(body: str, frequency_hz: float) -> str:
+def mode_group(body: str, frequency_hz: float, oscillating: bool = True) -> str:
     """The group (:data:`GROUPS`) of a mode from its dominant body and frequency."""
+    if not oscillating:
+        return "relaxation"
     if body.startswith("carbody"):
         return "carbody" if frequency_hz < CONTACT_HZ else "articulation"
     if body.startswith("bogie"):
@@ -128,7 +131,7 @@ def compute_modes(linear: LinearSystem) -> list[Mode]:
             participation={b: round(e, 4) for b, e in sorted(per_body.items(), key=lambda kv: -kv[1]) if e >= 0.05},
             eigenvalue=(float(l.real), float(l.imag))))
     for m in modes:
-        m.group = mode_group(m.body, m.frequency_hz)
+        m.group = mode_group(m.body, m.frequency_hz, m.damped_frequency_hz > 0.0)
     modes.sort(key=lambda m: (GROUPS.index(m.group), m.frequency_hz))
     return modes
 

@@ -150,7 +150,14 @@ CONVENTIONAL_HS: tuple[VehicleParameter, ...] = (
     _p("k_sec_x", "N/m", 160e3, 80e3, 320e3, "secondary longitudinal stiffness per side", CRH),
     _p("k_sec_y", "N/m", 160e3, 100e3, 240e3, "secondary lateral stiffness per side", CRH),
     _p("k_sec_z", "N/m", 350e3, 230e3, 500e3, "secondary vertical stiffness per side", ICE3),
-    _p("c_sec_z", "N s/m", 20e3, 10e3, 35e3, "secondary vertical damping per side", ICE3),
+    _p("c_sec_z", "N s/m", 20e3, 10e3, 35e3,
+       "secondary vertical damping per side (the damper of a Maxwell element with the series stiffness "
+       "k_sec_z_s)", ICE3),
+    _p("k_sec_z_s", "N/m", 5e6, 2e6, 10e6,
+       "series stiffness of each secondary vertical damper (its rubber end mounts)",
+       ASSUMED + ": rubber end mounts of hydraulic dampers, a few MN/m; modelled in series with the damper as "
+       "recommended by Bruni et al., Modelling of suspension components in a rail vehicle dynamics context, "
+       "Vehicle System Dynamics 49(7), 2011"),
     _p("c_sec_y", "N s/m", 30e3, 15e3, 60e3,
        "secondary lateral damping per side (one lateral damper per side, in parallel with the secondary "
        "lateral spring)", HMPE),
