@@ -158,7 +158,7 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
     (k_track + i w c_track - w^2 m_track) z_rail, from the linear model solved at each frequency line
     (M, K, D and the track inputs of exudyn's linearisation); 2 s at each end left out.
     """
-    from suspid.plugins.simulators.exudyn_train import parameters as P
+    from suspid.plugins.simulators.exudyn_train.layout import layout_of
     from suspid.plugins.simulators.exudyn_train.solvers import InputSpectra, fft_length, output_samples
 
     sim = ExudynTrain(vehicle=vehicle, fs_hz=fs)
@@ -179,7 +179,7 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
             z = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[rail]
             Z[k] = (p["k_track"] + 1j * wk * p["c_track"] - wk ** 2 * p["m_track"]) * z
         force = np.fft.irfft(Z, n=n_fft)[:n_t][int(2 * fs):-int(2 * fs)]
-        out.append(float(np.std(force)) / P.static_loads(p)["wheel"])
+        out.append(float(np.std(force)) / layout_of(vehicle).wheel_load(p, 0))
     return out
 
 
