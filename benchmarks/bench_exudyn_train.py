@@ -30,6 +30,9 @@ the carbody vertical spectra, time vs frequency solver, creep saturation.
 
 ``--c-yaw-shift`` prints only that influence and the critical speed, for a
 preset with other nominal values (``--set k_trac=10e6``, repeatable).
+``--pitch-paths`` prints the carbody pitch response to vertical track input
+through the vertical suspension alone (links at the carbody's centre of mass)
+and as modelled, and its shift for c_yaw x 0.7 (one car).
 """
 
 from __future__ import annotations
@@ -66,7 +69,12 @@ def main() -> None:
                     help="print only the c_yaw influence on the carbody spectra and the critical speed")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="with --c-yaw-shift: another nominal value of a vehicle parameter (repeatable)")
+    ap.add_argument("--pitch-paths", action="store_true",
+                    help="print the carbody pitch response by path and its c_yaw shift (one car)")
     args = ap.parse_args()
+    if args.pitch_paths:
+        pitch_paths(args.vehicle)
+        return
     if args.physics:
         physics(args.vehicle)
         return
@@ -158,7 +166,7 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
     (k_track + i w c_track - w^2 m_track) z_rail, from the linear model solved at each frequency line
     (M, K, D and the track inputs of exudyn's linearisation); 2 s at each end left out.
     """
-    from suspid.plugins.simulators.exudyn_train import parameters as P
+    from suspid.plugins.simulators.exudyn_train.layout import layout_of
     from suspid.plugins.simulators.exudyn_train.solvers import InputSpectra, fft_length, output_samples
 
     sim = ExudynTrain(vehicle=vehicle, fs_hz=fs)
@@ -179,7 +187,7 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
             z = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[rail]
             Z[k] = (p["k_track"] + 1j * wk * p["c_track"] - wk ** 2 * p["m_track"]) * z
         force = np.fft.irfft(Z, n=n_fft)[:n_t][int(2 * fs):-int(2 * fs)]
-        out.append(float(np.std(force)) / P.static_loads(p)["wheel"])
+        out.append(float(np.std(force)) / layout_of(vehicle).wheel_load(p, 0))
     return out
 
 
@@ -203,6 +211,36 @@ def c_yaw_shift(sim, segs, base) -> None:
               "channel's peak, 0.4-20 Hz, 200 bins): " + "  ".join(
                   f"{c}: {d[i].mean():.2f}/{d[i, k[i]]:.2f} at {f[k[i]]:.1f} Hz ({level[i].max() - level[i, k[i]]:.0f} dB)"
                   for i, c in enumerate(sim.channels()) if c.startswith("carbody")))
+
+
+def pitch_paths(vehicle: str, freqs=(4.0, 8.0, 9.6, 10.5, 10.8, 11.1, 12.0, 14.4), speed_kmh: float = 300.0) -> None:
+    """Carbody pitch per unit vertical track level (the same at every wheelset, delayed), relative to its value at
+    the first frequency: vertical path only (traction rod and yaw dampers at the carbody's centre of mass), as
+    modelled, and the shift (dB) of the modelled one for c_yaw x 0.7."""
+    v = speed_kmh / 3.6
+    f = np.asarray(freqs)
+
+    def pitch(overrides, w=None):
+        sim = ExudynTrain(vehicle={"preset": vehicle, **overrides}, fs_hz=FS_HZ)
+        lin = sim.linear_system(w or {}, v)
+        i = lin.labels.index(("carbody", "pitch"))
+        out = []
+        for fk in f:
+            wk = 2 * np.pi * fk
+            rhs = sum(lin.G[j][:, 0] * np.exp(1j * wk * lin.wheelset_x[j] / v) for j in range(lin.G.shape[0]))
+            out.append(abs(np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[i]))
+        return np.array(out)
+
+    p = {q.name: q.nominal for q in ExudynTrain(vehicle=vehicle).parameters()}
+    h = p["h_car"]
+    alone = pitch({"h_yaw": h, "h_trac": h})
+    base = pitch({})
+    low = pitch({}, {"c_yaw": 0.7 * p["c_yaw"]})
+    print(f"# {vehicle}, {speed_kmh:.0f} km/h: carbody pitch per vertical track level, relative to {f[0]:g} Hz")
+    print("f (Hz):                " + "  ".join(f"{x:7.1f}" for x in f))
+    print("vertical path only:    " + "  ".join(f"{x:7.4f}" for x in alone / alone[0]))
+    print("as modelled:           " + "  ".join(f"{x:7.4f}" for x in base / base[0]))
+    print("c_yaw x 0.7 (dB):      " + "  ".join(f"{x:+7.2f}" for x in 20 * np.log10(low / base)))
 
 
 def physics(vehicle: str) -> None:

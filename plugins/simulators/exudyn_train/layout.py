@@ -11,6 +11,14 @@ A :class:`Layout` names the bodies and places them; the model
   Jacobs bogies shared by two carbodies; bogies 1 and n + 1 carry one carbody
   end each. Adjacent carbodies meet at an articulation above the Jacobs
   bogie's centre.
+- ``Layout(n, articulated=True, outer_neighbours=True)``: the same section
+  cut from the middle of a rake: its end bogies are Jacobs bogies too, each
+  also carrying the end of a neighbouring carbody outside the section. That
+  carbody is not modelled; the static load of its end (half a carbody, the
+  section's carbody mass) acts on the end bogie as a dead load at its
+  secondary suspension seats (:meth:`Layout.neighbour_load`), so that every
+  bogie carries two carbody ends (the same wheel loads, Hertz stiffness,
+  Kalker coefficients and gravitational stiffness on every wheelset).
 
 Every carbody end rests on its own secondary suspension (per side: springs
 x, y, z, vertical and lateral dampers): a Jacobs bogie carries two carbody
@@ -38,6 +46,7 @@ class Layout:
 
     n_cars: int = 1
     articulated: bool = False
+    outer_neighbours: bool = False
 
     # ------------------------------------------------------------------ names
     @property
@@ -78,6 +87,12 @@ class Layout:
             ends.append((b, 1.0))          # front end of the carbody behind
         return tuple(ends)
 
+    def neighbour_ends(self, b: int) -> int:
+        """Number of carbody ends outside the section that bogie ``b`` also carries (0 or 1): one on each
+        end bogie of an articulated section with ``outer_neighbours``."""
+        end_bogie = self.articulated and b in (0, self.n_cars)
+        return int(self.outer_neighbours and end_bogie)
+
     def articulations(self) -> tuple[tuple[int, int], ...]:
         """Pairs (carbody ahead, carbody behind) joined by an articulation above a Jacobs bogie."""
         if not self.articulated:
@@ -105,9 +120,18 @@ class Layout:
         return np.array([x + s * w for x in self.bogie_x(values) for s in (1.0, -1.0)])
 
     # ------------------------------------------------------------------ static loads, N
+    def carried_ends(self, b: int) -> int:
+        """Number of carbody ends whose weight bogie ``b`` carries (those of the section and its neighbours)."""
+        return len(self.bogie_cars(b)) + self.neighbour_ends(b)
+
+    def neighbour_load(self, values: dict[str, float], b: int) -> float:
+        """Static force (N, downward) of the neighbouring carbody end outside the section on bogie ``b``: half
+        a carbody of the section's mass on an end bogie with ``outer_neighbours``, else 0."""
+        return self.neighbour_ends(b) * values["m_car"] / 2.0 * P.GRAVITY
+
     def axlebox_load(self, values: dict[str, float], b: int) -> float:
         """Static force per axlebox of bogie ``b``: its carbody ends (half a carbody each) and its frame."""
-        n_ends = len(self.bogie_cars(b))
+        n_ends = self.carried_ends(b)
         if n_ends == 1:
             return P.static_loads(values)["axlebox"]
         return (values["m_car"] / 8.0 * n_ends + values["m_bogie"] / 4.0) * P.GRAVITY
@@ -115,7 +139,7 @@ class Layout:
     def wheel_load(self, values: dict[str, float], j: int) -> float:
         """Static force per wheel of wheelset ``j`` (0-based)."""
         b = j // 2
-        if len(self.bogie_cars(b)) == 1:
+        if self.carried_ends(b) == 1:
             return P.static_loads(values)["wheel"]
         return self.axlebox_load(values, b) + values["m_ws"] * P.GRAVITY / 2.0
 
@@ -129,6 +153,7 @@ SINGLE = Layout()
 
 def layout_of(preset: str) -> Layout:
     """The layout of a vehicle preset (:data:`.parameters.LAYOUTS`: number of articulated carbodies, 0 for a
-    conventional car)."""
+    conventional car). An articulated preset is a section from the middle of a rake: its end bogies also
+    carry a neighbouring carbody end (``outer_neighbours``)."""
     n = P.LAYOUTS.get(preset, 0)
-    return Layout(n, articulated=True) if n else SINGLE
+    return Layout(n, articulated=True, outer_neighbours=True) if n else SINGLE

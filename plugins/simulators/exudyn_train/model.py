@@ -370,6 +370,8 @@ class TrainModel:
             f = np.zeros(n_r)
             for i, b in enumerate(self.bodies):
                 f[6 * i + 2] = -P.GRAVITY * q[f"m_{kind(b)}"]
+            for b, bogie in enumerate(self.layout.bogies):   # dead loads of carbody ends outside the section
+                f[6 * self.bodies.index(bogie) + 2] -= self.layout.neighbour_load(q, b)
             return f
 
         self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "forceVector", list(v)), gravity)
@@ -417,6 +419,7 @@ class TrainModel:
             arb = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[mr0, mr1], stiffness=0.0))
             self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v), lambda q: q["k_arb"])
         self._add_articulations()
+        self._add_neighbour_loads()
 
         # --- wheel-rail contact: one force element per wheelset, on the wheelset's coordinates and its
         #     odometer (its distance along the track, in track samples). One element per wheelset because
@@ -541,6 +544,24 @@ class TrainModel:
                 m1 = self._marker(car1, (p["a_bogie"], side * p["b_ic"], p["h_ic"] - p["h_car"]))
                 self._cartesian(m0, m1, lambda q: (0.0, 0.0, 0.0), lambda q: (q["c_ic"], 0.0, 0.0),
                                 lambda q: (0.0, 0.0, 0.0))
+
+    def _add_neighbour_loads(self) -> None:
+        """The static load W of a carbody end outside the section on an end bogie (articulated layouts with
+        ``outer_neighbours``, :meth:`.layout.Layout.neighbour_load`).
+
+        W acts downward at the bogie's secondary seats (±b_sec, height
+        h_sec): the vertical force is in the ground element (``gravity``);
+        here the stiffness a constant force applied e = h_sec - h_bogie above
+        the frame's centre of mass adds to the frame's roll and pitch, -W e
+        each (the term the preload of a secondary spring gives its seat; a
+        linear element on the bogie node). The neighbouring carbody's mass
+        does not enter the dynamics.
+        """
+        lay = self.layout
+        for b, bogie in enumerate(lay.bogies):
+            if lay.neighbour_ends(b):
+                self.add_linear_element([self.nodes[bogie]], 6, lambda q, b=b: _dead_load_matrices(
+                    lay.neighbour_load(q, b), q["h_sec"] - q["h_bogie"]))
 
     def _add_track_support(self) -> None:
         """A rail mass under each wheel on the track support (pad and ballast), vertical.
@@ -1220,6 +1241,15 @@ def _saturation(esym, fx, fy, limit):
     """
     u = esym.sqrt(fx * fx + fy * fy) / esym.max(limit, 1.0)
     return esym.IfThenElse(u < 3.0, 1.0 - u / 3.0 + u * u / 27.0, 1.0 / esym.max(u, 1e-12))
+
+
+def _dead_load_matrices(load: float, height: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mass, stiffness, damping (6 x 6, rigid-body node coordinates) of a constant downward force ``load``
+    (N) applied symmetrically ``height`` (m) above the node: stiffness -load height in roll and pitch."""
+    zeros = np.zeros((6, 6))
+    k = np.zeros((6, 6))
+    k[3, 3] = k[4, 4] = -load * height
+    return zeros, k, zeros
 
 
 def track_support_matrices(q: dict[str, float], wheel: float | None = None

@@ -29,7 +29,9 @@ the model is the same, built on the preset's layout, :mod:`.layout`):
 - ``tgv-articulated``: a power-car-free section of an articulated TGV-class
   trainset, three carbodies on four bogies (two Jacobs bogies shared by
   adjacent carbodies, an end bogie at each end), eight wheelsets; 17 t axle
-  load on the Jacobs bogies. Masses, pitch inertias, geometry and vertical
+  load on every bogie (the section stands for the middle of a rake: each end
+  bogie also carries the static load of the neighbouring carbody end outside
+  the section, :meth:`.layout.Layout.neighbour_load`). Masses, pitch inertias, geometry and vertical
   suspension of the Eurostar/TMST articulated (TGV-derived) intermediate
   trailer after A. Domenech Monforte, thesis, Universitat Politecnica de
   Valencia 2014 (2-D vehicle model; its values per wheelset and per carbody
