@@ -82,7 +82,9 @@ def test_two_variants_two_seeds_study_aggregates_the_runs(tmp_path):
     study = {"variants": [{"name": "likelihood", "set": {"objective.plugin": "likelihood"}},
                           {"name": "mean-spectrum", "set": {"objective.plugin": "mean-spectrum"}}],
              "seeds": [1, 2], "compare": ["likelihood", "mean-spectrum"], "checkpoints": [7, 1000]}
-    config = {**BASE, "ego": {"max_iter": 2}, "output": {"dir": str(tmp_path / "runs")}, "study": study}
+    # 12 segments: with 6, the likelihood finds no identifiable component and every error is undefined
+    data = {**BASE["data"], "track": {**BASE["data"]["track"], "n_segments": 12}}
+    config = {**BASE, "data": data, "ego": {"max_iter": 2}, "output": {"dir": str(tmp_path / "runs")}, "study": study}
     out = suspid.study(config).study_dir
 
     results = {(v, s): json.loads((out / "variants" / f"{v}-seed{s}" / "result.json").read_text())
@@ -156,3 +158,14 @@ def test_a_bad_compare_is_one_line_naming_the_key(tmp_path):
     res = run_cli("validate", str(cfg))
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "key 'study.compare'" in res.stderr and "unknown variant(s) overlapp" in res.stderr
+
+
+def test_anytime_figure_with_no_defined_error(tmp_path):
+    """Runs whose components are all not identifiable have an all-NaN anytime curve: the figure is still
+    written (linear axis, a note), and a curve with errors gets a log axis spanning them."""
+    from suspid.workflows.study_report import RunStats, figure_anytime
+
+    nan = RunStats("a-seed1", "a", 1, {}, np.full(5, np.nan))
+    assert figure_anytime(tmp_path / "none.png", [nan]).stat().st_size > 0
+    some = RunStats("b-seed1", "b", 1, {}, np.array([np.nan, 8.0, 2.0, 0.5]))
+    assert figure_anytime(tmp_path / "some.png", [nan, some]).stat().st_size > 0

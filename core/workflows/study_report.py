@@ -150,6 +150,7 @@ def figure_anytime(path: Path, runs: list[RunStats]) -> Path:
     over seeds (a line) and their range (a band); a run that stopped keeps its last value."""
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
+    plotted: list[np.ndarray] = []
     for variant, group in by_variant(runs).items():
         curves = [r.curve for r in group if r.curve.size]
         if not curves:
@@ -162,7 +163,15 @@ def figure_anytime(path: Path, runs: list[RunStats]) -> Path:
             mean, low, high = (np.nanmean(padded, axis=0), np.nanmin(padded, axis=0), np.nanmax(padded, axis=0))
         line, = ax.plot(calls, mean, label=f"{variant} ({len(curves)} seeds)")
         ax.fill_between(calls, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    ax.set_yscale("log")
+        plotted += [low, high]
+    values = np.concatenate(plotted) if plotted else np.zeros(0)
+    values = values[np.isfinite(values) & (values > 0)]
+    if values.size:   # a log axis needs positive values; its limits set here, not from NaN-padded data
+        ax.set_yscale("log")
+        ax.set_ylim(values.min() / 1.5, values.max() * 1.5)
+    else:
+        ax.text(0.5, 0.5, "no identifiable component with a defined error in any run", ha="center",
+                va="center", transform=ax.transAxes, fontsize=9)
     ax.set_xlabel("simulator calls")
     ax.set_ylabel("worst identifiable error (%)")
     ax.set_title("best-J point so far: mean over seeds, band from min to max", fontsize=9)
