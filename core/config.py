@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -130,6 +131,27 @@ MAX_VALUES = 100_000
 """Most values a config may expand to, aliases expanded (a config has a few hundred)."""
 
 
+class ConfigLoader(yaml.SafeLoader):
+    """YAML's safe loader that also reads ``14.68e6`` and ``1e-4`` as numbers.
+
+    PyYAML follows YAML 1.1, where a float needs a dot and a signed exponent:
+    ``3.3e5`` and ``1e3`` would be strings, and a config value such as a vehicle
+    parameter written that way would be refused as "not a number". YAML 1.2 (and
+    every engineer) reads them as floats.
+    """
+
+
+ConfigLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."))
+
+
+def parse_yaml(text: str) -> Any:
+    """A YAML document with :class:`ConfigLoader` (safe; exponents with or without sign are floats)."""
+    return yaml.load(text, Loader=ConfigLoader)
+
+
 def _check_shape(text: str, file: str) -> None:
     """Refuse, in linear time, YAML nested too deeply or expanding to too many values through aliases.
 
@@ -183,8 +205,8 @@ def read_yaml(path: Path) -> tuple[dict[str, Any], dict[tuple, int]]:
         raise ConfigError(f"cannot read config: {exc.strerror or exc}", file=file) from None
     try:
         _check_shape(text, file)
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
+        node = yaml.compose(text, Loader=ConfigLoader)
+        data = parse_yaml(text)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         raise ConfigError(f"YAML syntax error: {exc.problem or exc}", file=file,
@@ -211,7 +233,7 @@ def apply_overrides(data: dict[str, Any], overrides: Sequence[str], file: str) -
         if not all(parts):
             raise ConfigError(f"--set has an empty key in '{key}'", file=file, key=key)
         try:
-            value = yaml.safe_load(raw) if raw.strip() else ""
+            value = parse_yaml(raw) if raw.strip() else ""
         except yaml.YAMLError:
             value = raw
         node: Any = data

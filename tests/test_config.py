@@ -150,3 +150,18 @@ def test_command_line_mistakes_are_usage_errors_with_exit_2(args, words):
     res = run_cli(*args)
     assert res.returncode == 2, (res.returncode, res.stderr)
     assert words in res.stderr and "internal error" not in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def test_exponents_without_sign_or_dot_are_numbers(tmp_path):
+    """YAML 1.1 reads 14.68e6 and 1e3 as strings; a config reads them as floats (YAML 1.2), a vehicle override
+    written that way is accepted, and a word that only looks like one ('1e') stays a string."""
+    from suspid.config import parse_yaml
+
+    assert parse_yaml("a: 14.68e6\nb: 1e3\nc: -2.5E-3\nd: 1e\ne: 7") == {"a": 14.68e6, "b": 1000.0, "c": -2.5e-3,
+                                                                       "d": "1e", "e": 7}
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("simulator: {plugin: exudyn-train, options: {vehicle: {preset: conventional-hs, k_prim_x: 14.68e6}}}\n"
+                   "parameters: {k_sec_z: {lower: 2.3e5, upper: 5e5}}\n")
+    config = load_config(cfg)
+    assert config.parameters["k_sec_z"].lower == 2.3e5
+    assert config.simulator.options["vehicle"]["k_prim_x"] == 14.68e6

@@ -80,6 +80,16 @@ def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model
     assert json.loads((run / "result.json").read_text())["w_opt"] == result["w_opt"]
 
 
+def test_the_shipped_two_date_config_validates_beside_generated_files(tmp_path):
+    """configs/two-dates.yaml as the README says: copied beside `reference/` and `measurement/`, it validates
+    (its numbers in the exponent form 14.68e6 read as numbers, its nuisance parameters are the model's)."""
+    TR.generate_two_dates(tmp_path, {}, W_DAMAGED, seed=3, n_segments=2, speed_mps=300 / 3.6)
+    shipped = Path(__file__).resolve().parents[1] / "configs" / "two-dates.yaml"
+    cfg = tmp_path / "two-dates.yaml"
+    cfg.write_text(shipped.read_text())
+    assert _cli("validate", str(cfg)) == 0
+
+
 def test_validate_names_a_missing_reference_file(two_dates):
     cfg = _config(two_dates, noise={"reference": {"measurements": "nowhere", "track_file": "reference/track"}})
     assert _cli("validate", str(cfg)) == 2
