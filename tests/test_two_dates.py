@@ -128,3 +128,14 @@ def test_data_groups_split_directions_and_frequencies():
     assert names[:2] == ["vertical channels", "lateral channels"] and len(groups) == 4
     assert groups[0].channels.tolist() == [True, False, True]
     assert (groups[2].freqs ^ groups[3].freqs).all()
+
+
+def test_a_significant_self_check_shift_over_the_tolerance_is_a_bias():
+    """The self-check's rule on known numbers (fractions of the interval, tolerance 3 %): 4.7 ± 1.2 % is a bias
+    over the tolerance (its 2-sigma lower bound, 2.3 %, is not: the size is judged on the estimate); 4.7 ± 3.0 %
+    could be scatter; 2.0 ± 0.5 % is a bias within the tolerance."""
+    from suspid.workflows.analysis import biased
+
+    bias = [0.047, -0.047, 0.047, 0.020, 0.060]
+    se = [0.012, 0.012, 0.030, 0.005, 0.035]
+    assert biased(bias, se, 0.03).tolist() == [True, True, False, False, False]

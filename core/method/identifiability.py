@@ -93,8 +93,9 @@ class ModelErrorOptions(Section):
     run: Literal["measured", "always", "never"] = Field(
         default="measured", description="when to run the checks: on measured data only (the numerical "
         "experiment's model is the truth's, so it has no model-form error to find), always, or never")
-    max_bias: float = Field(default=0.03, ge=0, le=1, description="largest self-check bias beyond 2 standard "
-                            "errors of the splits' mean, fraction of the admissible interval, of a trustworthy component")
+    max_bias: float = Field(default=0.03, ge=0, le=1, description="largest self-check bias of a trustworthy "
+                            "component, fraction of the admissible interval (a shift counts as a bias when it lies "
+                            "beyond 2 standard errors of the splits' mean)")
     widen: bool = Field(default=True, description="widen the intervals by the self-check bias (in quadrature)")
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)
