@@ -128,21 +128,28 @@ class ExudynEffect:
         return []
 
 
-def maxwell_element(w_spring: np.ndarray, w_damper: np.ndarray, stiffness: float, c: float, damped: bool = True
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(M, K, D) ``(n, n)`` of a Maxwell element: a spring ``stiffness`` (N/m) in series with a damper ``c`` (N s/m).
+def maxwell_element(r_bogie: Sequence[float], r_car: Sequence[float], axis: int, stiffness: float, c: float,
+                    damped: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(M, K, D) ``(13, 13)`` of a Maxwell element on (bogie, carbody, internal coordinate u): a spring
+    ``stiffness`` (N/m) from the bogie point ``r_bogie`` to u, in series with a damper ``c`` (N s/m) from u
+    to the carbody point ``r_car`` (m, body axes at each body's centre of mass), along ``axis`` (0 x, 2 z).
 
-    The element's last coordinate is its internal node u (m); ``w_spring`` and
-    ``w_damper`` ``(n,)`` give the elongation of the spring and of the damper per
-    coordinate (each with +1 on u). Energy ½ k (w_spring·q)², dissipation
-    ½ c (w_damper·q')²; the internal mass c / (2π :data:`MAXWELL_FAST_HZ`) keeps the
-    system second order. ``damped=False`` leaves the damper out.
+    Energy ½ k (u - d_bogie)², dissipation ½ c (u' - d'_carbody)², d the
+    displacement of the attachment points along ``axis``; the internal mass
+    c / (2π :data:`MAXWELL_FAST_HZ`) keeps the system second order. ``damped=False``
+    leaves the damper out.
     """
-    n = len(w_spring)
+    n = 13
+    ws = np.zeros(n)
+    ws[0:6] = -point_jacobian(r_bogie)[axis]
+    ws[12] = 1.0
+    wd = np.zeros(n)
+    wd[6:12] = -point_jacobian(r_car)[axis]
+    wd[12] = 1.0
     M = np.zeros((n, n))
-    M[n - 1, n - 1] = c / (2 * math.pi * MAXWELL_FAST_HZ)
-    D = c * np.outer(w_damper, w_damper) if damped else np.zeros((n, n))
-    return M, stiffness * np.outer(w_spring, w_spring), D
+    M[12, 12] = c / (2 * math.pi * MAXWELL_FAST_HZ)
+    D = c * np.outer(wd, wd) if damped else np.zeros((n, n))
+    return M, stiffness * np.outer(ws, ws), D
 
 
 def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: float, damped: bool = True
@@ -156,15 +163,9 @@ def maxwell_yaw_damper(q: dict[str, float], end: float, side: float, stiffness: 
     ``damped=False`` leaves the damper out (the time solver's blow-off law then
     supplies it, :meth:`.model.TrainModel._yaw_blow_off`).
     """
-    n = 13
-    xb = end * q["a_bogie"]
-    ws = np.zeros(n)
-    ws[0:6] = -point_jacobian((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]))[0]
-    ws[12] = 1.0
-    wd = np.zeros(n)
-    wd[6:12] = -point_jacobian((xb, side * q["b_yaw"], q["h_yaw"] - q["h_car"]))[0]
-    wd[12] = 1.0
-    return maxwell_element(ws, wd, stiffness, q["c_yaw"], damped)
+    return maxwell_element((0.0, side * q["b_yaw"], q["h_yaw"] - q["h_bogie"]),
+                           (end * q["a_bogie"], side * q["b_yaw"], q["h_yaw"] - q["h_car"]), 0,
+                           stiffness, q["c_yaw"], damped)
 
 
 def maxwell_secondary_damper(q: dict[str, float], end: float, side: float) -> tuple[np.ndarray, np.ndarray,
@@ -174,16 +175,11 @@ def maxwell_secondary_damper(q: dict[str, float], end: float, side: float) -> tu
     The damper c_sec_z in series with the stiffness k_sec_z_s of its rubber end
     mounts, at the secondary spring's place (±a_bogie on the carbody, ±b_sec,
     h_sec): energy ½ k_sec_z_s (u - z_bogie)², dissipation ½ c_sec_z (u' - z'_carbody)²,
-    z the vertical displacement of the attachment points.
+    z the vertical displacement of the attachment points (:func:`maxwell_element`).
     """
-    n = 13
-    ws = np.zeros(n)
-    ws[0:6] = -point_jacobian((0.0, side * q["b_sec"], q["h_sec"] - q["h_bogie"]))[2]
-    ws[12] = 1.0
-    wd = np.zeros(n)
-    wd[6:12] = -point_jacobian((end * q["a_bogie"], side * q["b_sec"], q["h_sec"] - q["h_car"]))[2]
-    wd[12] = 1.0
-    return maxwell_element(ws, wd, q["k_sec_z_s"], q["c_sec_z"])
+    return maxwell_element((0.0, side * q["b_sec"], q["h_sec"] - q["h_bogie"]),
+                           (end * q["a_bogie"], side * q["b_sec"], q["h_sec"] - q["h_car"]), 2,
+                           q["k_sec_z_s"], q["c_sec_z"])
 
 
 def _symmetric_outer(u: np.ndarray, e: np.ndarray) -> np.ndarray:
