@@ -24,8 +24,10 @@ parameter θ at each end of its range:
 
 A component that some θ within its plausible range moves by more than
 ``max_shift`` of its admissible interval is *not trustworthy under model
-error*: the data do not decide it, the assumed θ does. The intervals are
-widened by the largest shift. The searches cost about ``(2 n_θ + 1) · 20 q``
+error*: the data do not decide it, the assumed θ does. Every nuisance
+parameter may be off at once: the sum over θ of each one's larger |shift|
+bounds the bias they cause together, and the intervals are widened by it
+(:func:`suspid.method.identifiability.bias_aware_half_width`). The searches cost about ``(2 n_θ + 1) · 20 q``
 simulations of the measurement date and one of the reference date per end.
 """
 
@@ -63,6 +65,13 @@ class NuisanceCheck:
         """``(q,)`` largest |shift| per component and the row that gives it."""
         rows = np.argmax(np.abs(self.shifts), axis=0)
         return np.abs(self.shifts[rows, np.arange(self.shifts.shape[1])]), [int(r) for r in rows]
+
+    def per_parameter(self) -> np.ndarray:
+        """``(q,)`` the sum over nuisance parameters of each one's larger |shift| (of the ends of its range):
+        a bound on the shift when every parameter is off at once, each within its range (linear response)."""
+        names = list(dict.fromkeys(name for name, _ in self.values))
+        return sum(np.abs(self.shifts[[i for i, (n, _) in enumerate(self.values) if n == name]]).max(axis=0)
+                   for name in names)
 
     def to_dict(self, names: list[str]) -> dict:
         return {"status": "done", "n_simulations": self.n_simulations,

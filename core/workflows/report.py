@@ -252,8 +252,9 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
     if result.get("refine_stop_reason"):
         refine = (f" (the last {result['n_refine_iterations']} in the local refinement, stop: "
                   f"`{result['refine_stop_reason']}`)")
-    widened = (", combined in quadrature with the model-error terms (reference-date self-check bias, half the "
-               "spread of the data groups' estimates)"
+    widened = (", made bias-aware: widened by the model-error checks' bound on the bias (reference-date "
+               "self-check bias + half the spread of the data groups' estimates + the nuisance parameters' shifts; "
+               "Armstrong and Kolesár's fixed-length interval, which keeps the level for any bias within the bound)"
                if result.get("interval_method", {}).get("widened_by_model_error") else "")
     text = f"""# suspid run `{config.name}`
 
