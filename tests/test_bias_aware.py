@@ -55,3 +55,15 @@ def test_nuisance_bias_bound_sums_each_parameters_larger_shift():
     check = NuisanceCheck([("k_yaw_s", 5e6), ("k_yaw_s", 2e7), ("conicity", 0.18), ("conicity", 0.35)], shifts, 0)
     assert np.allclose(check.per_parameter(), [0.02 + 0.005, 0.03 + 0.04])
     assert np.allclose(check.largest()[0], [0.02, 0.04])
+
+
+def test_a_component_too_uncertain_under_model_error_is_not_trustworthy():
+    from suspid.workflows.analysis import imprecise
+
+    trust = {"trustworthy": {"a": True, "b": True, "c": True}, "reasons": {},
+             "bias_bound": np.array([0.01, 0.06, 0.2])}
+    sd = np.array([0.01, 0.02, 0.05])
+    half = bias_aware_half_width(sd, trust["bias_bound"], 2.0)   # 0.027, 0.094, 0.28
+    imprecise(trust, ["a", "b", "c"], np.array([True, True, False]), half, 2 * sd, 0.08)
+    assert trust["trustworthy"] == {"a": True, "b": False, "c": True}  # c: not identifiable, flagged already
+    assert list(trust["reasons"]) == ["b"] and "± 9.4 %" in trust["reasons"]["b"][0]

@@ -98,6 +98,10 @@ class ModelErrorOptions(Section):
     max_bias: float = Field(default=0.03, ge=0, le=1, description="largest self-check bias of a trustworthy "
                             "component, fraction of the admissible interval (a shift counts as a bias when it lies "
                             "beyond 2 standard errors of the splits' mean)")
+    max_half_width: float = Field(
+        default=0.08, gt=0, le=1, description="largest half-width of a trustworthy component's bias-aware "
+        "interval, fraction of the admissible interval: a component that the sampling spread and the bound on the "
+        "model-error bias together leave less precise is not reported as a finding")
     widen: bool = Field(default=True, description="make the intervals bias-aware: widen them by the model-error "
                         "checks' bound on the bias (self-check bias, half the groups' spread, nuisance shifts)")
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)

@@ -167,6 +167,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     if opts.model_error.widen and trust["bias_bound"] is not None:
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)
         interval_unit = np.stack([np.clip(u_opt - half, 0, 1), np.clip(u_opt + half, 0, 1)], axis=1)
+        imprecise(trust, names, verdict.identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
     interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
     sampling_si = problem.from_unit(verdict.interval_unit.T).T
     units = {p.name: p.unit for p in problem.simulator.parameters()}
@@ -259,6 +260,24 @@ def local_sensitivity(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: fl
         if up > um:
             S[k] = (yp - ym) / (up - um)
     return y_opt, S
+
+
+def imprecise(trust: dict[str, Any], names: list[str], identifiable: np.ndarray, half: np.ndarray,
+              sampling_half: np.ndarray, max_half_width: float) -> None:
+    """Flag, in ``trust`` (from :func:`model_error`), the identifiable components whose bias-aware half-width
+    ``half`` ``(q,)`` exceeds ``max_half_width`` (fractions of the admissible interval).
+
+    The checks' bound on the bias, added to the sampling spread, says how far the reported value may be
+    from the vehicle's: beyond ``max_half_width`` the value is not a finding, even when no single check
+    flags it (each source small, the sum large; or a sampling spread that model error widens further).
+    """
+    for k, n in enumerate(names):
+        if identifiable[k] and half[k] > max_half_width:
+            trust["trustworthy"][n] = False
+            trust["reasons"].setdefault(n, []).append(
+                f"too uncertain under model error: its bias-aware interval is ± {100 * half[k]:.1f} % of the "
+                f"admissible one (sampling ± {100 * sampling_half[k]:.1f} %, model-error bound on the bias "
+                f"{100 * trust['bias_bound'][k]:.1f} %), wider than ± {100 * max_half_width:.0f} %")
 
 
 def biased(bias: np.ndarray, se: np.ndarray, max_bias: float) -> np.ndarray:
