@@ -33,6 +33,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -164,6 +165,22 @@ def main(argv: list[str] | None = None) -> None:
     missed = [x for x in reported if abs(x[4]["error"]) > 5.0]
     print("reported but off by > 5 %: " + (", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in missed)
                                          or "none"))
+    print("\nper objective and component: reported / runs (worst |error| of the reported, %; mean half-width "
+          "of their intervals, %)")
+    for obj in objectives_in(all_rows):
+        cells = []
+        for n in names:
+            rows_n = [r for _, _, o, m, r in all_rows if o == obj and m == n]
+            rep = [r for r in rows_n if r["identifiable"] and r["trustworthy"]]
+            cells.append(f"{n} {len(rep)}/{len(rows_n)}" + (f" ({max(abs(r['error']) for r in rep):.1f}; "
+                                                             f"{np.mean([r['half_width'] for r in rep]):.1f})"
+                                                             if rep else ""))
+        print(f"  {obj}: " + ", ".join(cells))
+
+
+def objectives_in(all_rows: list) -> list[str]:
+    """The objectives of the rows, in their order."""
+    return list(dict.fromkeys(o for _, _, o, _, _ in all_rows))
 
 
 if __name__ == "__main__":
