@@ -73,8 +73,16 @@ def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model
         lo, hi = result["interval"][n]
         slo, shi = result["interval_sampling"][n]
         assert lo <= slo + 1e-9 and hi >= shi - 1e-9
+    me = result["model_error"]   # the bias-aware interval is w_opt ± the reported half-width, clipped to the box
+    for n in result["parameters"]:
+        u, half = result["w_opt_normalized"][n], me["half_width_percent"][n] / 100
+        assert result["interval_normalized"][n] == pytest.approx([max(u - half, 0.0), min(u + half, 1.0)], abs=1e-9)
+        assert me["bias_bound_percent"][n] >= 0
+        if half > me["max_half_width_percent"] / 100 and result["identifiable"][n]:
+            assert not result["trustworthy"][n]
     report = (run / "report.md").read_text()
     assert "## Model error" in report and "trustworthy under model error" in report
+    assert "Bound on the bias" in report
     # a second run reuses the reference-date simulation and the self-check from the ledger
     assert _cli("run", str(cfg), "--quiet") == 0
     assert json.loads((run / "result.json").read_text())["w_opt"] == result["w_opt"]

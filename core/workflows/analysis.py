@@ -168,6 +168,9 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)
         interval_unit = np.stack([np.clip(u_opt - half, 0, 1), np.clip(u_opt + half, 0, 1)], axis=1)
         imprecise(trust, names, verdict.identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
+        trust["report"].update({"bias_bound_percent": {n: float(100 * v) for n, v in zip(names, trust["bias_bound"])},
+                                "half_width_percent": {n: float(100 * v) for n, v in zip(names, half)},
+                                "max_half_width_percent": 100 * opts.model_error.max_half_width})
     interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
     sampling_si = problem.from_unit(verdict.interval_unit.T).T
     units = {p.name: p.unit for p in problem.simulator.parameters()}

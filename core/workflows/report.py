@@ -183,6 +183,14 @@ def model_error_section(result: dict[str, Any]) -> str:
                                 for row in nu["shifts_percent"]])]
     elif nu:
         out += ["", f"Nuisance parameters: {nu['status']}."]
+    bound = me.get("bias_bound_percent")
+    if bound:
+        out += ["", f"Bound on the bias of w_opt (the self-check's |bias| + half the groups' spread + each nuisance "
+                    f"parameter's larger |shift|, their signs unknown) and the bias-aware interval's half-width, "
+                    f"in % of the interval. A component wider than ± {me['max_half_width_percent']:.0f} % is not "
+                    f"trustworthy.", "",
+                markdown_table(["parameter", "bound on the bias (%)", "half-width (%)"],
+                               [[n, f"{bound[n]:.1f}", f"{me['half_width_percent'][n]:.1f}"] for n in names])]
     return "\n".join(out) + "\n"
 
 
