@@ -17,7 +17,7 @@ Usage (from the repository root)::
 
     python benchmarks/bench_model_form.py OUT_DIR [--seeds 7 8 11] [--w-refs quickstart other w0]
         [--objectives overlap likelihood] [--jobs 2] [--segments 40] [--summary]
-        [--nuisance k_yaw_s=5e6:20e6 kalker_scale=0.6:1.0]
+        [--nuisance k_yaw_s=5e6:20e6 kalker_scale=0.6:1.0] [--weights reference]
 
 A finished run (its result.json) is kept: running again completes a cut grid;
 ``--summary`` prints the table of the runs finished so far.
@@ -55,19 +55,21 @@ BOUNDS = {n: {"lower": 0.5 * protocol.VEHICLE[n], "upper": 1.5 * protocol.VEHICL
 independent train (16 and 800 kN s/m) on a bound: the interval is centred on them instead, as the preset's is."""
 
 
-def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None) -> Path:
-    cfg = {"name": objective, "seed": seed,
+def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None,
+                 weights: str | None = None) -> Path:
+    name = objective + (f"-{weights}-weights" if weights else "")
+    cfg = {"name": name, "seed": seed,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": protocol.VEHICLE}},
            "parameters": {n: BOUNDS.get(n, {}) for n in W_REFS["quickstart"]},
            "data": {"source": "measured", "measurements": "measurement/accelerations",
                     "track_file": "measurement/track"},
            "noise": {"reference": {"measurements": "reference/accelerations", "track_file": "reference/track"}},
            "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200},
-           "objective": {"plugin": objective}, "surrogate": {"plugin": "gpy-kriging"},
+           "objective": {"plugin": objective, **({"weights": weights} if weights else {})}, "surrogate": {"plugin": "gpy-kriging"},
            "design": {"method": "maximin-lhs", "n_initial": 30}, "ego": {"max_iter": 40, "tol": 1.0e-4}}
     if nuisance:
         cfg["identifiability"] = {"model_error": {"nuisance": {"parameters": nuisance}}}
-    path = case / f"{objective}.yaml"
+    path = case / f"{name}.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     return path
 
@@ -116,6 +118,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--summary", action="store_true", help="only summarise the runs already finished")
     ap.add_argument("--nuisance", nargs="*", default=[], metavar="NAME=LOW:HIGH",
                     help="nuisance parameters of the model-error check, e.g. k_yaw_s=5e6:20e6")
+    ap.add_argument("--weights", choices=["reference"], default=None,
+                    help="objective.weights of the runs (their run directories get the suffix -reference-weights)")
     a = ap.parse_args(argv)
     a.out.mkdir(parents=True, exist_ok=True)
     nuisance = {text.split("=")[0]: [float(v) for v in text.split("=")[1].split(":")] for text in a.nuisance}
@@ -123,7 +127,7 @@ def main(argv: list[str] | None = None) -> None:
     for obj in a.objectives:       # the runs most needed first: a cut grid still covers every w_ref
         for seed in a.seeds:
             for w_ref in a.w_refs:
-                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj, nuisance))
+                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj, nuisance, a.weights))
     with ThreadPoolExecutor(a.jobs) as pool:
         for cfg, wall, err in ([] if a.summary else pool.map(run_one, cfgs)):
             print(f"{cfg.parent.name}/{cfg.stem}: {wall:.0f} s{' FAILED: ' + err if err else ''}", flush=True)

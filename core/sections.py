@@ -41,8 +41,10 @@ class SimulatorSection(PluginSection):
 
 class ObjectiveSection(PluginSection):
     plugin: str = "overlap"
-    weights: list[float] | dict[str, float] | None = Field(
-        default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; default 1/n")
+    weights: list[float] | dict[str, float] | Literal["reference"] | None = Field(
+        default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; 'reference': "
+        "from the noise model B, down-weighting the channels the model misses most at the reference date; "
+        "default 1/n")
 
 
 class SurrogateSection(PluginSection):

@@ -67,3 +67,18 @@ def test_a_component_too_uncertain_under_model_error_is_not_trustworthy():
     imprecise(trust, ["a", "b", "c"], np.array([True, True, False]), half, 2 * sd, 0.08)
     assert trust["trustworthy"] == {"a": True, "b": False, "c": True}  # c: not identifiable, flagged already
     assert list(trust["reasons"]) == ["b"] and "± 9.4 %" in trust["reasons"]["b"][0]
+
+
+def test_reference_weights_down_weight_the_channels_the_model_misses():
+    from suspid.method.noise import fit_noise_model
+    from suspid.method.objective import reference_weights
+
+    rng = np.random.default_rng(1)
+    y_sim0 = rng.normal(0, 1, (40, 3, 50))
+    offset = np.array([0.0, 2.0, 0.0])[None, :, None]          # channel 1: the model 2 dB off
+    spread = np.array([0.5, 0.5, 1.5])[None, :, None]          # channel 2: 1.5 dB of scatter
+    noise = fit_noise_model(y_sim0 + offset + spread * rng.normal(0, 1, y_sim0.shape), y_sim0)
+    alpha = reference_weights(noise)
+    error = np.array([0.25, 4.25, 2.25])                       # μ² + σ² per channel, dB²
+    assert alpha.sum() == pytest.approx(1.0)
+    assert alpha == pytest.approx((1 / error) / (1 / error).sum(), rel=0.15)

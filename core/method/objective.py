@@ -26,6 +26,18 @@ from suspid.method.floor import NoiseFloor
 from suspid.method.noise import NoiseModel, modelled_spectra
 
 
+def reference_weights(noise_model: NoiseModel) -> np.ndarray:
+    """α_k of eq. 5 from the reference date: ``(n_channels,)`` ∝ 1 / mean over ω of (μ_B² + σ_B²), sum 1.
+
+    B = y_mes - y_sim(w0) at the reference date (eq. 3) measures, per channel, how far the model is from
+    the vehicle where the truth is known: a channel the model misses by a lot (large mean μ_B or
+    spread σ_B, in dB) is down-weighted, in the spirit of inverse-variance weighting.
+    """
+    error = np.mean(noise_model.mean_ ** 2 + noise_model.variance_, axis=1)        # (n_channels,) dB²
+    alpha = 1.0 / np.maximum(error, 1e-12)
+    return alpha / alpha.sum()
+
+
 def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, channels: Sequence[str],
                      key: str = "objective.weights") -> np.ndarray:
     """The weights α_k of eq. 5 as ``(n_channels,)``, normalised to sum to 1.
@@ -41,7 +53,7 @@ def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, chan
     n = len(channels)
     if n == 0:
         raise ConfigError("there are no channels to weight", key=key)
-    if weights is None:
+    if weights is None or weights == "reference":  # "reference": set from B by reference_weights
         return np.full(n, 1.0 / n)
     if isinstance(weights, abc.Mapping):
         unknown = [str(name) for name in weights if str(name) not in channels]

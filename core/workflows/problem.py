@@ -35,6 +35,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.infra.seeds import seed_for
 from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
 from suspid.method.noise import NoiseModel, fit_noise_model, modelled_spectra
+from suspid.method.objective import reference_weights
 from suspid.method.spectra import compute_spectra
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -336,7 +337,8 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
 
     objective_cls = registry.get("objective", config.objective.plugin)
     objective = objective_cls(**config.objective.options)
-    weights = channel_weights(config, channels)
+    weights = reference_weights(noise_model) if config.objective.weights == "reference" \
+        else channel_weights(config, channels)
     data_identity = stable_hash("data", array_digest(y_mes, b), segments_digest(segments),
                                 config.objective.plugin, config.objective.options, weights.tolist(),
                                 spectra_options.model_dump())
