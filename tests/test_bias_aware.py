@@ -82,3 +82,10 @@ def test_reference_weights_down_weight_the_channels_the_model_misses():
     error = np.array([0.25, 4.25, 2.25])                       # μ² + σ² per channel, dB²
     assert alpha.sum() == pytest.approx(1.0)
     assert alpha == pytest.approx((1 / error) / (1 / error).sum(), rel=0.15)
+
+
+def test_weights_given_as_an_array_are_still_weights():
+    from suspid.method.objective import validate_weights
+
+    assert validate_weights(np.array([1.0, 1.0, 2.0]), ["a", "b", "c"]) == pytest.approx([0.25, 0.25, 0.5])
+    assert validate_weights("reference", ["a", "b"]) == pytest.approx([0.5, 0.5])  # replaced from B later
