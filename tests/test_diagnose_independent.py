@@ -83,6 +83,7 @@ def test_local_model_takes_a_one_channel_bump_and_a_flat_gain():
     grid = make_cells(["a", "b", "c"], f, [80.0] * 4)
     null = Null()
     null.bin_sd = np.full((1, 3, f.size), 0.2)
+    null.noise_mean = np.zeros((1, 3, f.size))                                 # μ_B of the speed group
     nm = type("NM", (), {"mean_": np.zeros((3, f.size)), "floor_": None,  # a noise model without a floor
                          "effective": lambda self, y_sim: y_sim})()
     y_mes = np.zeros((4, 3, f.size))
