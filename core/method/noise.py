@@ -280,7 +280,7 @@ class NoiseModel:
             centre[group_of == g] = means[i] - mean
         return centre, v0 - len(kept) - int(np.any(~np.isin(group_of, kept)))
 
-    def _speed_group_of(self, speeds: Sequence[float]) -> np.ndarray:
+    def speed_group_of(self, speeds: Sequence[float]) -> np.ndarray:
         """Each speed's group in ``speeds_`` (within :data:`SPEED_TOLERANCE`), -1 where none; ``(n,)``."""
         v = np.atleast_1d(np.asarray(speeds, dtype=float))
         if self.speeds_ is None:
@@ -293,7 +293,7 @@ class NoiseModel:
         """μ_B at each speed ``(n, n_channels, n_freqs)`` dB: the mean of the reference date's speed group within
         :data:`SPEED_TOLERANCE`, else (no such group, or no speed groups) the overall mean ``mean_``."""
         self._check_fitted()
-        g = self._speed_group_of(speeds)
+        g = self.speed_group_of(speeds)
         out = np.repeat(self.mean_[None], g.size, axis=0)
         if self.speed_means_ is not None:
             out[g >= 0] = self.speed_means_[g[g >= 0]]
@@ -301,7 +301,7 @@ class NoiseModel:
 
     def reference_counts(self, speeds: Sequence[float]) -> np.ndarray:
         """The reference-date segments behind :meth:`mean_for` at each speed ``(n,)``: its group's, else v0."""
-        g = self._speed_group_of(speeds)
+        g = self.speed_group_of(speeds)
         counts = np.full(g.size, self.n_samples_)
         if self.speed_counts_ is not None:
             counts[g >= 0] = self.speed_counts_[g[g >= 0]]
@@ -311,7 +311,7 @@ class NoiseModel:
         """Per speed (m/s): which mean of B it takes (``speed_group`` or ``pooled``) and from how many
         reference-date segments; ``covered`` is False where the reference date's speeds are known and none is
         within :data:`SPEED_TOLERANCE` of this one (its mean is then the pooled one, of other speeds)."""
-        g = self._speed_group_of(speeds)
+        g = self.speed_group_of(speeds)
         counts = self.reference_counts(speeds)
         out = []
         for v, gi, n in zip(np.atleast_1d(np.asarray(speeds, dtype=float)), g, counts):
