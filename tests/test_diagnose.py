@@ -419,3 +419,16 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     polygon = ranking[0]
     assert polygon.parameters["order"] == 1 and polygon.signature["200.0 km/h"]["speed_dependence"] == "proportional"
     assert bumps[polygon.n_parameters].explained < 0.75 * polygon.explained   # one frequency in Hz: half the story
+
+
+def test_report_says_when_a_speed_has_no_reference_date_data():
+    from suspid.method.noise import NoiseModel
+    from suspid.workflows.diagnose.report import _speed_note
+
+    nm = NoiseModel().fit(np.random.default_rng(0).normal(size=(10, 2, 5)), speeds=[300 * KMH] * 10)
+    coverage = nm.speed_coverage([200 * KMH, 300 * KMH])
+    assert [c["covered"] for c in coverage] == [False, True]
+    note = _speed_note(coverage)
+    assert "200 km/h" in note and "no reference-date data at this speed" in note
+    assert "300 km/h: the reference date's mean at this speed (10 segments)" in note
+    assert _speed_note(nm.speed_coverage([300 * KMH])) == ""
