@@ -263,7 +263,8 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
         fixed.discard("sensor-tilt")
         record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
                       reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
-                             f"({n0} → {n1} in all)")
+                             f"({n0} → {n1} in all)",
+                      unexplained=unexplained_regions(current.dmap, [], None))   # what stays flagged, as it is
         return record, None
     record["named_parameters"] = canonical(params)
     record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
