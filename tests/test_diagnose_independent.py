@@ -184,6 +184,22 @@ def test_independent_null_names_nothing(tmp_path, case, seed):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+def test_two_speed_null_at_the_truth_takes_a_mean_of_b_per_speed(tmp_path, seed):
+    """At the true parameters (no identification error) the two-speed null flags at most 2 % of the cells: the
+    reference date's μ_B differs by a median 0.9 dB between 200 and 300 km/h, and one μ_B for both speeds
+    flagged 21-26 %."""
+    hidden, speeds = HE.CASES["two-speeds"]
+    path = HE.prepare(tmp_path / f"two-speeds-{seed}", hidden, seed=seed, speeds_kmh=speeds,
+                      diagnose={"at": "nominal"})
+    d = suspid.diagnose(path).diagnosis
+    assert d["named_effects"] == [], d["reason"]
+    assert d["gap_before"]["share_flagged"] <= 0.02
+    coverage = d["statistics"]["noise_mean_by_speed"]
+    assert [(c["mean"], c["reference_segments"]) for c in coverage] == [("speed_group", 32)] * 2
+
+
+@pytest.mark.slow
 @pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
 def test_independent_bending_and_tilt_named_in_two_steps(tmp_path, seed):
