@@ -14,12 +14,14 @@ did not make; identification before and after, joint fit) instead.
 
     python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
     python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5] [--floor auto]
+        [--keep DIR]
 
 ``--floor`` sets ``noise.floor`` of the reference-date noise model of the independent experiments:
 ``none``, ``auto``, or ``spec=<density>`` (the sensors' noise density, (m/s²)²/Hz one-sided; the
 independent train's sensors have 1e-8). ``--at nominal`` diagnoses at the nominal parameters (the truth of
 the null cases) instead of the identified ones: the noise model's share of the flags, without the
-identification's error.
+identification's error. ``--keep DIR`` writes the experiments (data, configs, runs) under DIR instead of a
+temporary folder, for a look at their ``diagnosis.json`` afterwards.
 """
 
 from __future__ import annotations
@@ -92,9 +94,10 @@ def main() -> None:
                     help="diagnose.at of the independent experiments")
     ap.add_argument("--floor", default="none", help="noise.floor of the independent experiments' noise model: "
                     "none, auto or spec=<density in (m/s²)²/Hz>")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the independent experiments under this folder")
     args = ap.parse_args()
     if args.independent:
-        return independent(args.seeds, args.cases, args.floor, args.at)
+        return independent(args.seeds, args.cases, args.floor, args.at, args.keep)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"# bench_diagnose  {datetime.date.today()}  python {platform.python_version()}  {platform.machine()}  "
           f"{os.cpu_count()} cpus  load average {load:.2f}")
@@ -135,8 +138,11 @@ def main() -> None:
                   f"{json.dumps({k: round(v, 2) for k, v in ga['errors_percent'].items()})}")
 
 
-def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", at: str = "identified") -> None:
+def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", at: str = "identified",
+                keep: Path | None = None) -> None:
     """The table of the experiments on the independent train (docs/diagnose.md, section 2)."""
+    import contextlib
+
     from independent import effects as HE
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
@@ -144,7 +150,8 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", 
     print("| case (seed) | named (steps) | effect parameters | flagged before → after each step | "
           "errors before → after (% of interval) | unexplained (first) | s |")
     print("|---|---|---|---|---|---|---|")
-    with tempfile.TemporaryDirectory() as tmp:
+    folder = contextlib.nullcontext(str(keep)) if keep is not None else tempfile.TemporaryDirectory()
+    with folder as tmp:
         for seed in seeds:
             for case in cases or list(HE.CASES):
                 hidden, speeds = HE.CASES[case]

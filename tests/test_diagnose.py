@@ -81,6 +81,41 @@ def test_null_is_calibrated_and_by_flags_nothing_under_the_null():
     assert n_flags <= 4                                              # FWER of BY under the full null: <= 5 %
 
 
+def test_two_speed_null_takes_the_reference_mean_of_each_speed():
+    """The reference date runs at 200 and 300 km/h and its B has means 1.2 dB apart (a model-form error that
+    changes with speed); the measurement date has no effect. With one mean of B per speed group the null
+    flags at most 2 % of the cells; with one mean for both speeds (``by_speed: false``) half the cells or more."""
+    from suspid.method.noise import NoiseModel
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells
+
+    rng = np.random.default_rng(7)
+    f, channels = np.linspace(0.5, 30.0, 60), ["ch0", "ch1", "ch2"]
+    v200, v300 = 200 * KMH, 300 * KMH
+    offset = np.where(np.arange(f.size) < f.size // 2, 1.2, -1.2)[None]   # (1, F): 200 vs 300 km/h
+
+    def paths(n, seed, speeds):
+        x = np.log2(f)
+        L = np.linalg.cholesky(np.exp(-0.5 * ((x[:, None] - x[None]) / 0.5) ** 2) + 0.3 * np.eye(f.size))
+        e = 0.5 * np.einsum("fg,vkg->vkf", L, np.random.default_rng(seed).standard_normal((n, 3, f.size)))
+        return e + 2.0 + np.where(np.asarray(speeds)[:, None, None] < 70, offset[None] / 2, -offset[None] / 2)
+
+    ref_speeds = [v200] * 32 + [v300] * 32
+    b0 = paths(64, 10, ref_speeds)
+    speeds = [v200] * 24 + [v300] * 24
+    y_sim = rng.normal(size=(48, 3, f.size))
+    y_mes = y_sim + paths(48, 11, speeds)
+    grid = make_cells(channels, f, speeds)
+    shares = {}
+    for by_speed in (True, False):
+        nm = NoiseModel(by_speed=by_speed).fit(b0, freqs=f, channels=channels, speeds=ref_speeds)
+        null = calibrate_null(grid, nm, 100, np.random.default_rng(4))
+        shares[by_speed] = locate(grid, null, y_mes, y_sim, null.noise_mean).share_flagged
+    np.testing.assert_allclose(nm.mean_, b0.mean(axis=0))
+    by = NoiseModel().fit(b0, speeds=ref_speeds)
+    assert np.abs((by.speed_means_[0] - by.speed_means_[1]) - offset).max() < 0.6   # 1.2 dB recovered
+    assert shares[True] <= 0.02 and shares[False] >= 0.5
+
+
 def test_locate_finds_a_broad_shift_and_a_narrow_line():
     from suspid.workflows.diagnose import calibrate_null, locate, make_cells
 
@@ -384,3 +419,16 @@ def test_speed_signature_with_data_at_two_speeds(tmp_path):
     polygon = ranking[0]
     assert polygon.parameters["order"] == 1 and polygon.signature["200.0 km/h"]["speed_dependence"] == "proportional"
     assert bumps[polygon.n_parameters].explained < 0.75 * polygon.explained   # one frequency in Hz: half the story
+
+
+def test_report_says_when_a_speed_has_no_reference_date_data():
+    from suspid.method.noise import NoiseModel
+    from suspid.workflows.diagnose.report import _speed_note
+
+    nm = NoiseModel().fit(np.random.default_rng(0).normal(size=(10, 2, 5)), speeds=[300 * KMH] * 10)
+    coverage = nm.speed_coverage([200 * KMH, 300 * KMH])
+    assert [c["covered"] for c in coverage] == [False, True]
+    note = _speed_note(coverage)
+    assert "200 km/h" in note and "no reference-date data at this speed" in note
+    assert "300 km/h: the reference date's mean at this speed (10 segments)" in note
+    assert _speed_note(nm.speed_coverage([300 * KMH])) == ""

@@ -83,6 +83,7 @@ def test_local_model_takes_a_one_channel_bump_and_a_flat_gain():
     grid = make_cells(["a", "b", "c"], f, [80.0] * 4)
     null = Null()
     null.bin_sd = np.full((1, 3, f.size), 0.2)
+    null.noise_mean = np.zeros((1, 3, f.size))                                 # μ_B of the speed group
     nm = type("NM", (), {"mean_": np.zeros((3, f.size)), "floor_": None,  # a noise model without a floor
                          "effective": lambda self, y_sim: y_sim})()
     y_mes = np.zeros((4, 3, f.size))
@@ -180,6 +181,22 @@ def test_independent_null_names_nothing(tmp_path, case, seed):
     d, _ = run_case(tmp_path, case, seed)
     assert d["named_effects"] == [], d["reason"]
     assert d["gap_before"]["share_flagged"] <= 0.02
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", SEEDS)
+def test_two_speed_null_at_the_truth_takes_a_mean_of_b_per_speed(tmp_path, seed):
+    """At the true parameters (no identification error) the two-speed null flags at most 2 % of the cells: the
+    reference date's μ_B differs by a median 0.9 dB between 200 and 300 km/h, and one μ_B for both speeds
+    flagged 21-26 %."""
+    hidden, speeds = HE.CASES["two-speeds"]
+    path = HE.prepare(tmp_path / f"two-speeds-{seed}", hidden, seed=seed, speeds_kmh=speeds,
+                      diagnose={"at": "nominal"})
+    d = suspid.diagnose(path).diagnosis
+    assert d["named_effects"] == [], d["reason"]
+    assert d["gap_before"]["share_flagged"] <= 0.02
+    coverage = d["statistics"]["noise_mean_by_speed"]
+    assert [(c["mean"], c["reference_segments"]) for c in coverage] == [("speed_group", 32)] * 2
 
 
 @pytest.mark.slow

@@ -169,3 +169,41 @@ def test_invalid_inputs():
     model = fit_noise_model(y + 1.0, y, {"n_components": 2})
     np.testing.assert_allclose(model.mean_, 1.0)
     assert model.sample(3, seed=0) == pytest.approx(np.ones((3, N_CH, N_F)))  # zero variance: b = 1 dB
+
+
+def test_speed_groups_keep_a_mean_per_speed_and_the_covariance_about_it(tmp_path):
+    """Reference paths at 200 and 300 km/h whose means differ by 1.5 dB: a mean per speed, the within-group
+    variance (not inflated by the speeds' difference), saved and loaded; another speed takes the pooled mean."""
+    v200, v300 = 200 / 3.6, 300 / 3.6
+    b = draw(80, 11)
+    b[:40] += 1.5
+    speeds = [v200] * 40 + [v300 * 1.01] * 20 + [v300] * 20        # 1 % apart: one group
+    model = NoiseModel().fit(b, freqs=FREQS, speeds=speeds)
+    np.testing.assert_allclose(model.speeds_, [v200, v300 * 1.005])
+    np.testing.assert_array_equal(model.speed_counts_, [40, 40])
+    np.testing.assert_allclose(model.speed_means_, [b[:40].mean(axis=0), b[40:].mean(axis=0)])
+    within = np.concatenate([b[:40] - b[:40].mean(axis=0), b[40:] - b[40:].mean(axis=0)])
+    np.testing.assert_allclose(model.variance_, (within ** 2).sum(axis=0) / (80 - 2))
+    assert np.mean(model.variance_) < 0.8 * np.mean(NoiseModel().fit(b).variance_)   # pooled: + (1.5/2)² dB²
+    np.testing.assert_allclose(model.mean_for([v300, v200, 250 / 3.6]),
+                               [model.speed_means_[1], model.speed_means_[0], b.mean(axis=0)])
+    np.testing.assert_array_equal(model.reference_counts([v300, 250 / 3.6]), [40, 80])
+    assert [c["covered"] for c in model.speed_coverage([v200, 250 / 3.6])] == [True, False]
+    again = NoiseModel.load(model.save(tmp_path / "noise.npz"))
+    np.testing.assert_array_equal(again.speed_means_, model.speed_means_)
+    np.testing.assert_array_equal(again.sample(4, 3, [v200, v300, v200, v300]),
+                                  model.sample(4, 3, [v200, v300, v200, v300]))
+    pooled = NoiseModel(by_speed=False).fit(b, speeds=speeds)
+    assert pooled.speeds_ is None and np.allclose(pooled.mean_for([v200]), b.mean(axis=0))
+
+
+def test_one_reference_speed_changes_nothing_but_records_it(tmp_path):
+    b = draw(30, 12)
+    plain = NoiseModel().fit(b)
+    one = NoiseModel().fit(b, speeds=[300 / 3.6] * 30)
+    for name in ("mean_", "components_", "eigenvalues_", "variance_", "residual_variance_"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(plain, name))
+    np.testing.assert_array_equal(one.sample(5, 7, [300 / 3.6] * 5), plain.sample(5, 7))
+    assert one.speed_coverage([200 / 3.6]) == [{"speed_kmh": 200.0, "mean": "pooled", "reference_segments": 30,
+                                                "covered": False}]
+    assert json.loads(str(np.load(plain.save(tmp_path / "plain.npz"))["meta"]))["format_version"] == 1

@@ -130,6 +130,25 @@ def test_band_residuals_flag_a_shift_the_noise_cannot_explain():
     assert share[0] > 0.9 and share[1] < 0.05
 
 
+def test_band_residuals_take_the_mean_of_b_at_each_speed():
+    """Reference date and measurements at 200 and 300 km/h, B's mean 3 dB higher at 200 km/h: nothing is
+    inadequate with μ_B per speed; with one μ_B for both speeds every band of both channels is."""
+    rng = np.random.default_rng(1)
+    freqs = np.geomspace(0.5, 16, 60)
+    speeds = np.repeat([200 / 3.6, 300 / 3.6], 30)
+    shift = np.where(speeds < 70, 1.5, -1.5)[:, None, None]
+    y_sim0 = rng.normal(0, 1, (60, 2, 60))
+    noise = fit_noise_model(y_sim0 + rng.normal(0, 0.5, (60, 2, 60)) + shift, y_sim0, speeds=speeds)
+    y_sim = rng.normal(0, 1, (60, 2, 60))
+    y_mes = y_sim + rng.normal(0, 0.5, (60, 2, 60)) + shift
+    bands = frequency_bands(freqs, 1.0)
+    keep = np.r_[0:10, 30:60]                          # 10 segments at 200, 30 at 300 km/h: unequal weights
+    res = band_residuals(y_mes[keep], y_sim[keep], noise, bands, speeds=speeds[keep])
+    assert not res.inadequate.any() and np.abs(res.mean_db).max() < 0.3
+    pooled = band_residuals(y_mes[keep], y_sim[keep], noise, bands)
+    assert pooled.inadequate.all() and np.allclose(pooled.mean_db, -0.75, atol=0.2)
+
+
 def test_data_groups_split_directions_and_frequencies():
     groups = data_groups(["a_vertical", "a_lateral", "b_vertical"], np.geomspace(0.4, 20, 10))
     names = [g.name for g in groups]

@@ -82,15 +82,22 @@ class Residuals:
 
 
 def band_residuals(y_mes: np.ndarray, y_sim: np.ndarray, noise: NoiseModel, bands: list[np.ndarray],
-                   z_threshold: float = 3.0, min_db: float = 0.5) -> Residuals:
+                   z_threshold: float = 3.0, min_db: float = 0.5, speeds: np.ndarray | None = None) -> Residuals:
     """The band test of the module docstring.
 
     :param y_mes: ``(v, n_channels, n_freqs)`` dB measured spectra.
     :param y_sim: ``(v, n_channels, n_freqs)`` dB simulated at w_opt on the same segments.
     :param noise: the fitted noise model B (mean, covariance, number of paths v0).
+    :param speeds: ``(v,)`` m/s, the segments' speeds: each takes μ_B at its speed (``noise.mean_for``).
     """
-    d = np.asarray(y_mes, float) - noise.effective(np.asarray(y_sim, float)) - noise.mean_[None]
+    mean_b = noise.mean_[None] if speeds is None else noise.mean_for(speeds)
+    d = np.asarray(y_mes, float) - noise.effective(np.asarray(y_sim, float)) - mean_b
     v, n_ch, n_f = d.shape
+    # Var of the estimated μ_B averaged over the segments: Σ_g (v_g / v)² / v0_g per unit variance of B
+    mu_factor = 1.0 / max(noise.n_samples_, 1)
+    if speeds is not None:
+        group, counts = noise.speed_group_of(speeds), noise.reference_counts(speeds)
+        mu_factor = sum((np.sum(group == g) / v) ** 2 / counts[group == g][0] for g in np.unique(group))
     n_b = len(bands)
     mean, se = np.empty((n_ch, n_b)), np.empty((n_ch, n_b))
     phi = noise.components_.reshape(-1, n_ch, n_f)          # (r, n_ch, n_f)
@@ -103,7 +110,7 @@ def band_residuals(y_mes: np.ndarray, y_sim: np.ndarray, noise: NoiseModel, band
         # a^T C_B a per channel: low-rank part plus the diagonal remainder
         proj = phi[:, :, idx].sum(axis=2) * a               # (r, n_ch)
         var_b = (lam[:, None] * proj ** 2).sum(axis=0) + (noise.residual_variance_[:, idx] * a * a).sum(axis=1)
-        se[:, j] = np.sqrt(s2 / v + var_b / max(noise.n_samples_, 1))
+        se[:, j] = np.sqrt(s2 / v + var_b * mu_factor)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(se > 0, mean / se, 0.0)
     inadequate = (np.abs(z) > z_threshold) & (np.abs(mean) > min_db)

@@ -38,6 +38,20 @@ power under the multiplicative (dB) model error, y_mod = 5 log10(10^{(y_sim + m)
 (:mod:`suspid.method.floor`); the fitted model then carries it as ``floor_``
 and every use of y_sim + b goes through :func:`modelled_spectra`. With
 ``floor: none`` (the default) ``floor_`` is None and nothing changes.
+
+Also beyond the paper, the mean of B may depend on the speed: the model-form
+error of a rigid-body model against a vehicle changes with the excitation's
+frequencies, which move with the speed. When the reference date runs at
+several speeds (``noise.by_speed``, the default, and the segments' speeds given
+to :meth:`NoiseModel.fit`), the model keeps one mean per speed group of the
+reference date (speeds within :data:`SPEED_TOLERANCE` of each other, at least
+two segments) as ``speed_means_``, and the covariance of the paths about their
+own group's mean: B(v) = μ_B(v) + e, e the one Gaussian process. A speed the
+reference date did not cover takes the mean over all its segments, ``mean_``
+(:meth:`NoiseModel.mean_for`), and :meth:`NoiseModel.speed_coverage` says so.
+With one speed the mean and covariance are those of all segments, as
+without speeds; the speed is kept, so that data at another speed are reported
+as not covered by the reference date.
 """
 
 from __future__ import annotations
@@ -57,8 +71,13 @@ from suspid.options import parse_options
 from suspid.errors import DataError
 
 FORMAT = "suspid-noise-model"
-FORMAT_VERSION = 2
-"""Version 2 adds the floor arrays; a model without a floor is still written as version 1, and both are read."""
+FORMAT_VERSION = 3
+"""Version 2 adds the floor arrays, version 3 the speed groups; a model is written with the lowest version that
+holds what it has (no floor, no speed groups: version 1), and every version is read."""
+
+SPEED_TOLERANCE = 0.03
+"""Relative difference of speed within which reference-date segments form one speed group, and within which a
+measurement speed takes that group's mean of B."""
 
 
 class NoiseOptions(BaseModel):
@@ -80,6 +99,8 @@ class NoiseOptions(BaseModel):
               "per channel name (floor: spec)")
     floor_octaves: float = Field(default=0.5, ge=0.0, le=4.0,
                                  description="width (octaves) of the window over which the floor is smoothed")
+    by_speed: bool = Field(default=True, description="one mean of B per speed group of the reference date "
+                           "(when it runs at several speeds), the covariance about each group's mean")
 
     @model_validator(mode="after")
     def _spec_needs_density(self) -> "NoiseOptions":
@@ -114,6 +135,24 @@ def noise_samples(y_mes: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(b)):
         raise DataError("measured or simulated spectra contain NaN or infinite values")
     return b
+
+
+def speed_groups(speeds: Sequence[float], tolerance: float = SPEED_TOLERANCE) -> tuple[np.ndarray, np.ndarray]:
+    """Group segment speeds: sorted, a new group where a speed exceeds the group's first by more than
+    ``tolerance`` of it.
+
+    :param speeds: ``(v,)`` m/s, one per segment.
+    :returns: the groups' mean speeds ``(S,)`` m/s (ascending) and each segment's group ``(v,)``.
+    """
+    v = np.asarray(speeds, dtype=float)
+    order = np.argsort(v, kind="stable")
+    group_of = np.empty(v.size, dtype=int)
+    g, first = -1, -np.inf
+    for i in order:
+        if v[i] > first * (1.0 + tolerance):
+            g, first = g + 1, v[i]
+        group_of[i] = g
+    return np.array([v[group_of == k].mean() for k in range(g + 1)]), group_of
 
 
 def _auto_shrinkage(z: np.ndarray) -> float:
@@ -151,22 +190,30 @@ class NoiseModel:
     - ``residual_variance_`` ``(n_channels, n_freqs)`` dB², the diagonal remainder d_γ;
     - ``shrinkage_`` γ, ``n_samples_`` v0, ``explained_variance_ratio_`` ``(r,)``;
     - ``freqs_`` ``(n_freqs,)`` Hz and ``channels_`` when given to :meth:`fit`;
-    - ``floor_`` the :class:`~suspid.method.floor.NoiseFloor` (set by :func:`fit_noise_model`), or None.
+    - ``floor_`` the :class:`~suspid.method.floor.NoiseFloor` (set by :func:`fit_noise_model`), or None;
+    - ``speeds_`` ``(S,)`` m/s, ``speed_counts_`` ``(S,)`` and ``speed_means_`` ``(S, n_channels, n_freqs)`` dB:
+      the reference date's speed groups (at least two segments each), their segments and their means of B;
+      None without speeds or with ``by_speed: false``.
     """
 
     floor_: NoiseFloor | None = None
+    speeds_: np.ndarray | None = None
+    speed_counts_: np.ndarray | None = None
+    speed_means_: np.ndarray | None = None
 
     def __init__(self, **options: Any) -> None:
         self.options = options
 
     # -- fitting -----------------------------------------------------------------
     def fit(self, b: np.ndarray, freqs: np.ndarray | None = None,
-            channels: Sequence[str] | None = None) -> "NoiseModel":
+            channels: Sequence[str] | None = None, speeds: Sequence[float] | None = None) -> "NoiseModel":
         """Estimate mean and covariance from noise paths (eq. 3); returns ``self``.
 
         :param b: ``(v0, n_channels, n_freqs)`` dB, see :func:`noise_samples`; v0 >= 2.
         :param freqs: ``(n_freqs,)`` Hz, the grid Ω, stored to check later reuse.
         :param channels: channel names, stored to check later reuse.
+        :param speeds: ``(v0,)`` m/s, each path's segment speed: with ``by_speed``, one mean per speed group
+            and the covariance about the group means (segments of a group of one keep the overall mean).
         :raises DataError: wrong shape, fewer than 2 paths, non-finite values.
         :raises ConfigError: invalid options.
         """
@@ -179,8 +226,9 @@ class NoiseModel:
         v0, n_ch, n_f = b.shape
         self._set_grid(freqs, channels, n_ch, n_f)
         mean = b.mean(axis=0)
-        z = (b - mean).reshape(v0, -1)
-        scaled = z / math.sqrt(v0 - 1)
+        centre, dof = self._fit_speed_groups(b, speeds if opt.by_speed else None)
+        z = (b - mean - centre).reshape(v0, -1)
+        scaled = z / math.sqrt(dof)
         _, s, vt = np.linalg.svd(scaled, full_matrices=False)
         lam = s * s
         total = float(lam.sum())
@@ -205,6 +253,72 @@ class NoiseModel:
         self.explained_variance_ratio_ = lam[:r] / total if total > 0 else lam[:r]
         self.floor_ = None
         return self
+
+    def _fit_speed_groups(self, b: np.ndarray, speeds: Sequence[float] | None) -> tuple[np.ndarray, int]:
+        """Set the speed groups; returns each path's centre relative to the overall mean ``(v0, K, F)`` and the
+        degrees of freedom of the covariance (v0 minus the means estimated)."""
+        self.speeds_ = self.speed_counts_ = self.speed_means_ = None
+        v0 = b.shape[0]
+        centre = np.zeros_like(b)
+        if speeds is None:
+            return centre, v0 - 1
+        speeds = np.asarray(speeds, dtype=float)
+        if speeds.shape != (v0,):
+            raise DataError(f"{speeds.size} segment speeds for {v0} noise paths")
+        centres, group_of = speed_groups(speeds)
+        kept = [g for g in range(centres.size) if np.sum(group_of == g) >= 2]
+        if not kept:
+            return centre, v0 - 1
+        mean = b.mean(axis=0)
+        means = np.array([b[group_of == g].mean(axis=0) for g in kept])
+        self.speeds_ = centres[kept]
+        self.speed_counts_ = np.array([np.sum(group_of == g) for g in kept])
+        self.speed_means_ = means
+        if len(kept) < 2:
+            return centre, v0 - 1        # one speed: the covariance about the overall mean, as without speeds
+        for i, g in enumerate(kept):
+            centre[group_of == g] = means[i] - mean
+        return centre, v0 - len(kept) - int(np.any(~np.isin(group_of, kept)))
+
+    def speed_group_of(self, speeds: Sequence[float]) -> np.ndarray:
+        """Each speed's group in ``speeds_`` (within :data:`SPEED_TOLERANCE`), -1 where none; ``(n,)``."""
+        v = np.atleast_1d(np.asarray(speeds, dtype=float))
+        if self.speeds_ is None:
+            return np.full(v.size, -1)
+        rel = np.abs(v[:, None] / self.speeds_[None] - 1.0)
+        best = np.argmin(rel, axis=1)
+        return np.where(rel[np.arange(v.size), best] <= SPEED_TOLERANCE, best, -1)
+
+    def mean_for(self, speeds: Sequence[float]) -> np.ndarray:
+        """μ_B at each speed ``(n, n_channels, n_freqs)`` dB: the mean of the reference date's speed group within
+        :data:`SPEED_TOLERANCE`, else (no such group, or no speed groups) the overall mean ``mean_``."""
+        self._check_fitted()
+        g = self.speed_group_of(speeds)
+        out = np.repeat(self.mean_[None], g.size, axis=0)
+        if self.speed_means_ is not None:
+            out[g >= 0] = self.speed_means_[g[g >= 0]]
+        return out
+
+    def reference_counts(self, speeds: Sequence[float]) -> np.ndarray:
+        """The reference-date segments behind :meth:`mean_for` at each speed ``(n,)``: its group's, else v0."""
+        g = self.speed_group_of(speeds)
+        counts = np.full(g.size, self.n_samples_)
+        if self.speed_counts_ is not None:
+            counts[g >= 0] = self.speed_counts_[g[g >= 0]]
+        return counts
+
+    def speed_coverage(self, speeds: Sequence[float]) -> list[dict[str, Any]]:
+        """Per speed (m/s): which mean of B it takes (``speed_group`` or ``pooled``) and from how many
+        reference-date segments; ``covered`` is False where the reference date's speeds are known and none is
+        within :data:`SPEED_TOLERANCE` of this one (its mean is then the pooled one, of other speeds)."""
+        g = self.speed_group_of(speeds)
+        counts = self.reference_counts(speeds)
+        out = []
+        for v, gi, n in zip(np.atleast_1d(np.asarray(speeds, dtype=float)), g, counts):
+            out.append({"speed_kmh": round(float(v) * 3.6, 3), "mean": "speed_group" if gi >= 0 else "pooled",
+                        "reference_segments": int(n),
+                        "covered": bool(gi >= 0 or self.speeds_ is None)})
+        return out
 
     def effective(self, y_sim: np.ndarray) -> np.ndarray:
         """What stands for y_sim in y_mod = y_sim + b: ``y_sim`` itself without a floor, else
@@ -236,12 +350,15 @@ class NoiseModel:
         low_rank = (self.components_.T * ((1 - self.shrinkage_) * self.eigenvalues_)) @ self.components_
         return low_rank + np.diag(self.residual_variance_.ravel())
 
-    def sample(self, n: int, seed: int | np.random.Generator | None) -> np.ndarray:
+    def sample(self, n: int, seed: int | np.random.Generator | None,
+               speeds: Sequence[float] | None = None) -> np.ndarray:
         """``n`` paths of B drawn from the fitted Gaussian model.
 
         :param n: number of paths (>= 1).
         :param seed: an int seed or a ``numpy.random.Generator``; the same seed
             gives the same paths (draws: KL coefficients first, then the diagonal part).
+        :param speeds: ``(n,)`` m/s, each path's segment speed: its mean is :meth:`mean_for` that speed
+            (default: ``mean_`` for all).
         :returns: ``(n, n_channels, n_freqs)`` dB.
         """
         self._check_fitted()
@@ -253,7 +370,10 @@ class NoiseModel:
         coefficients *= np.sqrt((1 - self.shrinkage_) * self.eigenvalues_)
         independent = rng.standard_normal((n, self.mean_.size)) * np.sqrt(self.residual_variance_.ravel())
         paths = coefficients @ self.components_ + independent
-        return paths.reshape((n,) + self.mean_.shape) + self.mean_
+        if speeds is not None and len(speeds) != n:
+            raise DataError(f"{len(speeds)} speeds for {n} noise paths")
+        mean = self.mean_ if speeds is None else self.mean_for(speeds)
+        return paths.reshape((n,) + self.mean_.shape) + mean
 
     def check_grid(self, freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> None:
         """Raise :class:`DataError` unless the model belongs to this grid Ω and these channels.
@@ -285,13 +405,18 @@ class NoiseModel:
         path = Path(path)
         arrays = {name: getattr(self, name + "_") for name in self._ARRAYS}
         floor = self.floor_
+        version = 1
+        exclude = {"floor", "sensor_noise_density", "floor_octaves", "by_speed"}
         if floor is not None:
             arrays |= {"floor_power": floor.power, "floor_gain_db": floor.gain_db}
-        meta = {"format": FORMAT, "format_version": FORMAT_VERSION if floor is not None else 1,
+            version, exclude = 2, exclude - {"floor", "sensor_noise_density", "floor_octaves"}
+        if self.speed_means_ is not None:
+            arrays |= {"speeds": self.speeds_, "speed_counts": self.speed_counts_, "speed_means": self.speed_means_}
+            version, exclude = 3, exclude - {"by_speed"}
+        meta = {"format": FORMAT, "format_version": version,
                 "shrinkage": self.shrinkage_,
                 "n_samples": self.n_samples_,
-                "options": parse_options(NoiseOptions, self.options, "noise").model_dump(
-                    exclude=None if floor is not None else {"floor", "sensor_noise_density", "floor_octaves"}),
+                "options": parse_options(NoiseOptions, self.options, "noise").model_dump(exclude=exclude),
                 "channels": list(self.channels_) if self.channels_ is not None else None}
         try:
             with atomic_open(path, "wb", fsync=True) as fh:  # a later date needs this file: never truncated
@@ -325,7 +450,7 @@ class NoiseModel:
             raise DataError(f"noise model file {path} has a corrupt header") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise DataError(f"noise model file {path} is not a suspid noise model")
-        if meta.get("format_version") not in (1, FORMAT_VERSION):
+        if meta.get("format_version") not in range(1, FORMAT_VERSION + 1):
             raise DataError(f"noise model file {path} has format version {meta.get('format_version')}; "
                             f"this suspid reads versions 1 to {FORMAT_VERSION}: identify the noise model again")
         model = cls(**(meta.get("options") or {}))
@@ -340,6 +465,10 @@ class NoiseModel:
         if "floor_power" in content and "floor_gain_db" in content:
             model.floor_ = NoiseFloor(np.asarray(content["floor_power"], dtype=float),
                                       np.asarray(content["floor_gain_db"], dtype=float))
+        if all(k in content for k in ("speeds", "speed_counts", "speed_means")):
+            model.speeds_ = np.asarray(content["speeds"], dtype=float)
+            model.speed_counts_ = np.asarray(content["speed_counts"], dtype=int)
+            model.speed_means_ = np.asarray(content["speed_means"], dtype=float)
         model._check_consistent(path)
         return model
 
@@ -356,13 +485,18 @@ class NoiseModel:
               and (self.floor_ is None or (self.floor_.power.shape == grid and self.floor_.gain_db.shape == grid
                                            and np.all(self.floor_.power >= 0)
                                            and np.all(np.isfinite(self.floor_.power))
-                                           and np.all(np.isfinite(self.floor_.gain_db)))))
+                                           and np.all(np.isfinite(self.floor_.gain_db))))
+              and (self.speed_means_ is None or (self.speed_means_.shape == (self.speeds_.size,) + grid
+                                                 and self.speed_counts_.shape == self.speeds_.shape
+                                                 and np.all(self.speeds_ > 0) and np.all(self.speed_counts_ >= 2)
+                                                 and np.all(np.isfinite(self.speed_means_)))))
         if not ok:
             raise DataError(f"noise model file {path} is inconsistent (array shapes or values do not match)")
 
 
 def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions | Mapping[str, Any] | None = None,
-                    freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> NoiseModel:
+                    freqs: np.ndarray | None = None, channels: Sequence[str] | None = None,
+                    speeds: Sequence[float] | None = None) -> NoiseModel:
     """Eq. 3 then the Gaussian model: the noise model of a reference date in one call.
 
     With ``floor: auto`` or ``spec`` the floor N and gain m are fitted first and
@@ -370,6 +504,7 @@ def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions 
 
     :param y_mes: ``(v0, n_channels, n_freqs)`` dB measured spectra.
     :param y_sim: ``(v0, n_channels, n_freqs)`` dB spectra simulated at w0.
+    :param speeds: ``(v0,)`` m/s, the reference segments' speeds (for the speed groups, see :meth:`NoiseModel.fit`).
     """
     opt = parse_options(NoiseOptions, options, "noise")
     b = noise_samples(y_mes, y_sim)
@@ -380,6 +515,6 @@ def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions 
         floor = spec_floor(y_mes, y_sim, opt.sensor_noise_density, channels)
     if floor is not None:
         b = floor.paths(y_mes, y_sim)
-    model = NoiseModel(**opt.model_dump()).fit(b, freqs=freqs, channels=channels)
+    model = NoiseModel(**opt.model_dump()).fit(b, freqs=freqs, channels=channels, speeds=speeds)
     model.floor_ = floor
     return model

@@ -113,11 +113,13 @@ class ObjectiveFunction:
                          noise_model: NoiseModel, seed: int | np.random.Generator,
                          n_paths: int | None = None,
                          weights: Sequence[float] | Mapping[str, float] | None = None,
-                         channels: Sequence[str] | None = None) -> "ObjectiveFunction":
+                         channels: Sequence[str] | None = None,
+                         speeds: Sequence[float] | None = None) -> "ObjectiveFunction":
         """Draw the run's noise paths b_i once from ``noise_model`` with ``seed`` (common random numbers).
 
         :param n_paths: v, the number of simulated spectra per evaluation;
             default: as many as measured spectra (one per segment).
+        :param speeds: ``(v,)`` m/s, the segments' speeds: each path takes μ_B at its speed.
         :raises DataError: the noise model belongs to another grid or other channels.
         """
         y_mes = np.asarray(y_mes, dtype=float)
@@ -127,7 +129,7 @@ class ObjectiveFunction:
         if noise_model.shape != y_mes.shape[1:]:
             raise DataError(f"the noise model is on a {noise_model.shape} (channels, frequencies) grid, "
                             f"the measured spectra on {y_mes.shape[1:]}")
-        paths = noise_model.sample(y_mes.shape[0] if n_paths is None else n_paths, seed)
+        paths = noise_model.sample(y_mes.shape[0] if n_paths is None else n_paths, seed, speeds)
         return cls(objective, y_mes, freqs, paths, weights=weights, channels=channels, floor=noise_model.floor_)
 
     @cached_property

@@ -368,7 +368,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     else:
         y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed, executor)
         bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
-        res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db)
+        res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db,
+                             speeds=[s.mean_speed for s in problem.segments])
         share, info = information_share(S, problem.noise_model.variance_, problem.weights, res)
         f = problem.freqs
         labels = [f"{f[idx[0]]:.3g}-{f[idx[-1]]:.3g} Hz" for idx in bands]

@@ -108,10 +108,12 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
     def identify(extra: dict[str, float], y_sim0: np.ndarray) -> np.ndarray:
         """w re-identified from u_opt with the model at ``extra`` and its own B."""
         nonlocal n_sims
-        model = fit_noise_model(ref["y_mes0"], y_sim0, noise_options, freqs=problem.freqs, channels=problem.channels)
+        model = fit_noise_model(ref["y_mes0"], y_sim0, noise_options, freqs=problem.freqs, channels=problem.channels,
+                                speeds=[s.mean_speed for s in ref_segments])
         fn = ObjectiveFunction.from_noise_model(problem.objective, problem.y_mes, problem.freqs, model,
                                                 named_rng(config.seed, "nuisance"),  # the same draws each time
-                                                weights=problem.weights, channels=problem.channels)
+                                                weights=problem.weights, channels=problem.channels,
+                                                speeds=[s.mean_speed for s in problem.segments])
         neg_j = SearchObjective(problem, task, fn, executor, extra)
         found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_eval)
         n_sims += neg_j.n_simulations

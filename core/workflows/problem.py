@@ -290,6 +290,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           partial(apply_model_error, options=ref_opt, rng=err_rng)), {}),
                      (key + ":sim", _task(simulator, ref_segments, spectra_options), {})]
         log("measurement date: simulating w_ref (eq. 10)")
+        speeds = [s.mean_speed for s in segments]
         meas_opt = config.data.measurement
         meas_sim, meas_id = simulator, sim_id
         if meas_opt.simulator_options:   # the "real" vehicle: e.g. with an effect the model lacks
@@ -304,12 +305,13 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         *reference_spectra, (y_sim_ref, freqs) = cached_spectra(ledger, executor, jobs)
         if not noise_path:
             (y_mes0, freqs0), (y_sim0, _) = reference_spectra
-            noise_model = fit_noise_model(y_mes0, y_sim0, noise_options, freqs=freqs0, channels=channels)
+            noise_model = fit_noise_model(y_mes0, y_sim0, noise_options, freqs=freqs0, channels=channels,
+                                          speeds=[s.mean_speed for s in ref_segments])
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
             reference_segments = ref_segments
         # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
         b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
-                                                            + segments_digest(segments)[:16]))
+                                                            + segments_digest(segments)[:16]), speeds)
         y_mes = modelled_spectra(y_sim_ref, b_ref, noise_model.floor_)
     else:
         w_ref = None
@@ -328,12 +330,13 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         elif reference:
             log("reference date: identifying the noise model B (eq. 3) from the measured reference date")
             noise_model = fit_noise_model(reference["y_mes0"], reference["y_sim0"], noise_options,
-                                          freqs=freqs, channels=channels)
+                                          freqs=freqs, channels=channels,
+                                          speeds=[s.mean_speed for s in reference_segments])
         else:
             raise config.error("measured data need the noise model of the reference date: noise.reference "
                                "(the reference date's measured data) or noise.path (a noise model file)", "noise")
     noise_model.check_grid(freqs, channels)
-    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"))
+    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), [s.mean_speed for s in segments])
 
     objective_cls = registry.get("objective", config.objective.plugin)
     objective = objective_cls(**config.objective.options)

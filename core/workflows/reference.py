@@ -158,9 +158,10 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
         perm = rng.permutation(v0)
         a, b = np.sort(perm[:n_fit]), np.sort(perm[n_fit:])
         model = fit_noise_model(y_mes0[a], ref["y_sim0"][a], noise_options, freqs=problem.freqs,
-                                channels=problem.channels)
+                                channels=problem.channels, speeds=[segments[i].mean_speed for i in a])
         fn = ObjectiveFunction.from_noise_model(problem.objective, y_mes0[b], problem.freqs, model, rng,
-                                                weights=problem.weights, channels=problem.channels)
+                                                weights=problem.weights, channels=problem.channels,
+                                                speeds=[segments[i].mean_speed for i in b])
         task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
         neg_j = SearchObjective(problem, task, fn, executor)
         shifts[s] = local_search(neg_j, u0, options.initial_step, max_eval) - u0

@@ -67,7 +67,8 @@ def fit_reference_noise(reference_dir: Path, out_path: Path, simulator_options: 
     segments, records = read_measurements(reference_dir / "accelerations", reference_dir / "track", channels)
     y_mes0, freqs = compute_spectra(records, spectra or SPECTRA)
     y_sim0, _ = compute_spectra(sim.simulate({}, segments), spectra or SPECTRA)
-    model = fit_noise_model(y_mes0, y_sim0, noise or {}, freqs=freqs, channels=channels)
+    model = fit_noise_model(y_mes0, y_sim0, noise or {}, freqs=freqs, channels=channels,
+                            speeds=[s.mean_speed for s in segments])
     return model.save(out_path)
 
 

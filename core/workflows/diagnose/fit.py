@@ -58,8 +58,9 @@ class Candidate:
 
 class Discrepancy:
     """The fit criterion D = Σ (m / σ)² over every (speed group, channel, frequency bin), and over the bins
-    of the flagged cells; m the group mean of y_mes - y_sim - μ_B (dB), σ its null sd (``null.bin_sd``);
-    y_sim passes through the noise model's sensor-noise floor when it has one.
+    of the flagged cells; m the group mean of y_mes - y_sim - μ_B (dB; μ_B of the group's speed,
+    ``null.noise_mean``), σ its null sd (``null.bin_sd``); y_sim passes through the noise model's sensor-noise
+    floor when it has one.
 
     ``D0`` and ``D0_flagged`` are the base model's (``y_base``).
     """
@@ -68,7 +69,7 @@ class Discrepancy:
                  flagged: np.ndarray, y_base: np.ndarray) -> None:
         self.grid = grid
         self.effective = noise_model.effective
-        self.target = grid.group_means(y_mes - noise_model.mean_[None])          # m = target - mean(y_sim)
+        self.target = grid.group_means(y_mes) - null.noise_mean                  # m = target - mean(y_sim)
         self.scale = null.bin_sd
         self.flagged = grid.cell_to_bins(flagged.astype(float)) > 0
         self.base_means = grid.group_means(self.effective(y_base))

@@ -110,9 +110,10 @@ def locate(grid: CellGrid, null: NullCalibration, y_mes: np.ndarray, y_sim: np.n
     Benjamini-Yekutieli over all cells, a cell flagged when its adjusted p-value is below ``alpha``.
 
     :param y_mes, y_sim: ``(v, n_channels, n_freqs)`` dB on the same segments, in the same order.
-    :param noise_mean: ``(n_channels, n_freqs)`` dB, μ_B.
+    :param noise_mean: μ_B, dB: ``(G, n_channels, n_freqs)`` per speed group (``null.noise_mean``), or
+        ``(n_channels, n_freqs)`` for all.
     """
-    r_bar = grid.group_means(y_mes - y_sim - noise_mean[None])             # (G, K, F)
+    r_bar = grid.group_means(y_mes - y_sim) - np.asarray(noise_mean)        # (G, K, F)
     mean = (r_bar @ grid.average).ravel()
     scale = null.scale
     p_mean = np.clip(2.0 * norm.sf(np.abs(mean) / scale), 1e-300, 1.0)

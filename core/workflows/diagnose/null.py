@@ -24,6 +24,8 @@ class NullCalibration:
     :ivar shape_scale, shape_dof: ``(n_cells,)`` the shape statistic Q_c is a χ²_ν scaled by a under the null.
     :ivar bin_sd: ``(G, K, F)`` null sd of the mean residual at each bin (dB).
     :ivar bin_kappa: ``(G, K, F)`` bootstrap scale (>= 1) of the bin z-scores, for the peak test.
+    :ivar noise_mean: ``(G, K, F)`` dB, μ_B of each speed group (the noise model's mean at that speed).
+    :ivar reference_counts: ``(G,)`` the reference-date segments behind each group's μ_B (v0 when pooled).
     """
 
     sd: np.ndarray
@@ -35,6 +37,8 @@ class NullCalibration:
     bin_kappa: np.ndarray | float = 1.0
     kappa_raw: np.ndarray | None = None
     null_rate: float | None = None
+    noise_mean: np.ndarray | None = None
+    reference_counts: np.ndarray | None = None
 
     @property
     def scale(self) -> np.ndarray:
@@ -70,9 +74,18 @@ def _counts(grid: CellGrid) -> np.ndarray:
     return np.array([np.sum(grid.group_of == g) for g in range(len(grid.speeds))], dtype=float)
 
 
+def _reference(grid: CellGrid, noise_model) -> tuple[np.ndarray, np.ndarray]:
+    """μ_B ``(G, K, F)`` and the reference-date segments behind it ``(G,)`` at each speed group's speed (the
+    noise model's speed groups where it has them: ``mean_for``; else its one mean and v0)."""
+    return noise_model.mean_for(grid.speeds), noise_model.reference_counts(grid.speeds).astype(float)
+
+
 def analytic_null(grid: CellGrid, noise_model) -> NullCalibration:
-    """The analytic null: s_c of the band mean, and Q_c ~ a χ²_ν by Satterthwaite (E Q = n_b, Var Q = 2 tr R²)."""
-    v0 = noise_model.n_samples_
+    """The analytic null: s_c of the band mean, and Q_c ~ a χ²_ν by Satterthwaite (E Q = n_b, Var Q = 2 tr R²).
+
+    Per speed group g the residual's mean over v_g segments minus the estimate of μ_B from v0_g reference
+    segments (its speed group's, or all v0) has the variance of B times 1/v_g + 1/v0_g."""
+    mu, v0 = _reference(grid, noise_model)
     factor = 1.0 / _counts(grid) + 1.0 / v0                           # (G,)
     var_mean, tr2 = _band_variances(grid, noise_model)
     n_b = (grid.average > 0).sum(axis=0).astype(float)                # (B,)
@@ -80,7 +93,7 @@ def analytic_null(grid: CellGrid, noise_model) -> NullCalibration:
     a = np.tile((tr2 / n_b).ravel(), len(factor))
     dof = np.tile((n_b ** 2 / tr2).ravel(), len(factor))
     bin_sd = np.sqrt(noise_model.variance_[None] * factor[:, None, None])
-    return NullCalibration(sd, np.ones_like(sd), a, dof, bin_sd, 0)
+    return NullCalibration(sd, np.ones_like(sd), a, dof, bin_sd, 0, noise_mean=mu, reference_counts=v0)
 
 
 def shape_statistic(grid: CellGrid, r_bar: np.ndarray, bin_sd: np.ndarray) -> np.ndarray:
@@ -91,14 +104,16 @@ def shape_statistic(grid: CellGrid, r_bar: np.ndarray, bin_sd: np.ndarray) -> np
 def calibrate_null(grid: CellGrid, noise_model, n_bootstrap: int, rng: np.random.Generator) -> NullCalibration:
     """The analytic null calibrated by ``n_bootstrap`` parametric-bootstrap replicates (0: the analytic null).
 
-    Sets κ_c, κ_f (floored at 1), a_c and ν_c from the replicates; ``rng`` draws them.
+    Sets κ_c, κ_f (floored at 1), a_c and ν_c from the replicates; ``rng`` draws them. A replicate draws v0
+    reference paths; a speed group's μ_B is estimated from v0_g of them, as the analysis estimates it.
     """
     null = analytic_null(grid, noise_model)
     if n_bootstrap <= 0:
         return null
     v0 = noise_model.n_samples_
+    v0_g = null.reference_counts.astype(int)                          # (G,)
     v = grid.group_of.size
-    factor = 1.0 / _counts(grid) + 1.0 / v0
+    factor = 1.0 / _counts(grid) + 1.0 / v0_g
     z = np.empty((n_bootstrap, null.sd.size))
     Q = np.empty((n_bootstrap, null.sd.size))
     z2_bin = np.zeros(null.bin_sd.shape)
@@ -109,11 +124,11 @@ def calibrate_null(grid: CellGrid, noise_model, n_bootstrap: int, rng: np.random
             n = min(chunk, n_bootstrap - b)
             draws = noise_model.sample(n * (v0 + v), rng).reshape((n, v0 + v) + noise_model.mean_.shape)
         b0, bm = draws[b % chunk, :v0], draws[b % chunk, v0:]
-        mu = b0.mean(axis=0)
-        dev = b0 - mu
+        dev = b0 - b0.mean(axis=0)
         var_bin = (dev ** 2).sum(axis=0) / (v0 - 1)                       # (K, F)
         var_band = ((dev @ grid.average) ** 2).sum(axis=0) / (v0 - 1)     # (K, B)
-        r_bar = grid.group_means(bm - mu[None])
+        mu = np.array([b0[:n].mean(axis=0) for n in v0_g])               # (G, K, F)
+        r_bar = grid.group_means(bm) - mu
         sd = np.concatenate([np.sqrt(var_band * f).ravel() for f in factor])
         z[b] = (r_bar @ grid.average).ravel() / sd
         bin_sd = np.sqrt(var_bin[None] * factor[:, None, None])
@@ -127,4 +142,4 @@ def calibrate_null(grid: CellGrid, noise_model, n_bootstrap: int, rng: np.random
     null_rate = float(np.mean(np.abs(z / kappa) > Z95))
     bin_kappa = np.maximum(np.sqrt(z2_bin / n_bootstrap), 1.0)
     return NullCalibration(null.sd, kappa, a, dof, null.bin_sd, n_bootstrap, bin_kappa=bin_kappa, kappa_raw=raw,
-                           null_rate=null_rate)
+                           null_rate=null_rate, noise_mean=null.noise_mean, reference_counts=null.reference_counts)

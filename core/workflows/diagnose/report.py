@@ -168,6 +168,7 @@ of {st['alpha']:g} (Benjamini-Yekutieli); integrated discrepancy {gb['integrated
 measurements are above the model; magnitude: the band mean (mean test) or the most deviant bin (shape and
 peak tests: a moved resonance, a narrow line). Null calibrated by {st['n_bootstrap']} parametric-bootstrap replicates
 (median scale κ {st['kappa_median']:.3f}, unfloored {st['kappa_raw_median'] if st['kappa_raw_median'] is None else round(st['kappa_raw_median'], 3)}).
+{_speed_note(st.get('noise_mean_by_speed') or [])}
 
 {markdown_table(['channel', 'band (Hz)', 'km/h', 'sign', 'magnitude (dB)', 'test', 'q (BY)'], flag_rows) if flag_rows else '(no flagged cell)'}
 {f'(and {len(flagged) - 30} more)' if len(flagged) > 30 else ''}
@@ -209,3 +210,17 @@ Unexplained at the end:
 Method: `docs/diagnose.md`.
 """
     return write_text(out_dir / "diagnosis.md", text)
+
+
+def _speed_note(coverage: list[dict]) -> str:
+    """A sentence on the mean of B each speed group takes: a reference-date speed group's, or the pooled one."""
+    if len(coverage) < 2 and all(c["covered"] for c in coverage):
+        return ""
+    parts = [f"{c['speed_kmh']:.0f} km/h: " + (f"the reference date's mean at this speed ({c['reference_segments']} "
+                                               f"segments)" if c["mean"] == "speed_group" else
+                                               f"the mean over all {c['reference_segments']} reference-date segments"
+                                               + ("" if c["covered"] else
+                                                  " (**no reference-date data at this speed**: model-form error that "
+                                                  "changes with speed shows as discrepancy here)"))
+             for c in coverage]
+    return "μ_B per speed group: " + "; ".join(parts) + "."

@@ -184,6 +184,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                          "p = min(1, 3 min(p_mean, p_shape, p_peak))",
             "null": "mean: N(0, kappa_c^2 s_c^2), s_c from the noise covariance; shape: a_c chi2(nu_c); "
                     "peak: Bonferroni over the band's bins; kappa, a_c, nu_c from a parametric bootstrap",
+            "noise_mean_by_speed": problem.noise_model.speed_coverage(grid.speeds),
             "n_bootstrap": null.n_bootstrap, "kappa_median": float(np.median(null.kappa)),
             "kappa_raw_median": None if null.kappa_raw is None else float(np.median(null.kappa_raw)),
             "bootstrap_null_rate_at_5pct": null.null_rate, "fdr": "Benjamini-Yekutieli", "alpha": opts.alpha,
@@ -262,7 +263,8 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
         fixed.discard("sensor-tilt")
         record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
                       reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
-                             f"({n0} → {n1} in all)")
+                             f"({n0} → {n1} in all)",
+                      unexplained=unexplained_regions(current.dmap, [], None))   # what stays flagged, as it is
         return record, None
     record["named_parameters"] = canonical(params)
     record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
@@ -272,7 +274,7 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
 
 def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
     noise = stage.problem.noise_model
-    stage.dmap = locate(grid, null, stage.problem.y_mes, noise.effective(stage.y_sim), noise.mean_, alpha)
+    stage.dmap = locate(grid, null, stage.problem.y_mes, noise.effective(stage.y_sim), null.noise_mean, alpha)
     stage.dmap.J = j_of_spectra(stage.problem, stage.y_sim)[0]
 
 
