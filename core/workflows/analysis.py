@@ -314,7 +314,6 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
       plausible range) moves it by more than ``nuisance.max_shift`` at an end of its range
       (:mod:`suspid.workflows.nuisance`).
 
-    :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
     The checks also bound the bias that model-form error puts in w_opt, per component: the
     self-check's |bias|, plus half the groups' spread, plus for each nuisance parameter its larger
     |shift| of the two ends of its range. The terms come from different sources whose signs are
@@ -369,7 +368,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed, executor)
         bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
         res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db,
-                             speeds=[s.mean_speed for s in problem.segments])
+                             speeds=problem.speeds)
         share, info = information_share(S, problem.noise_model.variance_, problem.weights, res)
         f = problem.freqs
         labels = [f"{f[idx[0]]:.3g}-{f[idx[-1]]:.3g} Hz" for idx in bands]

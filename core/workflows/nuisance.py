@@ -44,7 +44,7 @@ from suspid.interfaces import Executor
 from suspid.method.identifiability import NuisanceOptions
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
-from suspid.workflows.problem import Problem, segments_digest
+from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import SearchObjective, local_search
 from suspid.workflows.tasks import SpectraTask, run_one
 
@@ -109,11 +109,11 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
         """w re-identified from u_opt with the model at ``extra`` and its own B."""
         nonlocal n_sims
         model = fit_noise_model(ref["y_mes0"], y_sim0, noise_options, freqs=problem.freqs, channels=problem.channels,
-                                speeds=[s.mean_speed for s in ref_segments])
+                                speeds=segment_speeds(ref_segments))
         fn = ObjectiveFunction.from_noise_model(problem.objective, problem.y_mes, problem.freqs, model,
                                                 named_rng(config.seed, "nuisance"),  # the same draws each time
                                                 weights=problem.weights, channels=problem.channels,
-                                                speeds=[s.mean_speed for s in problem.segments])
+                                                speeds=problem.speeds)
         neg_j = SearchObjective(problem, task, fn, executor, extra)
         found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_eval)
         n_sims += neg_j.n_simulations

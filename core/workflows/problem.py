@@ -60,6 +60,11 @@ def segments_digest(segments: Sequence[TrackSegment]) -> str:
     return stable_hash(parts)
 
 
+
+def segment_speeds(segments: Sequence[TrackSegment]) -> list[float]:
+    """``(n_segments,)`` m/s: each segment's mean speed."""
+    return [s.mean_speed for s in segments]
+
 @dataclass
 class Problem:
     """Everything J(w) needs, built once per run.
@@ -96,6 +101,11 @@ class Problem:
     @property
     def q(self) -> int:
         return len(self.names)
+
+    @property
+    def speeds(self) -> list[float]:
+        """``(v,)`` m/s: each measured segment's mean speed (B's mean is taken per speed)."""
+        return segment_speeds(self.segments)
 
     def w_of(self, x_si: np.ndarray) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.names, np.asarray(x_si, float))}
@@ -290,7 +300,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           partial(apply_model_error, options=ref_opt, rng=err_rng)), {}),
                      (key + ":sim", _task(simulator, ref_segments, spectra_options), {})]
         log("measurement date: simulating w_ref (eq. 10)")
-        speeds = [s.mean_speed for s in segments]
+        speeds = segment_speeds(segments)
         meas_opt = config.data.measurement
         meas_sim, meas_id = simulator, sim_id
         if meas_opt.simulator_options:   # the "real" vehicle: e.g. with an effect the model lacks
@@ -306,7 +316,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         if not noise_path:
             (y_mes0, freqs0), (y_sim0, _) = reference_spectra
             noise_model = fit_noise_model(y_mes0, y_sim0, noise_options, freqs=freqs0, channels=channels,
-                                          speeds=[s.mean_speed for s in ref_segments])
+                                          speeds=segment_speeds(ref_segments))
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
             reference_segments = ref_segments
         # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
@@ -331,12 +341,12 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             log("reference date: identifying the noise model B (eq. 3) from the measured reference date")
             noise_model = fit_noise_model(reference["y_mes0"], reference["y_sim0"], noise_options,
                                           freqs=freqs, channels=channels,
-                                          speeds=[s.mean_speed for s in reference_segments])
+                                          speeds=segment_speeds(reference_segments))
         else:
             raise config.error("measured data need the noise model of the reference date: noise.reference "
                                "(the reference date's measured data) or noise.path (a noise model file)", "noise")
     noise_model.check_grid(freqs, channels)
-    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), [s.mean_speed for s in segments])
+    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), segment_speeds(segments))
 
     objective_cls = registry.get("objective", config.objective.plugin)
     objective = objective_cls(**config.objective.options)

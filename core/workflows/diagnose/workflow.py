@@ -73,7 +73,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     before = make_stage("before", config, opts.at == "identified", out_dir / "before", fresh=fresh,
                         progress=progress, log=log)
     problem = before.problem
-    grid = make_cells(problem.channels, problem.freqs, [s.mean_speed for s in problem.segments],
+    grid = make_cells(problem.channels, problem.freqs, problem.speeds,
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
     named: list[tuple[str, dict[str, Any], int]] = []
