@@ -75,6 +75,16 @@ class ParameterBounds(Section):
     upper: float | None = None
 
 
+class SensorCorrection(Section):
+    """One item of ``data.corrections``: a tilted lateral accelerometer rotated back (:mod:`suspid.data.corrections`)."""
+
+    channel: str = Field(description="the lateral channel whose sensor is tilted")
+    tilt_deg: float = Field(ge=-45.0, le=45.0, description="its tilt about the longitudinal axis, degrees "
+                            "(x = cos α a_lat + sin α a_vert; suspid diagnose reports it from the coupling)")
+    vertical: str | None = Field(default=None, description="the vertical channel at the same point (default: the "
+                                 "channel's name with 'vertical' for 'lateral')")
+
+
 class DataSection(Section):
     """Where the measurements come from.
 
@@ -95,6 +105,9 @@ class DataSection(Section):
     track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
     strict: bool = Field(default=False, description="implausible measured data (units, dead channels) are "
                          "errors, not warnings (``--strict``)")
+    corrections: list[SensorCorrection] = Field(
+        default_factory=list, description="sensor faults corrected in the measured records before their spectra "
+        "(measured data; the reference date's records are taken as they are)")
 
     @field_validator("measurements", "track_file")
     @classmethod
@@ -230,6 +243,8 @@ class DiagnoseOptions(Section):
     bands_per_octave: float = Field(default=3.0, gt=0.0, le=24.0, description="band width: 1/bands_per_octave octave")
     min_bins_per_band: int = Field(default=3, ge=1, description="least grid frequencies per band (merged upwards)")
     alpha: float = Field(default=0.05, gt=0.0, lt=1.0, description="false discovery rate (Benjamini-Yekutieli)")
+    min_db: float = Field(default=0.5, ge=0.0, le=10.0, description="relevance margin, dB: a cell is flagged when its "
+                          "discrepancy exceeds this beyond the noise (0: any significant discrepancy)")
     n_bootstrap: int = Field(default=200, ge=0, description="parametric bootstrap replicates of the null (0: analytic)")
     effects: list[str] | None = Field(default=None, description="candidate effects (default: every registered "
                                       "effect the simulator supports)")
@@ -238,16 +253,17 @@ class DiagnoseOptions(Section):
                                  description="share of the flagged cells' discrepancy the named effect must explain")
     n_starts: int = Field(default=2, ge=1, description="starting points refined per effect")
     max_evaluations: int = Field(default=30, ge=3, description="simulator calls per refinement")
-    reidentify: bool = Field(default=True, description="run the identification again with the named effect")
+    reidentify: bool = Field(default=True, description="fit the suspension again jointly with the named effects, "
+                             "and run the identification of the augmented model (after/)")
     max_new_flagged: float = Field(default=0.1, ge=0.0, description="new flagged cells a named effect may create "
                                    "elsewhere, as a share of the cells flagged before it")
     max_effects: int = Field(default=3, ge=1, le=10, description="effects named one after the other, at most")
-    joint_rounds: int = Field(default=2, ge=1, le=10, description="rounds of the alternating joint fit (effect "
-                              "parameters at the identified suspension, identification with the effect)")
+    fit_suspension: bool = Field(default=True, description="fit the identified suspension by least squares on the "
+                                 "diagnosis's criterion D, from the identification's w_opt (at: identified)")
+    joint_max_evaluations: int = Field(default=150, ge=5, description="simulator calls of one least-squares fit of "
+                                       "the suspension and the effects' parameters (Jacobians included)")
     coupling_reference: ConfigPath | None = Field(
         default=None, description="reference-date measured accelerations (file or folder): their "
         "vertical-into-lateral coupling is subtracted in the coupling test (the train's own coupling)")
     coupling_reference_track: ConfigPath | None = Field(
         default=None, description="the track measured with coupling_reference")
-    joint_tol: float = Field(default=0.01, gt=0.0, description="the joint fit stops when no effect parameter moves "
-                             "by more than this share of its (normalised) range")

@@ -26,6 +26,7 @@ import numpy as np
 
 from suspid import registry
 from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
+from suspid.data.corrections import untilt
 from suspid.data.experiment import apply_model_error
 from suspid.data.files import read_accelerations_records, read_track
 from suspid.data.track import synthetic_segments
@@ -195,6 +196,7 @@ def validate_data(config: Config) -> int:
         raise config.error("measured data need data.measurements", "data.measurements")
     segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                             simulator.channels(), strict=config.data.strict)
+    untilt(responses[:1], config.data.corrections, simulator.channels(), error=config.error)
     _, freqs = compute_spectra(responses, config.spectra)
     if config.noise.reference is not None:
         ref = config.noise.reference
@@ -327,6 +329,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         w_ref = None
         segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                                 channels=channels, strict=config.data.strict)
+        responses = untilt(responses, config.data.corrections, channels, error=config.error)
         y_mes, freqs = compute_spectra(responses, spectra_options)
         if config.noise.reference is not None:
             reference_segments, y_mes0, y_sim0, freqs0 = measured_reference(config, simulator, ledger, log, executor)

@@ -3,21 +3,30 @@
 Method: ``docs/diagnose.md``, "Sensor tilt from the coupling".
 
 A lateral accelerometer tilted by α reads x = cos α a_lat + sin α a_vert. The
-vertical channel at the same point reads v = a_vert. On a vehicle symmetric
-about its centre plane, with sensors on it, a_lat and a_vert are uncorrelated
-(the vertical and the lateral/roll motions decouple), so the regression of x
-on v is H(f) = S_vx / S_vv = sin α at every frequency: a real constant. The
-power spectrum of x changes by sin²α V / L only, invisible where the lateral
-motion dominates (0.1-0.4 dB for 6-10° on a bogie); the cross-spectrum shows
-sin α directly.
+vertical channel at the same point reads v = a_vert. If a_lat and a_vert were
+uncorrelated, the regression of x on v would be H(f) = S_vx / S_vv = sin α at
+every frequency: a real constant. The power spectrum of x changes by
+sin²α V / L only, invisible where the lateral motion dominates (0.1-0.4 dB for
+6-10° on a bogie); the cross-spectrum shows sin α directly.
 
-Per segment i: β_i = Σ_f Re S_vx,i / S̄_xx ÷ Σ_f S_vv,i / S̄_xx over the spectra band
+Per segment i: β_i = Σ_f Re S_vx,i / S̄_xx ÷ Σ_f S_vv,i / S̄_xx over the band
 (a weighted least-squares estimate of the constant H, weights 1 / S̄_xx, S̄_xx the
-mean over the segments: a segment's own S_xx would correlate with its cross-spectrum);
-β = mean β_i, its standard error from the spread over segments, t = β / se
-with v - 1 degrees of freedom; a channel's coupling is significant when its
-p-value is below alpha / (number of tested channels) (Bonferroni). The angle
-is asin β (the calibration gains of both channels enter as their ratio).
+mean over the segments: a segment's own S_xx would correlate with its cross-spectrum).
+
+A real vehicle has a lateral-vertical coupling of its own (asymmetric contact
+geometry, gauge, creep): on the independent train β of an untilted bogie
+sensor is ±0.02 from one set of track segments to another, a sixth of a 6°
+tilt, and the same set moves both bogies' β together (their per-segment β
+correlate by 0.9: the same track, the same dynamics). So a lateral channel with
+a *twin* (the same sensor on the other bogie or carbody end: ``front`` and
+``rear`` swapped in its name) is tested on the paired difference
+d_i = β_i - β_twin,i: the coupling the twin does not have. Of a pair whose
+difference is significant, the channel with the larger |mean β| is the
+tilted one and its estimate is ±mean d (a tilt shared by both twins is taken
+for the vehicle's own coupling). A channel without a twin is tested on its own
+β. The estimate's standard error comes from the spread over segments, t with
+v - 1 degrees of freedom, Bonferroni over the tests at ``alpha``. The angle is
+asin β (the calibration gains of both channels enter as their ratio).
 """
 
 from __future__ import annotations
@@ -29,13 +38,16 @@ import numpy as np
 from scipy.signal import csd, welch
 from scipy.stats import t as student_t
 
+from suspid.data.corrections import vertical_partner
 
-def partner(channel: str, channels: Sequence[str]) -> str | None:
-    """The vertical channel at the same point as lateral ``channel`` (the same name with ``vertical``)."""
-    if "lateral" not in channel:
-        return None
-    other = channel.replace("lateral", "vertical")
-    return other if other in channels else None
+
+def twin(channel: str, channels: Sequence[str]) -> str | None:
+    """The same sensor at the other end (``front`` and ``rear`` swapped in the name), or None."""
+    for a, b in (("front", "rear"), ("rear", "front")):
+        if a in channel:
+            other = channel.replace(a, b)
+            return other if other in channels else None
+    return None
 
 
 def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[float, float], alpha: float = 0.05,
@@ -44,36 +56,46 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
 
     :param records: responses with ``accelerations`` ``(n_channels, n_t)`` m/s² and ``fs`` Hz, channels in the
         order of ``channels``.
-    :param f_band: ``(f_min, f_max)`` Hz, the band the estimate uses.
-    :param reference: records of the reference date: their coupling (the train's own, which suspid's symmetric
-        model lacks) is subtracted, with its standard error.
-    :returns: per lateral channel with a partner: ``{channel, vertical, beta, se, t, p, angle_deg,
-        significant, n_segments, beta_reference}``.
+    :param f_band: ``(f_min, f_max)`` Hz, the band the estimate uses (clipped to the records' Nyquist frequency).
+    :param reference: records of the reference date: their coupling, by the same estimator, is subtracted with
+        its standard error.
+    :returns: per lateral channel with a vertical partner: ``{channel, vertical, twin, beta, se, t, p,
+        angle_deg, significant, n_segments, beta_raw, beta_reference}``; ``beta`` is the estimate tested
+        (against the twin when there is one, ``beta_raw`` the channel's own).
     """
     names = list(channels)
-    pairs = [(c, partner(c, names)) for c in names]
-    pairs = [(c, v) for c, v in pairs if v is not None]
+    lateral = [c for c in names if vertical_partner(c, names) is not None]
+    betas = {c: _betas(records, names.index(c), names.index(vertical_partner(c, names)), f_band, segment_seconds)
+             for c in lateral}
+    ref = ({c: _betas(reference, names.index(c), names.index(vertical_partner(c, names)), f_band, segment_seconds)
+            for c in lateral} if reference is not None else {})
     out = []
-    for c, v in pairs:
-        k, kv = names.index(c), names.index(v)
-        b, b0 = _betas(records, k, kv, f_band, segment_seconds), None
+    for c in lateral:
+        b = betas[c]
         if b.size < 3:
             continue
-        beta, se = float(b.mean()), float(b.std(ddof=1) / math.sqrt(b.size))
-        dof = b.size - 1
-        if reference is not None:
-            b0 = _betas(reference, k, kv, f_band, segment_seconds)
-            if b0.size >= 3:
-                se0 = float(b0.std(ddof=1) / math.sqrt(b0.size))
-                beta, se = beta - float(b0.mean()), math.hypot(se, se0)
-                dof = min(b.size, b0.size) - 1
+        t_name = twin(c, lateral)
+        paired = t_name is not None and betas[t_name].size == b.size
+        d = b - betas[t_name] if paired else b
+        beta, se, n = float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size)), d.size
+        b0 = None
+        if ref.get(c) is not None and ref[c].size >= 3:
+            d0 = ref[c] - ref[t_name] if paired and ref[t_name].size == ref[c].size else ref[c]
+            b0 = float(d0.mean())
+            beta, se = beta - b0, math.hypot(se, float(d0.std(ddof=1) / math.sqrt(d0.size)))
+            n = min(n, d0.size)
         t = beta / se if se > 0 else 0.0
-        p = float(2 * student_t.sf(abs(t), dof))
-        out.append({"channel": c, "vertical": v, "beta": beta, "se": se, "t": t, "p": p,
+        p = float(2 * student_t.sf(abs(t), n - 1))
+        candidate = not paired or abs(b.mean()) >= abs(betas[t_name].mean())
+        out.append({"channel": c, "vertical": vertical_partner(c, names), "twin": t_name if paired else None,
+                    "beta": beta, "se": se, "t": t, "p": p if candidate else 1.0,
                     "angle_deg": math.degrees(math.asin(max(-1.0, min(1.0, beta)))), "n_segments": int(b.size),
-                    "beta_reference": None if b0 is None or b0.size < 3 else float(b0.mean())})
+                    "beta_raw": float(b.mean()), "beta_reference": b0,
+                    "note": None if candidate else f"its twin {t_name} is the further from zero: the pair's "
+                                                   f"difference is tested there"})
+    tests = len(out) - sum(1 for r in out if r["twin"] is not None) // 2
     for row in out:
-        row["significant"] = bool(row["p"] < alpha / max(1, len(out)))
+        row["significant"] = bool(row["p"] < alpha / max(1, tests))
     return out
 
 
@@ -94,7 +116,7 @@ def _betas(records: Sequence, k: int, kv: int, f_band: tuple[float, float], segm
         return np.array([])
     f0 = spectra[0][0]
     spectra = [s for s in spectra if s[0].shape == f0.shape and np.allclose(s[0], f0)]
-    use = (f0 >= f_band[0]) & (f0 <= f_band[1])
+    use = (f0 >= f_band[0]) & (f0 <= f_band[1]) & (f0 > 0)
     mean_xx = np.mean([s[1] for s in spectra], axis=0)
     use &= mean_xx > 0
     if use.sum() < 3:

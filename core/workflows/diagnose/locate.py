@@ -105,33 +105,47 @@ class DiscrepancyMap:
 
 
 def locate(grid: CellGrid, null: NullCalibration, y_mes: np.ndarray, y_sim: np.ndarray, noise_mean: np.ndarray,
-           alpha: float = 0.05) -> DiscrepancyMap:
+           alpha: float = 0.05, min_db: float = 0.0) -> DiscrepancyMap:
     """The discrepancy map of the residual r = y_mes - y_sim - μ_B: mean, shape and peak tests per cell,
     Benjamini-Yekutieli over all cells, a cell flagged when its adjusted p-value is below ``alpha``.
+
+    With a relevance margin ``min_db`` = δ > 0 each test asks whether the discrepancy exceeds δ, not 0 (the
+    null |mean discrepancy| <= δ): the mean test's p is P(|N(δ, s)| >= |m|), the peak test's the same per bin,
+    and the shape test sums the squared standardised excesses max(0, |r̄_f| - δ) / σ_f against its null for
+    δ = 0 (conservative). A model is never exactly right: with enough data every model-form difference of a
+    few tenths of a dB is significant, and δ says which size of discrepancy is worth a diagnosis.
 
     :param y_mes, y_sim: ``(v, n_channels, n_freqs)`` dB on the same segments, in the same order.
     :param noise_mean: μ_B, dB: ``(G, n_channels, n_freqs)`` per speed group (``null.noise_mean``), or
         ``(n_channels, n_freqs)`` for all.
+    :param min_db: δ, dB (>= 0).
     """
     r_bar = grid.group_means(y_mes - y_sim) - np.asarray(noise_mean)        # (G, K, F)
     mean = (r_bar @ grid.average).ravel()
     scale = null.scale
-    p_mean = np.clip(2.0 * norm.sf(np.abs(mean) / scale), 1e-300, 1.0)
-    Q = shape_statistic(grid, r_bar, null.bin_sd)
+    p_mean = np.clip(_two_sided(np.abs(mean), min_db, scale), 1e-300, 1.0)
+    excess = np.sign(r_bar) * np.maximum(0.0, np.abs(r_bar) - min_db)
+    Q = shape_statistic(grid, excess, null.bin_sd)
     p_shape = np.clip(chi2.sf(Q / null.shape_scale, null.shape_dof), 1e-300, 1.0)
     # the most deviant bin of each band, and the peak test
-    z_bin = np.abs(r_bar / (null.bin_sd * null.bin_kappa))
+    bin_scale = null.bin_sd * null.bin_kappa
+    z_bin = np.abs(excess) / bin_scale
     G, K, B = len(grid.speeds), len(grid.channels), grid.band_edges.shape[0]
     peak = np.empty((G, K, B))
     p_peak = np.empty((G, K, B))
     for b in range(B):
         idx = np.nonzero(grid.average[:, b] > 0)[0]
         j = idx[np.argmax(z_bin[:, :, idx], axis=2)]                        # (G, K)
-        peak[:, :, b] = np.take_along_axis(r_bar, j[:, :, None], axis=2)[:, :, 0]
-        z_max = np.take_along_axis(z_bin, j[:, :, None], axis=2)[:, :, 0]
-        p_peak[:, :, b] = np.minimum(1.0, idx.size * 2.0 * norm.sf(z_max))
+        pick = lambda a: np.take_along_axis(a, j[:, :, None], axis=2)[:, :, 0]  # noqa: E731
+        peak[:, :, b] = pick(r_bar)
+        p_peak[:, :, b] = np.minimum(1.0, idx.size * _two_sided(np.abs(pick(r_bar)), min_db, pick(bin_scale)))
     p_peak = np.clip(p_peak.ravel(), 1e-300, 1.0)
     p = np.minimum(1.0, 3.0 * np.minimum(np.minimum(p_mean, p_shape), p_peak))
     q = false_discovery_control(p, method="by")
     return DiscrepancyMap(grid, mean, peak.ravel(), scale, p_mean, p_shape, p_peak, p, q, q < alpha, r_bar,
                           null.bin_sd)
+
+
+def _two_sided(x: np.ndarray, delta: float, scale: np.ndarray) -> np.ndarray:
+    """P(|N(δ, scale)| >= x): the two-sided p-value of |x| at the boundary |μ| = δ of the null |μ| <= δ."""
+    return norm.sf((x - delta) / scale) + norm.sf((x + delta) / scale)

@@ -123,7 +123,7 @@ def effect_evidence(cls, cand: Candidate, disc: Discrepancy, dmap: DiscrepancyMa
     own_bins = grid.cell_to_bins(own.astype(float)) > 0
     cand_means = grid.group_means(y_cand)
     D_own0, D_own1 = disc.within(own_bins, disc.base_means), disc.within(own_bins, cand_means)
-    after = locate(grid, null, problem.y_mes, y_cand, null.noise_mean, options.alpha)
+    after = locate(grid, null, problem.y_mes, y_cand, null.noise_mean, options.alpha, options.min_db)
     new = after.flagged & ~dmap.flagged
     out = {"own_cells": int(own.sum()), "explained_own": (1.0 - D_own1 / D_own0) if D_own0 > 0 else 0.0,
            "flagged_own_before": int((dmap.flagged & own).sum()), "flagged_own_after": int((after.flagged & own).sum()),

@@ -35,14 +35,32 @@ class Stage:
     y_sim: np.ndarray
     result: dict[str, Any] | None = None
     dmap: DiscrepancyMap | None = None
+    fit: Any = None                      # the joint least-squares fit behind ``w`` (:class:`.joint.JointFit`)
 
     def gap(self) -> dict[str, Any]:
+        """The map's gap measures, the suspension ``w`` (with its errors when w_ref is known) and, when ``w`` was
+        fitted under D, the identification's own ``w_opt`` under ``identified``."""
         out = self.dmap.gap() if self.dmap is not None else {}
         out["w"] = {k: float(v) for k, v in self.w.items()}
-        if self.result is not None and "errors_percent" in self.result:
-            out["errors_percent"] = self.result["errors_percent"]
-            out["w_ref"] = self.result.get("w_ref")
+        w_ref = getattr(self.problem, "w_ref", None)
+        if w_ref and self.w:
+            out["errors_percent"] = errors_percent(self.problem, self.w)
+            out["w_ref"] = {k: float(w_ref[k]) for k in self.w if k in w_ref}
+        if self.fit is not None:
+            out["suspension_fit"] = self.fit.as_dict()
+        if self.result is not None:
+            out["identified"] = {"w": self.result.get("w_opt"), "errors_percent": self.result.get("errors_percent"),
+                                 "trustworthy": self.result.get("trustworthy")}
         return out
+
+
+def errors_percent(problem, w: dict[str, float]) -> dict[str, float]:
+    """``|w - w_ref|`` in % of each admissible interval (a numerical experiment's measure)."""
+    out = {}
+    for n, (lo, hi) in zip(problem.names, problem.bounds):
+        if n in w and n in problem.w_ref:
+            out[n] = 100.0 * abs(float(w[n]) - float(problem.w_ref[n])) / (float(hi) - float(lo))
+    return out
 
 
 def _with_output(config: Config, run_dir: Path) -> Config:
@@ -66,15 +84,17 @@ def make_stage(label: str, config: Config, identify: bool, run_dir: Path, *, fre
     return Stage(label, cfg, problem, w, y_sim, result)
 
 
-def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], noise_path: Path, run_dir: Path
-                   ) -> dict[str, Any]:
-    """The config (as data) with ``effects`` ``[(name, parameters)]`` appended to the simulator's effects and
-    the base run's noise model; its output in ``run_dir``."""
+def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], noise_path: Path, run_dir: Path,
+                   corrections: list[dict[str, Any]] = ()) -> dict[str, Any]:
+    """The config (as data) with ``effects`` ``[(name, parameters)]`` appended to the simulator's effects,
+    ``corrections`` to ``data.corrections`` and the base run's noise model; its output in ``run_dir``."""
     data = config.model_dump(mode="json", exclude={"source_file"})
     options = dict(data["simulator"].get("options") or {})
     options["effects"] = list(options.get("effects") or []) + [{"name": name, **canonical(params)}
                                                                for name, params in effects]
     data["simulator"]["options"] = options
+    if corrections:
+        data["data"]["corrections"] = list(data["data"].get("corrections") or []) + [canonical(c) for c in corrections]
     data["noise"] = {**(data.get("noise") or {}), "path": str(noise_path)}
     data["name"] = config.name if config.name.endswith("-augmented") else f"{config.name}-augmented"
     data["output"] = {"dir": str(run_dir), "figure_channel": config.output.figure_channel}
@@ -82,15 +102,17 @@ def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], no
 
 
 def write_augmented(config: Config, effects: Candidate | list[tuple[str, dict[str, Any]]], out_dir: Path,
-                    noise_path: Path, path: Path | None = None, run_dir: Path | None = None) -> Path:
-    """``augmented.yaml``: the config with the named effects (``[(name, parameters)]``, or one candidate) and
-    the base run's noise model; output in ``out_dir/after`` unless ``run_dir``."""
+                    noise_path: Path, path: Path | None = None, run_dir: Path | None = None,
+                    corrections: list[dict[str, Any]] = ()) -> Path:
+    """``augmented.yaml``: the config with the named effects (``[(name, parameters)]``, or one candidate), the
+    sensor corrections of the measured records (``data.corrections``) and the base run's noise model; output
+    in ``out_dir/after`` unless ``run_dir``."""
     if isinstance(effects, Candidate):
         effects = [(effects.effect, effects.parameters)]
-    data = augmented_data(config, effects, noise_path, run_dir or out_dir / "after")
+    data = augmented_data(config, effects, noise_path, run_dir or out_dir / "after", corrections)
     path = path or out_dir / "augmented.yaml"
     path.parent.mkdir(parents=True, exist_ok=True)
-    names = ", ".join(f"'{n}'" for n, _ in effects)
+    names = ", ".join([f"'{n}'" for n, _ in effects] + [f"a tilt of {c['channel']}" for c in corrections])
     header = (f"# Written by suspid diagnose from {config.source_file}:\n"
               f"# the model with the named effects {names} and their fitted parameters,\n"
               f"# and the noise model of the base run (the measurements and B are unchanged).\n")

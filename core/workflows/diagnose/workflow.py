@@ -5,6 +5,7 @@ Method: ``docs/diagnose.md`` (steps 3-6).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -17,15 +18,19 @@ import numpy as np
 
 from suspid import registry
 from suspid.config import Config, load_config
+from suspid.data.corrections import untilt
 from suspid.infra.files import canonical, write_json
+from suspid.infra.ledger import stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.infra.threads import single_blas_thread
 from suspid.workflows.evaluation import j_of_spectra
+from suspid.method.spectra import compute_spectra
 from suspid.workflows.problem import read_measurements
 
 from .cells import CellGrid, make_cells
 from .coupling import coupling_test
-from .fit import Candidate, Discrepancy, EffectFitter, _Transform
+from .fit import Discrepancy
+from .joint import fit_jointly
 from .locate import locate
 from .name import Ranking, _supported_effects, check_after_joint_fit, rank_effects, unexplained_regions
 from .null import NullCalibration, calibrate_null
@@ -77,7 +82,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                       opts.bands_per_octave, opts.min_bins_per_band)
     log(f"locate: {grid.n_cells} cells, null calibrated by {opts.n_bootstrap} bootstrap replicates")
     named: list[tuple[str, dict[str, Any], int]] = []
-    fixed: set[str] = set()           # effects whose parameters come from a direct estimate (not refitted)
+    in_data: dict[str, list[dict[str, Any]]] = {}   # effects corrected in the measured records: data.corrections
     steps: list[dict[str, Any]] = []
     coupling = _coupling(config, problem, log)
     rankings: list[Ranking] = []
@@ -85,12 +90,14 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.infra.threads)
         null = calibrate_null(grid, problem.noise_model, opts.n_bootstrap,
                               named_rng(config.seed, "diagnose-bootstrap"))
+        if opts.at == "identified" and opts.fit_suspension:
+            _fit_suspension(before, config, grid, null, log)
         _locate(before, grid, null, opts.alpha)
         current = before
         for step in range(1, opts.max_effects + 1):
             tilted = [r for r in (coupling or []) if r["significant"]]
             if tilted and "sensor-tilt" not in {n for n, _, _ in named} and _eligible(config, problem, "sensor-tilt"):
-                record, stage = _tilt_from_coupling(config, named, fixed, tilted, coupling, current, step, grid,
+                record, stage = _tilt_from_coupling(config, named, in_data, tilted, coupling, current, step, grid,
                                                     null, out_dir, noise_path, fresh, progress, log)
                 steps.append(record)
                 rankings.append(Ranking([], {}, None, record["named"], record["reason"], []))
@@ -102,7 +109,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                 continue
             log(f"step {step}: {int(current.dmap.flagged.sum())} flagged cells; ranking the effects")
             t_rank = time.perf_counter()
-            cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
+            cfg_now = _with_effects(config, _model_effects(named, in_data))
             rk = rank_effects(cfg_now, current.problem, current.w, current.y_sim, current.dmap, null, opts, log,
                               exclude=[n for n, _, _ in named])
             rank_s += time.perf_counter() - t_rank
@@ -117,8 +124,8 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                 break
             cand = next(c for c in rk.candidates if c.effect == rk.named)
             named.append((cand.effect, dict(cand.parameters), cand.n_parameters))
-            stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir,
-                                                      noise_path, fresh, progress, log, fixed)
+            stage, record["joint_fit"] = _add_and_fit(config, named, in_data, cand, current, step, grid, null,
+                                                      out_dir, noise_path, fresh, progress, log)
             rejected = check_after_joint_fit(current.dmap, stage.dmap, cand.own, opts)
             if rejected is not None:   # the after-map decides: the effect is not named after all
                 log(f"step {step}: {cand.effect} retracted: {rejected}")
@@ -141,7 +148,8 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     aug_path = None
     if named:
         final_run = Path(current.config.output.dir)
-        aug_path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path)
+        aug_path = write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
+                                   corrections=_corrections(in_data))
         if final_run.resolve() != (out_dir / "after").resolve() and final_run.exists():
             shutil.copytree(final_run, out_dir / "after", dirs_exist_ok=True)
     first = next((r for r in rankings if r.candidates), rankings[0])
@@ -169,9 +177,10 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                       "share_flagged_after": s.get("gap_after", {}).get("share_flagged"),
                       "integrated_db_hz_after": s.get("gap_after", {}).get("integrated_db_hz")} for s in steps],
         "unexplained": unexplained,
-        "joint_fit": ("alternating: effect parameters refitted at the re-identified suspension parameters, "
-                      "then the suspension re-identified with them, until no effect parameter moves by more than "
-                      f"{opts.joint_tol:g} of its range ({opts.joint_rounds} rounds at most)") if opts.reidentify
+        "joint_fit": ("together: the suspension and the continuous parameters of every named effect fitted at once "
+                      "by least squares on D (the whitened mean residuals the map tests), from the identified "
+                      "suspension and the effects' fits at it; then the augmented model identified with the "
+                      "configured objective (after/)") if opts.reidentify
         else "none: reidentify is false, the effects are fitted at the base parameters",
         "gap_before": before.gap(),
         "gap_after": after.gap() if after is not None else None,
@@ -213,54 +222,61 @@ def _coupling(config: Config, problem, log: Callable[[str], None]) -> list[dict[
     if config.data.source != "measured" or config.data.measurements is None:
         return None
     _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
+    records = untilt(records, config.data.corrections, problem.channels, error=config.error)
     opts = config.diagnose
     reference = None
     if opts.coupling_reference is not None:
         _, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track, problem.channels)
-    rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, config.spectra.f_max_hz),
-                         opts.alpha, reference=reference)
+    # every frequency of the records up to their Nyquist frequency: the coupling is a property of the sensor,
+    # and the bins above the spectra band (where the vertical often dominates a bogie's lateral) weigh most
+    rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, math.inf), opts.alpha,
+                         reference=reference)
     for r in rows:
         log(f"coupling {r['channel']} <- {r['vertical']}: beta {r['beta']:.4f} ± {r['se']:.4f} "
             f"(t {r['t']:.1f}){' significant' if r['significant'] else ''}")
     return rows
 
 
-def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dict[str, Any]],
-                        coupling: list[dict[str, Any]], current: Stage, step: int, grid: CellGrid,
-                        null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool, progress: bool,
-                        log: Callable[[str], None]) -> tuple[dict[str, Any], Stage | None]:
-    """Name ``sensor-tilt`` from a significant coupling: the tilted channels, the angle asin |β| (the mean over
-    them, weighted by 1/se²), the tilt alone (no gravity term: the reference date had the sensors' gravity
-    response too). The angle stays as estimated in the joint fit (power spectra hardly see it)."""
+def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str, Any]]],
+                        tilted: list[dict[str, Any]], coupling: list[dict[str, Any]], current: Stage, step: int,
+                        grid: CellGrid, null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool,
+                        progress: bool, log: Callable[[str], None]) -> tuple[dict[str, Any], Stage | None]:
+    """Name ``sensor-tilt`` from a significant coupling and correct it in the measured records.
+
+    Each tilted channel is rotated back by its own angle asin β (``data.corrections``); the model is unchanged
+    (a tilt mixes two channels whose reference-date model errors differ: :mod:`suspid.data.corrections`). The
+    suspension is fitted again on the corrected data; the tilt is retracted when more than ``max_new_flagged``
+    (one at least) new cells are flagged on the tilted channels. The main parameter is the angle, weighted by
+    1/se² over the tilted channels.
+    """
     opts = config.diagnose
     w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
     angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
-    params = {"angle_deg": angle, "channels": [r["channel"] for r in tilted], "gravity_roll": False}
+    params = {"angle_deg": angle, "channels": [r["channel"] for r in tilted],
+              "angles_deg": {r["channel"]: r["angle_deg"] for r in tilted}}
     reason = ("sensor-tilt from the coupling of vertical into lateral at the same point: " + "; ".join(
         f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle {abs(r['angle_deg']):.2f}°)"
-        for r in tilted))
+        for r in tilted) + "; corrected in the measured records (data.corrections)")
     record: dict[str, Any] = {"step": step, "named": "sensor-tilt", "route": "coupling", "reason": reason,
+                              "applied": "data.corrections: the tilted channels' records rotated back",
                               "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
                               "ranking": [], "local_model": None}
     log(f"step {step}: {reason}")
-    cfg_now = _with_effects(config, [(n, p) for n, p, _ in named])
-    disc = Discrepancy(grid, null, current.problem.y_mes, current.problem.noise_model, current.dmap.flagged,
-                       current.y_sim)
-    fitter = EffectFitter(cfg_now, current.problem, current.w, disc, current.dmap.flagged_cells(), opts, log)
-    spec = {"name": "sensor-tilt", **params}
-    y = fitter.simulate(fitter.simulator_with(spec), {"sensor-tilt/angle_deg": angle})
-    cand = Candidate("sensor-tilt", "fitted", 2, params, y_sim=y if y is not None else current.y_sim)
     named.append(("sensor-tilt", params, 2))
-    fixed.add("sensor-tilt")
-    stage, record["joint_fit"] = _add_and_fit(config, named, cand, current, step, grid, null, out_dir, noise_path,
-                                              fresh, progress, log, fixed)
+    in_data["sensor-tilt"] = [{"channel": r["channel"], "tilt_deg": float(r["angle_deg"]), "vertical": r["vertical"]}
+                              for r in tilted]
+    corrected = Stage(current.label, current.config, _corrected_problem(config, current.problem, in_data),
+                      current.w, current.y_sim, current.result, fit=current.fit)
+    _locate(corrected, grid, null, opts.alpha)
+    stage, record["joint_fit"] = _add_and_fit(config, named, in_data, None, corrected, step, grid, null, out_dir,
+                                              noise_path, fresh, progress, log)
     n0 = int(current.dmap.flagged.sum())
     mine = np.array([grid.channels[grid.index(c)[1]] in params["channels"] for c in range(grid.n_cells)])
     new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
     n1 = int(stage.dmap.flagged.sum())
     if new > max(1.0, opts.max_new_flagged * n0):
         named.pop()
-        fixed.discard("sensor-tilt")
+        in_data.pop("sensor-tilt")
         record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
                       reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
                              f"({n0} → {n1} in all)",
@@ -272,9 +288,35 @@ def _tilt_from_coupling(config: Config, named, fixed: set[str], tilted: list[dic
     return record, stage
 
 
+def _corrections(in_data: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """The ``data.corrections`` items of the effects corrected in the data."""
+    return [c for items in in_data.values() for c in items]
+
+
+def _model_effects(named, in_data) -> list[tuple[str, dict[str, Any]]]:
+    """The named effects that go into the simulator (not those corrected in the data)."""
+    return [(n, p) for n, p, _ in named if n not in in_data]
+
+
+def _corrected_problem(config: Config, problem, in_data: dict[str, list[dict[str, Any]]]):
+    """``problem`` with y_mes from the measured records corrected by ``config.data.corrections`` and the
+    diagnosis's own corrections ``in_data``."""
+    from suspid.sections import SensorCorrection
+
+    items = list(config.data.corrections) + [SensorCorrection(**c) for c in _corrections(in_data)]
+    _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
+    y_mes, freqs = compute_spectra(untilt(records, items, problem.channels, error=config.error), config.spectra)
+    if y_mes.shape != problem.y_mes.shape or not np.allclose(freqs, problem.freqs):
+        raise RuntimeError("corrected records give other spectra than the run's")   # same files: cannot happen
+    return dataclasses.replace(problem, y_mes=y_mes,
+                               data_identity=stable_hash(problem.data_identity, "corrections",
+                                                         json.dumps(canonical(_corrections(in_data)), sort_keys=True)))
+
+
 def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
     noise = stage.problem.noise_model
-    stage.dmap = locate(grid, null, stage.problem.y_mes, noise.effective(stage.y_sim), null.noise_mean, alpha)
+    stage.dmap = locate(grid, null, stage.problem.y_mes, noise.effective(stage.y_sim), null.noise_mean, alpha,
+                        stage.config.diagnose.min_db)
     stage.dmap.J = j_of_spectra(stage.problem, stage.y_sim)[0]
 
 
@@ -287,65 +329,55 @@ def _with_effects(config: Config, effects: list[tuple[str, dict[str, Any]]]) -> 
     return config.model_copy(update={"simulator": config.simulator.model_copy(update={"options": options})})
 
 
-def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]], cand, current: Stage, step: int,
-                 grid: CellGrid, null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool,
-                 progress: bool, log: Callable[[str], None], fixed: set[str] = frozenset()
-                 ) -> tuple[Stage, dict[str, Any]]:
-    """Add the named effects to the model and fit them with the suspension: the alternating joint fit.
+def _fit_suspension(stage: Stage, config: Config, grid: CellGrid, null: NullCalibration,
+                    log: Callable[[str], None]) -> None:
+    """The base model's suspension fitted by least squares on D from the identification's w_opt (in place)."""
+    opts = config.diagnose
+    problem = stage.problem
+    disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, np.zeros(grid.n_cells, bool), stage.y_sim)
+    fit = fit_jointly(config, problem, disc, stage.w, max_evaluations=opts.joint_max_evaluations, log=log)
+    stage.w, stage.y_sim, stage.fit = fit.w, fit.y_sim, fit
 
-    Round r: identify the suspension with the effects at their current parameters; refit each effect's
-    continuous parameters at the identified suspension (the others fixed); stop when no parameter moves by more
-    than ``joint_tol`` of its range. ``named`` is updated in place. Returns the final stage and the trace.
+
+def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
+                 in_data: dict[str, list[dict[str, Any]]], cand, current: Stage, step: int, grid: CellGrid,
+                 null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool, progress: bool,
+                 log: Callable[[str], None]) -> tuple[Stage, dict[str, Any]]:
+    """Add the named effects to the model and fit them together with the suspension.
+
+    With ``reidentify``: the suspension and every named effect's continuous parameters by least squares on D
+    from the current suspension and the effects' values (``named`` is updated in place; effects corrected in the
+    data, ``in_data``, are not in the model); then, with ``at: identified``, the augmented model identified with
+    the configured objective in ``steps/<step>/`` (its ``w_opt`` reported beside the fit, under
+    ``identified``). Without: the effect as fitted at the base parameters (``cand``). Returns the stage and the
+    joint fit's record.
     """
     opts = config.diagnose
     if not opts.reidentify:
-        aug = load_config(write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
-                                          path=out_dir / "steps" / f"augmented-{step}.yaml"))
-        stage = Stage(f"after-{step}", aug, current.problem, current.w, cand.y_sim, None)
+        aug = load_config(write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
+                                          path=out_dir / "steps" / f"augmented-{step}.yaml",
+                                          corrections=_corrections(in_data)))
+        stage = Stage(f"after-{step}", aug, current.problem, current.w,
+                      cand.y_sim if cand is not None else current.y_sim, None)
         _locate(stage, grid, null, opts.alpha)
-        return stage, {"mode": "none (reidentify: false)", "rounds": 0, "converged": None, "trace": []}
-    def identified(suffix: str) -> Stage:
-        """The model with the effects as they stand, identified in ``steps/<step>-<suffix>``, and its map."""
-        run_dir = out_dir / "steps" / f"{step}-{suffix}"
-        path = write_augmented(config, [(n, p) for n, p, _ in named], out_dir, noise_path,
-                               path=out_dir / "steps" / f"augmented-{step}-{suffix}.yaml", run_dir=run_dir)
-        identified_stage = make_stage(f"after-{step}-{suffix}", load_config(path), True, run_dir, fresh=fresh,
-                                      progress=progress, log=log)
-        _locate(identified_stage, grid, null, opts.alpha)
-        return identified_stage
-
-    trace: list[dict[str, Any]] = []
-    converged = False
-    stage = current
-    for r in range(1, opts.joint_rounds + 1):
-        stage = identified(str(r))
-        moved, refits = 0.0, []
-        for i, (name, params, n_par) in enumerate(named):
-            if name in fixed:
-                continue
-            cls = registry.get("effect", name)
-            others = [(n, p) for j, (n, p, _) in enumerate(named) if j != i]
-            cfg_i = _with_effects(config, others)
-            disc = Discrepancy(grid, null, stage.problem.y_mes, stage.problem.noise_model, stage.dmap.flagged,
-                               stage.y_sim)
-            fitter = EffectFitter(cfg_i, stage.problem, stage.w, disc, stage.dmap.flagged_cells(), opts, log)
-            refit = fitter.refit(cls, params, n_par)
-            if refit.status != "fitted":
-                refits.append({"effect": name, "status": refit.status})
-                continue
-            move = max((abs(_Transform(cls, p).to_unit(refit.parameters[p]) - _Transform(cls, p).to_unit(params[p]))
-                        for p in cls.fitted), default=0.0)
-            moved = max(moved, move)
-            refits.append({"effect": name, "refitted": canonical({p: refit.parameters[p] for p in cls.fitted}),
-                           "move": round(move, 5)})
-            named[i] = (name, {**params, **{p: refit.parameters[p] for p in cls.fitted}}, n_par)
-        trace.append({"round": r, "w": {k: float(v) for k, v in stage.w.items()},
-                      "errors_percent": (stage.result or {}).get("errors_percent"),
-                      "share_flagged": stage.dmap.share_flagged, "refits": refits})
-        log(f"joint fit, round {r}: largest effect-parameter move {moved:.4f} of its range")
-        if moved <= opts.joint_tol:
-            converged = True
-            break
-    if not converged and opts.joint_rounds > 1:
-        stage = identified("final")  # the last refit moved the effects: the stage must match their parameters
-    return stage, {"mode": "alternating", "rounds": len(trace), "converged": converged, "trace": trace}
+        return stage, {"mode": "none (reidentify: false)"}
+    problem = current.problem
+    disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, current.dmap.flagged, current.y_sim)
+    fit = fit_jointly(config, problem, disc, current.w, _model_effects(named, in_data),
+                      max_evaluations=opts.joint_max_evaluations, log=log)
+    refitted = dict(fit.effects)
+    named[:] = [(n, refitted.get(n, p), k) for n, p, k in named]
+    result = None
+    if opts.at == "identified":
+        run_dir = out_dir / "steps" / str(step)
+        path = write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
+                               path=out_dir / "steps" / f"augmented-{step}.yaml", run_dir=run_dir,
+                               corrections=_corrections(in_data))
+        result = make_stage(f"identified-{step}", load_config(path), True, run_dir, fresh=fresh,
+                            progress=progress, log=log).result
+    aug = load_config(write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
+                                      path=out_dir / "steps" / f"augmented-{step}.yaml",
+                                      run_dir=out_dir / "steps" / str(step), corrections=_corrections(in_data)))
+    stage = Stage(f"after-{step}", aug, problem, fit.w, fit.y_sim, result, fit=fit)
+    _locate(stage, grid, null, opts.alpha)
+    return stage, {"mode": "together (least squares on D)", **fit.as_dict()}
