@@ -125,8 +125,8 @@ def test_polygon_candidates_cover_sets_of_wheelsets():
 
 # ------------------------------------------------------------------------------------------ experiments
 def run_case(tmp_path: Path, case: str, seed: int, **kw) -> tuple[dict, dict]:
-    hidden, speeds = HE.CASES[case]
-    path = HE.prepare(tmp_path / f"{case}-{seed}", hidden, seed=seed, speeds_kmh=speeds, **kw)
+    c = HE.CASES[case]
+    path = HE.prepare(tmp_path / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref, **kw)
     d = suspid.diagnose(path).diagnosis
     errors = HE.parameter_errors(d, path.parent / "measurement" / "truth.json",
                                  path.parent / "runs" / "config" / "before" / "result.json")
@@ -155,7 +155,9 @@ def test_independent_hidden_effect_is_named(tmp_path, case, effect, truth, tol, 
     d, errors = run_case(tmp_path, case, seed)
     assert effect in d["named_effects"], d["reason"]
     assert abs(_main(d, effect) - truth) <= tol * truth, d["effects"]
-    assert max(abs(e) for e in errors["gap_after_interval"].values()) < 3.0, errors   # % of the interval
+    identifiable = d["gap_after"]["suspension_fit"]["identifiable"]          # under the data-group check
+    assert max(abs(e) for n, e in errors["gap_after_interval"].items() if identifiable[n]) < 3.0, (errors,
+                                                                                                   identifiable)
 
 
 @pytest.mark.slow
@@ -176,7 +178,7 @@ def test_independent_out_of_catalogue_is_reported_unexplained(tmp_path, case, ch
 @pytest.mark.slow
 @pytest.mark.acceptance
 @pytest.mark.parametrize("seed", SEEDS)
-@pytest.mark.parametrize("case", ["none", "two-speeds"])
+@pytest.mark.parametrize("case", ["none", "two-speeds", "other-suspension"])
 def test_independent_null_names_nothing(tmp_path, case, seed):
     d, _ = run_case(tmp_path, case, seed)
     assert d["named_effects"] == [], d["reason"]
@@ -185,18 +187,26 @@ def test_independent_null_names_nothing(tmp_path, case, seed):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [SEEDS[0]] + [pytest.param(s, marks=pytest.mark.long) for s in SEEDS[1:]])
-def test_two_speed_null_at_the_truth_takes_a_mean_of_b_per_speed(tmp_path, seed):  # other seeds: -m long (CI time)
-    """At the true parameters (no identification error) the two-speed null flags at most 2 % of the cells: the
-    reference date's μ_B differs by a median 0.9 dB between 200 and 300 km/h, and one μ_B for both speeds
-    flagged 21-26 %."""
-    hidden, speeds = HE.CASES["two-speeds"]
-    path = HE.prepare(tmp_path / f"two-speeds-{seed}", hidden, seed=seed, speeds_kmh=speeds,
-                      diagnose={"at": "nominal"})
+@pytest.mark.parametrize("case", ["two-speeds", "other-suspension"])
+def test_null_at_the_fitted_suspension_flags_nothing(tmp_path, case, seed):  # other seeds: -m long (CI time)
+    """Two speeds, or the measurement date at another suspension than the reference date: no hidden effect, the
+    suspension identified and fitted under D, nothing named and at most 2 % of the cells flagged (with one μ_B
+    for both speeds 27-39 % were; with the likelihood's w_opt 1-9 %; another suspension flagged 15-25 %). 24
+    segments per date (the acceptance grid has 40) to keep CI's time."""
+    c = HE.CASES[case]
+    path = HE.prepare(tmp_path / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref,
+                      n_segments=24, n_reference=32)
     d = suspid.diagnose(path).diagnosis
     assert d["named_effects"] == [], d["reason"]
     assert d["gap_before"]["share_flagged"] <= 0.02
-    coverage = d["statistics"]["noise_mean_by_speed"]
-    assert [(c["mean"], c["reference_segments"]) for c in coverage] == [("speed_group", 32)] * 2
+    fit = d["gap_before"]["suspension_fit"]
+    assert fit["status"] == "fitted" and fit["D"] < fit["D_start"]
+    errors = HE.parameter_errors(d, path.parent / "measurement" / "truth.json",
+                                 path.parent / "runs" / "config" / "before" / "result.json")
+    assert max(abs(e) for e in errors["gap_before_interval"].values()) < 6.0, errors
+    if case == "two-speeds":
+        coverage = d["statistics"]["noise_mean_by_speed"]
+        assert [(c["mean"], c["reference_segments"]) for c in coverage] == [("speed_group", 32)] * 2
 
 
 @pytest.mark.slow
@@ -231,3 +241,36 @@ def test_coupling_test_reads_the_tilt_from_the_cross_spectrum():
     assert tilted["significant"] and tilted["angle_deg"] == pytest.approx(6.0, rel=0.15)
     null = coupling_test(records(0.0), channels, (0.4, 40.0))[0]
     assert not null["significant"]
+
+
+def test_coupling_against_the_twin_sensor_removes_the_vehicles_own_coupling():
+    """Both bogies couple lateral and vertical by the same amount on a set of segments (0.03, the order of the
+    independent train's, which shifts both bogies together); the front sensor is tilted by 6°. The raw β of the
+    front channel is off by the own coupling, its difference with the rear (its twin) is not; nothing is found
+    on the untilted twin, and without the tilt nothing at all."""
+    from types import SimpleNamespace
+
+    from suspid.workflows.diagnose.coupling import coupling_test, twin
+
+    channels = ["bogie_front_vertical", "bogie_front_lateral", "bogie_rear_vertical", "bogie_rear_lateral"]
+    assert twin("bogie_front_lateral", channels) == "bogie_rear_lateral" and twin("carbody_middle_x", channels) is None
+
+    def records(angle_deg, seed=1):
+        rng = np.random.default_rng(seed)
+        a, own = math.radians(angle_deg), 0.03
+        out = []
+        for _ in range(24):
+            rows = []
+            for tilt in (a, 0.0):
+                v = np.convolve(rng.standard_normal(800), np.ones(5) / 5, "same")
+                lat = 0.5 * rng.standard_normal(800) + own * v
+                rows += [v, math.cos(tilt) * lat + math.sin(tilt) * v]
+            out.append(SimpleNamespace(accelerations=np.array(rows), fs=100.0))
+        return out
+
+    rows = {r["channel"]: r for r in coupling_test(records(6.0), channels, (0.4, math.inf))}
+    front, rear = rows["bogie_front_lateral"], rows["bogie_rear_lateral"]
+    assert front["significant"] and not rear["significant"] and front["twin"] == "bogie_rear_lateral"
+    assert front["angle_deg"] == pytest.approx(6.0, rel=0.1)
+    assert math.degrees(math.asin(front["beta_raw"])) == pytest.approx(6.0 + math.degrees(0.03), rel=0.1)
+    assert not any(r["significant"] for r in coupling_test(records(0.0, seed=2), channels, (0.4, math.inf)))

@@ -122,6 +122,9 @@ class WheelPolygonOptions(_Params):
                                description="amplitude of the wheel radius deviation, m")
     wheelsets: list[int] = Field(default=[1], min_length=1, description="out-of-round wheelsets, 1 leads")
     phase_rad: float = Field(default=0.0, description="phase of the polygon at the segment start, rad")
+    phase_step_rad: float = Field(default=0.0, ge=0.0, le=2 * math.pi,
+                                  description="phase of each listed wheelset's polygon after the previous one's, "
+                                  "rad: the wheels' relative angle (each wheel is out of round at its own angle)")
     wheel_diameter_m: float = Field(default=0.92, ge=0.6, le=1.3,
                                     description="wheel diameter D, m (0.92 m: EN 15302 reference wheel)")
 
@@ -146,14 +149,18 @@ class WheelPolygon(Effect):
     Shows on axlebox and bogie vertical channels, and on the carbody where the
     secondary suspension filters it less (low orders at low speed).
 
-    Radius deviation A cos(2π s / (πD/k) + φ) with s the distance rolled: a
-    vertical input at f = k v / (π D) (28.8 Hz per order at 300 km/h).
+    Radius deviation A cos(2π s / (πD/k) + φ + i Δφ) on the i-th listed
+    wheelset (i = 0, 1, ...), s the distance it rolled: a vertical input at
+    f = k v / (π D) (28.8 Hz per order at 300 km/h). Wheels are out of round
+    at their own angles: the phase step Δφ sets how the lines of two wheelsets
+    add up where a channel sees both (the carbody), exactly for a pair and
+    as a uniform step for more (it does nothing on one wheelset).
     """
 
     name = "wheel-polygon"
     Options = WheelPolygonOptions
     main_parameter = "order"
-    fitted = ("amplitude_m",)
+    fitted = ("amplitude_m", "phase_step_rad")
     description = "wheel out-of-roundness, polygon of order k (periodic vertical input at k v / (π D))"
 
     def wavelength(self) -> float:
@@ -178,7 +185,9 @@ class WheelPolygon(Effect):
             orders.update(ks)
             if not ks:   # a band between two orders: both neighbours
                 orders.update(k for k in (math.floor(lo / f1), math.ceil(hi / f1)) if k_lo <= k <= k_hi)
-        return [{"order": k, "wheelsets": list(ws)} for k in sorted(orders) for ws in WHEELSET_SETS]
+        steps = [0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi]
+        return [{"order": k, "wheelsets": list(ws), "phase_step_rad": step} for k in sorted(orders)
+                for ws in WHEELSET_SETS for step in (steps if len(ws) > 1 else [0.0])]
 
 
 # ------------------------------------------------------------------------------------------ yaw damper

@@ -29,7 +29,7 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
 from scipy.fft import next_fast_len
@@ -185,8 +185,8 @@ VERTICAL_W_REF = {"k_sec_z": 340.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.30e6}
 SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 40.0, "n_freqs": 200}
 
 
-def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segments: int = 24,
-            n_reference: int = 32, speeds_kmh: Sequence[float] = (300.0,),
+def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segments: int = 40,
+            n_reference: int = 48, speeds_kmh: Sequence[float] = (300.0,),
             w_ref: Mapping[str, float] | None = None, w_reference: Mapping[str, float] | None = None,
             identified: Sequence[str] = tuple(VERTICAL_W_REF), diagnose: Mapping | None = None,
             ego: Mapping | None = None, noise: Mapping | None = None) -> Path:
@@ -246,25 +246,35 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("out_dir", type=Path)
     ap.add_argument("case", choices=sorted(CASES))
     ap.add_argument("--seed", type=int, default=3)
-    ap.add_argument("--segments", type=int, default=24)
+    ap.add_argument("--segments", type=int, default=40)
     ap.add_argument("--damaged", action="store_true", help="measurement date at VERTICAL_W_REF")
     a = ap.parse_args(argv)
-    hidden, speeds = CASES[a.case]
-    print(prepare(a.out_dir, hidden, seed=a.seed, n_segments=a.segments, n_reference=a.segments + 8,
-                  speeds_kmh=speeds, w_ref=VERTICAL_W_REF if a.damaged else None))
+    case = CASES[a.case]
+    print(prepare(a.out_dir, case.hidden, seed=a.seed, n_segments=a.segments, n_reference=a.segments + 8,
+                  speeds_kmh=case.speeds, w_ref=VERTICAL_W_REF if a.damaged else case.w_ref))
 
 
-CASES: dict[str, tuple[tuple, tuple[float, ...]]] = {
-    "none": ((), (300.0,)),
-    "two-speeds": ((), (200.0, 300.0)),
-    "bending": ((FlexibleCarbody(9.5, 0.02),), (300.0,)),
-    "bracket": ((BracketResonance("carbody_middle_vertical", 14.0, 0.05),), (300.0,)),
-    "gain": ((CalibrationGain(),), (300.0,)),
-    "tilt": ((SensorTilt("bogie_front_lateral", 6.0),), (300.0,)),
-    "polygon": ((WheelPolygon(1, 1.0e-4, (2, 3)),), (200.0, 300.0)),
-    "bending+tilt": ((FlexibleCarbody(9.5, 0.02), SensorTilt("bogie_front_lateral", 6.0)), (300.0,)),
+class Case(NamedTuple):
+    """One experiment: the hidden effects, the speeds (km/h) and the measurement date's suspension (None: w0,
+    as the reference date's)."""
+
+    hidden: tuple
+    speeds: tuple[float, ...]
+    w_ref: Mapping[str, float] | None = None
+
+
+CASES: dict[str, Case] = {
+    "none": Case((), (300.0,)),
+    "two-speeds": Case((), (200.0, 300.0)),
+    "other-suspension": Case((), (300.0,), VERTICAL_W_REF),
+    "bending": Case((FlexibleCarbody(9.5, 0.02),), (300.0,)),
+    "bracket": Case((BracketResonance("carbody_middle_vertical", 14.0, 0.05),), (300.0,)),
+    "gain": Case((CalibrationGain(),), (300.0,)),
+    "tilt": Case((SensorTilt("bogie_front_lateral", 6.0),), (300.0,)),
+    "polygon": Case((WheelPolygon(1, 1.0e-4, (2, 3)),), (200.0, 300.0)),
+    "bending+tilt": Case((FlexibleCarbody(9.5, 0.02), SensorTilt("bogie_front_lateral", 6.0)), (300.0,)),
 }
-"""The experiments: hidden effects and speeds (km/h)."""
+"""The experiments (``other-suspension``: no hidden effect, the measurement date at :data:`VERTICAL_W_REF`)."""
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ diagonal: the bins are not independent).
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -63,6 +64,13 @@ class JointFit:
     start: dict[str, float]
     status: str
     fitted: list[str] = field(default_factory=list)
+    jacobian: np.ndarray | None = None                  # (n_bins, n_fitted) of the whitened residuals, unit coords
+    model_error: dict[str, Any] | None = None            # the data-group check (:func:`check_groups`)
+
+    @property
+    def identifiable(self) -> dict[str, bool] | None:
+        """Per suspension parameter: its bias-aware half-width within ``max_half_width`` (None: not checked)."""
+        return None if self.model_error is None else dict(self.model_error["identifiable"])
 
     def as_dict(self) -> dict[str, Any]:
         return canonical({"method": "least squares on D (whitened mean residuals), trust-region reflective",
@@ -70,27 +78,33 @@ class JointFit:
                           "effects": [{"name": n, "parameters": p} for n, p in self.effects],
                           "D": round(self.D, 3), "D_start": round(self.D_start, 3),
                           "n_simulations": self.n_simulations, "half_width_percent": self.half_width_percent,
-                          "status": self.status})
+                          "status": self.status, "model_error": self.model_error,
+                          "identifiable": self.identifiable})
 
 
 def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, float],
                 effects: list[tuple[str, dict[str, Any]]] = (), fixed: set[str] = frozenset(), *,
-                max_evaluations: int = 120, log: Callable[[str], None] = lambda s: None) -> JointFit:
+                max_evaluations: int = 120, suspension: list[str] | None = None,
+                log: Callable[[str], None] = lambda s: None) -> JointFit:
     """Fit the identified suspension parameters and the continuous parameters of ``effects`` (except those
     named in ``fixed``, kept as given) by least squares on D, from ``w_start`` and the effects' values.
 
     :param config: the diagnosed config (its simulator options without ``effects``' entries).
     :param problem: the run's problem (segments, bounds, noise model).
-    :param disc: the criterion D (its target and scales; :class:`.fit.Discrepancy`).
+    :param disc: the criterion D (its target and scales; :class:`.fit.Discrepancy`; a scale of inf leaves a bin
+        out).
     :param effects: ``[(name, parameters)]``: the named effects with their structural choices.
     :param max_evaluations: simulator calls at most (the Jacobians' included).
+    :param suspension: the suspension parameters fitted (default: all identified ones; the others stay at
+        ``w_start``).
     """
     effects = [(n, dict(p)) for n, p in effects]
     options = dict(config.simulator.options)
     options["effects"] = list(options.get("effects") or []) + [{"name": n, **p} for n, p in effects]
     sim_cls = type(problem.simulator)
     sim = sim_cls(**validate_options(sim_cls, options, file=str(config.source_file), key="simulator.options"))
-    names = list(problem.names)
+    names = list(problem.names) if suspension is None else [n for n in problem.names if n in suspension]
+    index = [list(problem.names).index(n) for n in names]
     free: list[tuple[str, str, _Transform]] = []          # (effect, parameter, transform) of the fitted effects
     for n, p in effects:
         if n in fixed:
@@ -98,15 +112,17 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
         cls = registry.get("effect", n)
         free += [(n, q, _Transform(cls, q)) for q in cls.fitted]
     q = len(names)
-    u_start = np.concatenate([problem.to_unit(np.array([w_start[n] for n in names], float)),
-                              [t.to_unit(dict(effects)[n][p]) for n, p, t in free]])
+    u_all = problem.to_unit(np.array([w_start[n] for n in problem.names], float))
+    u_start = np.concatenate([u_all[index], [t.to_unit(dict(effects)[n][p]) for n, p, t in free]])
     u_start = np.clip(u_start, 0.0, 1.0)
     labels = names + [f"{n}/{p}" for n, p, _ in free]
     count = [0]
     cache: dict[tuple, tuple[np.ndarray, np.ndarray | None]] = {}
 
     def w_of(u: np.ndarray) -> dict[str, float]:
-        w = problem.w_of(problem.from_unit(u[:q]))
+        u_w = u_all.copy()
+        u_w[index] = u[:q]
+        w = problem.w_of(problem.from_unit(u_w))
         w.update({f"{n}/{p}": t.from_unit(ui) for (n, p, t), ui in zip(free, u[q:])})
         return w
 
@@ -144,8 +160,8 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
     w = w_of(u)
     fitted_effects = [(n, {**p, **{q_: w[f"{n}/{q_}"] for nn, q_, _ in free if nn == n}}) for n, p in effects]
     log(f"joint fit of {', '.join(labels)}: D {D_start:.1f} → {float(e @ e):.1f} ({count[0]} simulations)")
-    return JointFit({k: w[k] for k in names}, fitted_effects, y, float(e @ e), D_start, count[0], half,
-                    {lab: float(v) for lab, v in zip(labels, _si(w_of(u_start), labels))}, status, labels)
+    return JointFit({k: w[k] for k in problem.names}, fitted_effects, y, float(e @ e), D_start, count[0], half,
+                    {lab: float(v) for lab, v in zip(labels, _si(w_of(u_start), labels))}, status, labels, G)
 
 
 def _si(w: dict[str, float], labels: list[str]) -> list[float]:
@@ -173,4 +189,72 @@ def _half_widths(G: np.ndarray, disc: Discrepancy, noise_model, labels: list[str
     bread = np.linalg.pinv(G.T @ G)
     cov = bread @ meat @ bread
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    return {lab: round(float(200.0 * s), 4) if math.isfinite(s) else None for lab, s in zip(labels, se)}
+    dead = ~np.any(G != 0.0, axis=0)            # a parameter that acts on nothing here (a one-wheelset phase step)
+    return {lab: round(float(200.0 * s), 4) if math.isfinite(s) and not d else None
+            for lab, s, d in zip(labels, se, dead)}
+
+
+def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, max_evaluations: int = 60,
+                 log: Callable[[str], None] = lambda s: None) -> dict[str, Any]:
+    """Does each part of the data give the same suspension? The model-form check of a fit (sets
+    ``fit.model_error`` and returns it).
+
+    The sampling half-widths of the fit assume the model right; a model whose sensitivity to a parameter
+    differs from the vehicle's (or an effect implemented otherwise than the vehicle has it) makes the parts of
+    the data disagree, and the fit is a compromise set by where the model is wrong. As the identification's own
+    check (:mod:`suspid.workflows.adequacy`, ``identifiability.model_error.adequacy``): the data groups of
+    :func:`~suspid.workflows.adequacy.data_groups` (channel directions, the two frequency halves); in each, the
+    suspension parameters holding at least ``min_group_share`` of their information there (Σ G² over the
+    group's bins, G the fit's Jacobian) are fitted again by least squares on D restricted to the group, the
+    effects and the other parameters fixed. The bias bound B of a parameter is half the spread of its group
+    estimates; its bias-aware half-width (:func:`~suspid.method.identifiability.bias_aware_half_width`, at
+    ``n_sigmas``) with the sampling sd; it is *identifiable* when that half-width is within ``max_half_width``.
+    """
+    from suspid.method.identifiability import bias_aware_half_width
+    from suspid.workflows.adequacy import data_groups
+
+    ident = config.identifiability
+    adequacy = ident.model_error.adequacy
+    names = list(problem.names)
+    q = len(names)
+    w_fit = fit.w
+    G = fit.jacobian[:, :q] if fit.jacobian is not None else None
+    shape = disc.target.shape                                        # (G, K, F)
+    estimates: dict[str, dict[str, float]] = {}
+    shares: dict[str, dict[str, float]] = {}
+    if G is not None:
+        info = G ** 2
+        total = info.sum(axis=0)
+        for group in data_groups(problem.channels, problem.freqs):
+            mask = np.broadcast_to(group.channels[None, :, None] & group.freqs[None, None, :], shape).ravel()
+            share = np.where(total > 0, info[mask].sum(axis=0) / np.where(total > 0, total, 1.0), 0.0)
+            shares[group.name] = {n: round(float(v), 4) for n, v in zip(names, share)}
+            free = [n for n, v in zip(names, share) if v >= adequacy.min_group_share]
+            if not free:
+                continue
+            sub = copy.copy(disc)
+            sub.scale = np.where(mask.reshape(shape), disc.scale, np.inf)
+            g_fit = fit_jointly(config, problem, sub, w_fit, fit.effects, {n for n, _ in fit.effects},
+                                max_evaluations=max_evaluations, suspension=free)
+            estimates[group.name] = {n: _percent(problem, n, g_fit.w[n] - w_fit[n]) for n in free}
+    spread = {n: (max(v) - min(v)) if len(v) > 1 else 0.0
+              for n in names for v in [[e[n] for e in estimates.values() if n in e]]}
+    sd = np.array([(fit.half_width_percent.get(n) or 0.0) / 200.0 for n in names])
+    bound = np.array([spread[n] / 200.0 for n in names])
+    half = bias_aware_half_width(sd, bound, ident.n_sigmas)
+    out = {"groups": estimates, "information_share": shares,
+           "spread_percent": {n: round(spread[n], 3) for n in names},
+           "bias_bound_percent": {n: round(100 * b, 3) for n, b in zip(names, bound)},
+           "half_width_percent": {n: round(100 * h, 3) for n, h in zip(names, half)},
+           "max_half_width_percent": 100 * ident.model_error.max_half_width,
+           "identifiable": {n: bool(h <= ident.model_error.max_half_width) for n, h in zip(names, half)}}
+    log("data groups: " + ", ".join(f"{n} spread {spread[n]:.1f} %, half-width {100 * h:.1f} %"
+                                    for n, h in zip(names, half)))
+    fit.model_error = out
+    return out
+
+
+def _percent(problem, name: str, delta: float) -> float:
+    """``delta`` (SI) in % of the admissible interval of ``name``."""
+    lo, hi = problem.bounds[list(problem.names).index(name)]
+    return round(100.0 * float(delta) / (float(hi) - float(lo)), 3)

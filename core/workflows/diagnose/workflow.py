@@ -30,7 +30,7 @@ from suspid.workflows.problem import read_measurements
 from .cells import CellGrid, make_cells
 from .coupling import coupling_test
 from .fit import Discrepancy
-from .joint import fit_jointly
+from .joint import check_groups, fit_jointly
 from .locate import locate
 from .name import Ranking, _supported_effects, check_after_joint_fit, rank_effects, unexplained_regions
 from .null import NullCalibration, calibrate_null
@@ -336,7 +336,15 @@ def _fit_suspension(stage: Stage, config: Config, grid: CellGrid, null: NullCali
     problem = stage.problem
     disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, np.zeros(grid.n_cells, bool), stage.y_sim)
     fit = fit_jointly(config, problem, disc, stage.w, max_evaluations=opts.joint_max_evaluations, log=log)
+    _check_groups(config, problem, disc, fit, log)
     stage.w, stage.y_sim, stage.fit = fit.w, fit.y_sim, fit
+
+
+def _check_groups(config: Config, problem, disc: Discrepancy, fit, log: Callable[[str], None]) -> None:
+    """The data-group check of a least-squares fit (``identifiability.model_error.adequacy.groups``)."""
+    if config.identifiability.model_error.adequacy.groups:
+        check_groups(config, problem, disc, fit, max_evaluations=config.diagnose.joint_max_evaluations // 2,
+                     log=log)
 
 
 def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
@@ -365,6 +373,7 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
     disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, current.dmap.flagged, current.y_sim)
     fit = fit_jointly(config, problem, disc, current.w, _model_effects(named, in_data),
                       max_evaluations=opts.joint_max_evaluations, log=log)
+    _check_groups(config, problem, disc, fit, log)
     refitted = dict(fit.effects)
     named[:] = [(n, refitted.get(n, p), k) for n, p, k in named]
     result = None

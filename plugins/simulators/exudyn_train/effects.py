@@ -334,7 +334,7 @@ class ConicityChange(ExudynEffect):
 
 # ------------------------------------------------------------------------------------------ polygon
 class WheelPolygon(ExudynEffect):
-    """A polygonal wheel: vertical input A cos(2π s k / (π D) + φ) on each listed wheelset.
+    """A polygonal wheel: vertical input A cos(2π s k / (π D) + φ + i Δφ) on the i-th listed wheelset.
 
     Both wheels of a wheelset are out of round alike (a vertical input on the
     wheelset); s is the distance the wheelset has rolled from the segment
@@ -345,7 +345,7 @@ class WheelPolygon(ExudynEffect):
     """
 
     name = "wheel-polygon"
-    fitted = ("amplitude_m",)
+    fitted = ("amplitude_m", "phase_step_rad")
 
     def check(self, sensors, n_wheelsets) -> None:
         bad = [j for j in self.params["wheelsets"] if j > n_wheelsets]
@@ -354,8 +354,9 @@ class WheelPolygon(ExudynEffect):
 
     def periodic_inputs(self, values) -> list[PeriodicInput]:
         wavelength = math.pi * self.params["wheel_diameter_m"] / self.params["order"]
-        return [PeriodicInput(j - 1, wavelength, float(self.get(values, "amplitude_m")), self.params["phase_rad"])
-                for j in self.params["wheelsets"]]
+        step = float(self.get(values, "phase_step_rad"))
+        return [PeriodicInput(j - 1, wavelength, float(self.get(values, "amplitude_m")), self.params["phase_rad"] + i * step)
+                for i, j in enumerate(self.params["wheelsets"])]
 
 
 # ------------------------------------------------------------------------------------------ track flexibility
