@@ -206,3 +206,19 @@ def test_corrected_problem_keeps_everything_but_the_measurements(tmp_path):
     assert fixed.data_identity != problem.data_identity
     same = replace(problem)
     assert same.data_identity == problem.data_identity
+
+
+def test_at_nominal_with_reidentify_fits_the_suspension_from_the_nominal_values(tmp_path):
+    """No identification run (``at: nominal``): the joint fit starts from the simulator's nominal values."""
+    import suspid
+    from test_diagnose import _config
+
+    path = _config(tmp_path, "nominal_joint", [{"name": "carbody-bending", "frequency_hz": 9.5, "damping": 0.02}],
+                   n_segments=16, n_reference=24, f_max=30.0, n_freqs=120, at="nominal", reidentify=True)
+    d = suspid.diagnose(path).diagnosis
+    assert d["named"] == "carbody-bending" and d["gap_before"]["w"] == {}
+    fit = d["steps"][0]["joint_fit"]
+    assert fit["mode"].startswith("together") and fit["D"] < fit["D_start"]
+    assert set(d["gap_after"]["w"]) == {"k_sec_z", "c_sec_z"}
+    assert "identified" not in d["gap_after"]                                   # nothing identified
+    assert d["effects"][0]["parameters"]["frequency_hz"] == pytest.approx(9.5, rel=0.01)

@@ -112,6 +112,7 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
         cls = registry.get("effect", n)
         free += [(n, q, _Transform(cls, q)) for q in cls.fitted]
     q = len(names)
+    w_start = {**dict(getattr(problem, "w0", None) or {}), **dict(w_start)}      # nominal where not given
     u_all = problem.to_unit(np.array([w_start[n] for n in problem.names], float))
     u_start = np.concatenate([u_all[index], [t.to_unit(dict(effects)[n][p]) for n, p, t in free]])
     u_start = np.clip(u_start, 0.0, 1.0)
