@@ -18,7 +18,7 @@ import datetime as dt
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, ValidationInfo, field_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from suspid.data.experiment import MeasurementOptions, ReferenceOptions
 from suspid.data.track import TrackOptions
@@ -115,6 +115,25 @@ class DataSection(Section):
         if value is not None and not value.exists():
             raise ValueError(f"file not found: {value}")
         return value
+
+    @field_validator("corrections")
+    @classmethod
+    def _one_per_channel(cls, value: list[SensorCorrection]) -> list[SensorCorrection]:
+        channels = [c.channel for c in value]
+        twice = sorted({c for c in channels if channels.count(c) > 1})
+        if twice:
+            raise ValueError(f"channel {twice[0]} is corrected twice (one tilt per channel)")
+        same = [c.channel for c in value if c.vertical == c.channel]
+        if same:
+            raise ValueError(f"channel {same[0]} cannot be its own vertical channel")
+        return value
+
+    @model_validator(mode="after")
+    def _corrections_need_records(self) -> "DataSection":
+        if self.corrections and self.source != "measured":
+            raise ValueError("corrections apply to measured records (data.source: measured); a numerical "
+                             "experiment has none")
+        return self
 
 
 class MeasuredReference(Section):

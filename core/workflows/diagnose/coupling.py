@@ -76,17 +76,25 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
             continue
         t_name = twin(c, lateral)
         paired = t_name is not None and betas[t_name].size == b.size
+        has_ref = ref.get(c) is not None and ref[c].size >= 3
+        if paired and has_ref and ref[t_name].size != ref[c].size:
+            paired = False                       # pair both dates or neither
         d = b - betas[t_name] if paired else b
         beta, se, n = float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size)), d.size
         b0 = None
-        if ref.get(c) is not None and ref[c].size >= 3:
-            d0 = ref[c] - ref[t_name] if paired and ref[t_name].size == ref[c].size else ref[c]
+        if has_ref:
+            d0 = ref[c] - ref[t_name] if paired else ref[c]
             b0 = float(d0.mean())
             beta, se = beta - b0, math.hypot(se, float(d0.std(ddof=1) / math.sqrt(d0.size)))
             n = min(n, d0.size)
         t = beta / se if se > 0 else 0.0
         p = float(2 * student_t.sf(abs(t), n - 1))
-        candidate = not paired or abs(b.mean()) >= abs(betas[t_name].mean())
+        # of a pair, the tilted one is the channel whose own coupling (beyond the reference date's) is further
+        # from zero; the vehicle's coupling of opposite sign and about half the tilt's can mislead this for
+        # small tilts (docs/diagnose.md, Limits)
+        own = abs(b.mean() - (ref[c].mean() if has_ref else 0.0))
+        own_twin = abs(betas[t_name].mean() - (ref[t_name].mean() if has_ref else 0.0)) if paired else 0.0
+        candidate = not paired or own >= own_twin
         out.append({"channel": c, "vertical": vertical_partner(c, names), "twin": t_name if paired else None,
                     "beta": beta, "se": se, "t": t, "p": p if candidate else 1.0,
                     "angle_deg": math.degrees(math.asin(max(-1.0, min(1.0, beta)))), "n_segments": int(b.size),

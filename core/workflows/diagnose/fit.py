@@ -185,25 +185,6 @@ class EffectFitter:
         return Candidate(cls.name, "fitted", n_params, params, D_all, evaluations=self.evaluations - n0,
                          signature=sigs, y_sim=y, delta_D_flagged=self.disc.D0_flagged - D_f, evidence=evidence)
 
-    def refit(self, cls, parameters: dict[str, Any], n_parameters: int) -> Candidate:
-        """Refine an effect's continuous parameters from ``parameters`` (its structural choices kept) at ``w``:
-        the alternating joint fit (docs/diagnose.md, "Add and re-identify")."""
-        fitted = list(cls.fitted)
-        spec = {"name": cls.name, **{k: v for k, v in parameters.items() if k not in fitted},
-                **{k: parameters[k] for k in fitted}}
-        transforms = [_Transform(cls, p) for p in fitted]
-        n0 = self.evaluations
-        sim = self.simulator_with(spec)
-        x0 = np.array([float(parameters[p]) for p in fitted])
-        y0 = self.simulate(sim, self._w_effect(cls.name, fitted, x0))
-        if y0 is None:
-            return Candidate(cls.name, "failed: the effect cannot be simulated at these parameters", n_parameters)
-        D, spec, x, y = self._refine(cls.name, fitted, transforms, spec, x0, self.disc(y0)[0], y0)
-        params = {k: v for k, v in spec.items() if k != "name"} | {p: float(v) for p, v in zip(fitted, x)}
-        D_all, D_f = self.disc(y)
-        return Candidate(cls.name, "fitted", n_parameters, params, D_all, evaluations=self.evaluations - n0, y_sim=y,
-                         delta_D_flagged=self.disc.D0_flagged - D_f)
-
     @staticmethod
     def _w_effect(name: str, fitted: list[str], x: np.ndarray) -> dict[str, float]:
         return {f"{name}/{p}": float(v) for p, v in zip(fitted, x)}

@@ -155,7 +155,7 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
         u, G, status = u_start, None, f"failed: {exc}"
     e = residual(u)
     if float(e @ e) > D_start:                               # never worse than where it started
-        u, e = u_start, e0
+        u, e, G, status = u_start, e0, None, "reverted to the start: the fit did not lower D"
     y = cache[tuple(np.round(u, 12))][1]
     half = _half_widths(G, disc, problem.noise_model, labels) if G is not None else {}
     w = w_of(u)
@@ -216,10 +216,9 @@ def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, m
 
     ident = config.identifiability
     adequacy = ident.model_error.adequacy
-    names = list(problem.names)
-    q = len(names)
+    names = [n for n in problem.names if n in fit.fitted]
     w_fit = fit.w
-    G = fit.jacobian[:, :q] if fit.jacobian is not None else None
+    G = fit.jacobian[:, [fit.fitted.index(n) for n in names]] if fit.jacobian is not None else None
     shape = disc.target.shape                                        # (G, K, F)
     estimates: dict[str, dict[str, float]] = {}
     shares: dict[str, dict[str, float]] = {}
@@ -240,17 +239,20 @@ def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, m
             estimates[group.name] = {n: _percent(problem, n, g_fit.w[n] - w_fit[n]) for n in free}
     spread = {n: (max(v) - min(v)) if len(v) > 1 else 0.0
               for n in names for v in [[e[n] for e in estimates.values() if n in e]]}
+    known = {n: fit.half_width_percent.get(n) is not None and G is not None for n in names}
     sd = np.array([(fit.half_width_percent.get(n) or 0.0) / 200.0 for n in names])
     bound = np.array([spread[n] / 200.0 for n in names])
     half = bias_aware_half_width(sd, bound, ident.n_sigmas)
+    # without a sampling sd (a failed fit, a parameter the data do not move) nothing is measured: not identifiable
     out = {"groups": estimates, "information_share": shares,
            "spread_percent": {n: round(spread[n], 3) for n in names},
            "bias_bound_percent": {n: round(100 * b, 3) for n, b in zip(names, bound)},
-           "half_width_percent": {n: round(100 * h, 3) for n, h in zip(names, half)},
+           "half_width_percent": {n: round(100 * h, 3) if known[n] else None for n, h in zip(names, half)},
            "max_half_width_percent": 100 * ident.model_error.max_half_width,
-           "identifiable": {n: bool(h <= ident.model_error.max_half_width) for n, h in zip(names, half)}}
+           "identifiable": {n: bool(known[n] and h <= ident.model_error.max_half_width)
+                            for n, h in zip(names, half)}}
     log("data groups: " + ", ".join(f"{n} spread {spread[n]:.1f} %, half-width {100 * h:.1f} %"
-                                    for n, h in zip(names, half)))
+                                    for n, h in zip(names, half) if known[n]))
     fit.model_error = out
     return out
 

@@ -257,9 +257,11 @@ def _suspension_text(gb: dict, ga: dict | None) -> str:
         w = ((g or {}).get("identified") or {}).get("w") or {}
         return f"{w[n]:.5g}" if n in w else "-"
 
-    rows = [[n, cell(gb, fits[0], n), ident(gb, n), cell(ga, fits[1], n), ident(ga, n)] for n in gb.get("w", {})]
+    names = list(dict.fromkeys(list(gb.get("w", {})) + list((ga or {}).get("w", {}))))
+    rows = [[n, cell(gb, fits[0], n), ident(gb, n), cell(ga, fits[1], n), ident(ga, n)] for n in names]
+    start = ("from the identification's w_opt, which the columns *identified* give (`suspid run` with the "
+             "configured objective)" if gb.get("identified") else "from the nominal values (at: nominal)")
     return ("Fitted under D (least squares on the mean residuals, ± two sampling standard deviations in % of the "
-            "admissible interval) from the identification's w_opt, which the columns *identified* give "
-            "(`suspid run` with the configured objective); errors in % of the interval where the truth is known.\n\n"
+            f"admissible interval) {start}; errors in % of the interval where the truth is known.\n\n"
             + markdown_table(["parameter", "before: fitted", "before: identified", "after: fitted",
                               "after: identified"], rows))

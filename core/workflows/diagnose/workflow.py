@@ -61,9 +61,10 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                  ) -> DiagnosisResult:
     """Diagnose ``config``: writes diagnosis.json, diagnosis.md and figures in its run folder.
 
-    Steps: identify (or take the nominal model), locate, name an effect; add it, fit it jointly with the
-    suspension (alternating), locate again and name the next one, until nothing more is named, nothing is
-    flagged, or ``diagnose.max_effects`` effects are named.
+    Steps: identify (or take the nominal model) and fit the suspension under D, locate, name an effect (a
+    tilted sensor first, from the coupling of the records, corrected in them); add it, fit it together with the
+    suspension, locate again and name the next one, until nothing more is named, nothing is flagged, or
+    ``diagnose.max_effects`` effects are named.
 
     :param source: the config file or mapping ``config`` was loaded from (with ``overrides``).
     :param fresh: start the identifications over.
@@ -94,15 +95,17 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             _fit_suspension(before, config, grid, null, log)
         _locate(before, grid, null, opts.alpha)
         current = before
+        coupling_tried = False
         for step in range(1, opts.max_effects + 1):
             tilted = [r for r in (coupling or []) if r["significant"]]
-            if tilted and "sensor-tilt" not in {n for n, _, _ in named} and _eligible(config, problem, "sensor-tilt"):
+            if tilted and not coupling_tried and _eligible(config, problem, "sensor-tilt"):
+                coupling_tried = True
                 record, stage = _tilt_from_coupling(config, named, in_data, tilted, coupling, current, step, grid,
                                                     null, out_dir, noise_path, fresh, progress, log)
                 steps.append(record)
                 rankings.append(Ranking([], {}, None, record["named"], record["reason"], []))
-                if stage is None:
-                    break
+                if stage is None:       # retracted: the catalogue is ranked at the next step, on the data as they are
+                    continue
                 current = stage
                 if not current.dmap.flagged.any():
                     break
@@ -123,6 +126,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             if rk.named is None:
                 break
             cand = next(c for c in rk.candidates if c.effect == rk.named)
+            saved = list(named)          # the joint fit refits every named effect: restored if this one is retracted
             named.append((cand.effect, dict(cand.parameters), cand.n_parameters))
             stage, record["joint_fit"] = _add_and_fit(config, named, in_data, cand, current, step, grid, null,
                                                       out_dir, noise_path, fresh, progress, log)
@@ -130,7 +134,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             if rejected is not None:   # the after-map decides: the effect is not named after all
                 log(f"step {step}: {cand.effect} retracted: {rejected}")
                 cand.reason = rejected
-                named.pop()
+                named[:] = saved
                 record.update(named=None, retracted=cand.effect, gap_retracted=stage.gap(),
                               reason=f"unexplained discrepancy: no catalogue effect fits (best: {cand.effect}, "
                                      f"rejected because {rejected})")
@@ -178,9 +182,10 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                       "integrated_db_hz_after": s.get("gap_after", {}).get("integrated_db_hz")} for s in steps],
         "unexplained": unexplained,
         "joint_fit": ("together: the suspension and the continuous parameters of every named effect fitted at once "
-                      "by least squares on D (the whitened mean residuals the map tests), from the identified "
-                      "suspension and the effects' fits at it; then the augmented model identified with the "
-                      "configured objective (after/)") if opts.reidentify
+                      "by least squares on D (the whitened mean residuals the map tests), from the "
+                      + ("fitted identified suspension and the effects' fits at it; then the augmented model "
+                         "identified with the configured objective (after/)" if opts.at == "identified" else
+                         "nominal suspension and the effects' fits at it")) if opts.reidentify
         else "none: reidentify is false, the effects are fitted at the base parameters",
         "gap_before": before.gap(),
         "gap_after": after.gap() if after is not None else None,
@@ -192,7 +197,9 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                          "standardised bin means (shape test), largest standardised bin mean (peak test); "
                          "p = min(1, 3 min(p_mean, p_shape, p_peak))",
             "null": "mean: N(0, kappa_c^2 s_c^2), s_c from the noise covariance; shape: a_c chi2(nu_c); "
-                    "peak: Bonferroni over the band's bins; kappa, a_c, nu_c from a parametric bootstrap",
+                    "peak: Bonferroni over the band's bins; kappa, a_c, nu_c from a parametric bootstrap; each "
+                    "test against a discrepancy of min_db (|mean| <= min_db), the shape test on the excesses",
+            "min_db": opts.min_db,
             "noise_mean_by_speed": problem.noise_model.speed_coverage(grid.speeds),
             "n_bootstrap": null.n_bootstrap, "kappa_median": float(np.median(null.kappa)),
             "kappa_raw_median": None if null.kappa_raw is None else float(np.median(null.kappa_raw)),
@@ -262,6 +269,7 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
                               "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
                               "ranking": [], "local_model": None}
     log(f"step {step}: {reason}")
+    saved = list(named)
     named.append(("sensor-tilt", params, 2))
     in_data["sensor-tilt"] = [{"channel": r["channel"], "tilt_deg": float(r["angle_deg"]), "vertical": r["vertical"]}
                               for r in tilted]
@@ -275,7 +283,7 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
     new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
     n1 = int(stage.dmap.flagged.sum())
     if new > max(1.0, opts.max_new_flagged * n0):
-        named.pop()
+        named[:] = saved
         in_data.pop("sensor-tilt")
         record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
                       reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
