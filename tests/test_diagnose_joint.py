@@ -194,13 +194,14 @@ def test_corrected_problem_keeps_everything_but_the_measurements(tmp_path):
     from suspid.config import load_config
     from suspid.infra.ledger import Ledger
     from suspid.workflows.diagnose.workflow import _corrected_problem
-    from suspid.workflows.problem import build_problem
+    from suspid.workflows.problem import build_problem, read_measurements
 
     path = HE.prepare(tmp_path / "tilt", HE.CASES["tilt"].hidden, seed=3, n_segments=6, n_reference=8)
     cfg = load_config(path)
     problem = build_problem(cfg, Ledger(tmp_path / "a.sqlite"))
+    _, records = read_measurements(cfg.data.measurements, cfg.data.track_file, problem.channels)
     tilt = {"sensor-tilt": [{"channel": "bogie_front_lateral", "tilt_deg": 6.0, "vertical": "bogie_front_vertical"}]}
-    fixed = _corrected_problem(cfg, problem, tilt)
+    fixed = _corrected_problem(cfg, problem, records, tilt)
     assert fixed.segments == problem.segments and fixed.b is problem.b and fixed.noise_model is problem.noise_model
     assert fixed.data_identity != problem.data_identity
     k = problem.channels.index("bogie_front_lateral")

@@ -37,18 +37,17 @@ def vertical_partner(channel: str, channels: Sequence[str]) -> str | None:
     return other if other in channels else None
 
 
-def untilt(records: Sequence[Response], corrections: Sequence, channels: Sequence[str], *,
-           error: Callable[[str, str], Exception] = lambda message, key: DataError(f"{key}: {message}")
-           ) -> list[Response]:
-    """``records`` with each listed lateral channel rotated back by its tilt.
+def resolve(corrections: Sequence, channels: Sequence[str], *,
+            error: Callable[[str, str], Exception] = lambda message, key: DataError(f"{key}: {message}")
+            ) -> list[tuple[int, int, float]]:
+    """Each correction as ``(row of the lateral channel, row of its vertical, tilt in rad)``; what ``suspid
+    validate`` checks before anything is simulated.
 
     :param corrections: items with ``channel``, ``tilt_deg`` and ``vertical`` (None: the partner by name).
     :param channels: the channel order of the records' ``accelerations`` rows.
     :param error: makes the exception for a bad item from a message and its key (``data.corrections.<i>...``).
     :raises: ``error(...)`` for a channel that is not in the records or has no vertical partner.
     """
-    if not corrections:
-        return list(records)
     names = list(channels)
     rows = []
     for i, c in enumerate(corrections):
@@ -60,6 +59,16 @@ def untilt(records: Sequence[Response], corrections: Sequence, channels: Sequenc
             raise error(f"channel '{c.channel}' needs the vertical channel at its point (give 'vertical:'; "
                         f"channels: {', '.join(names)})", f"data.corrections.{i}.vertical")
         rows.append((names.index(c.channel), names.index(vertical), math.radians(c.tilt_deg)))
+    return rows
+
+
+def untilt(records: Sequence[Response], corrections: Sequence, channels: Sequence[str], *,
+           error: Callable[[str, str], Exception] = lambda message, key: DataError(f"{key}: {message}")
+           ) -> list[Response]:
+    """``records`` with each listed lateral channel rotated back by its tilt (arguments as :func:`resolve`)."""
+    rows = resolve(corrections, channels, error=error)
+    if not rows:
+        return list(records)
     out = []
     for r in records:
         acc = np.array(r.accelerations, dtype=float, copy=True)

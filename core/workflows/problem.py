@@ -26,6 +26,7 @@ import numpy as np
 
 from suspid import registry
 from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
+from suspid.data.corrections import resolve as resolve_corrections
 from suspid.data.corrections import untilt
 from suspid.data.experiment import apply_model_error
 from suspid.data.files import read_accelerations_records, read_track
@@ -196,7 +197,7 @@ def validate_data(config: Config) -> int:
         raise config.error("measured data need data.measurements", "data.measurements")
     segments, responses = read_measurements(config.data.measurements, config.data.track_file,
                                             simulator.channels(), strict=config.data.strict)
-    untilt(responses[:1], config.data.corrections, simulator.channels(), error=config.error)
+    resolve_corrections(config.data.corrections, simulator.channels(), error=config.error)
     _, freqs = compute_spectra(responses, config.spectra)
     if config.noise.reference is not None:
         ref = config.noise.reference

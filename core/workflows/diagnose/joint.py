@@ -66,6 +66,7 @@ class JointFit:
     fitted: list[str] = field(default_factory=list)
     jacobian: np.ndarray | None = None                  # (n_bins, n_fitted) of the whitened residuals, unit coords
     model_error: dict[str, Any] | None = None            # the data-group check (:func:`check_groups`)
+    simulator: Any = field(default=None, repr=False)     # the model with the effects (reused by the group fits)
 
     @property
     def identifiable(self) -> dict[str, bool] | None:
@@ -84,7 +85,7 @@ class JointFit:
 
 def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, float],
                 effects: list[tuple[str, dict[str, Any]]] = (), fixed: set[str] = frozenset(), *,
-                max_evaluations: int = 120, suspension: list[str] | None = None,
+                max_evaluations: int = 120, suspension: list[str] | None = None, simulator=None,
                 log: Callable[[str], None] = lambda s: None) -> JointFit:
     """Fit the identified suspension parameters and the continuous parameters of ``effects`` (except those
     named in ``fixed``, kept as given) by least squares on D, from ``w_start`` and the effects' values.
@@ -97,12 +98,10 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
     :param max_evaluations: simulator calls at most (the Jacobians' included).
     :param suspension: the suspension parameters fitted (default: all identified ones; the others stay at
         ``w_start``).
+    :param simulator: the config's simulator with ``effects`` already built (an earlier fit's ``simulator``).
     """
     effects = [(n, dict(p)) for n, p in effects]
-    options = dict(config.simulator.options)
-    options["effects"] = list(options.get("effects") or []) + [{"name": n, **p} for n, p in effects]
-    sim_cls = type(problem.simulator)
-    sim = sim_cls(**validate_options(sim_cls, options, file=str(config.source_file), key="simulator.options"))
+    sim = simulator if simulator is not None else _with_effects(config, problem, effects)
     names = list(problem.names) if suspension is None else [n for n in problem.names if n in suspension]
     index = [list(problem.names).index(n) for n in names]
     free: list[tuple[str, str, _Transform]] = []          # (effect, parameter, transform) of the fitted effects
@@ -161,12 +160,17 @@ def fit_jointly(config: Config, problem, disc: Discrepancy, w_start: dict[str, f
     w = w_of(u)
     fitted_effects = [(n, {**p, **{q_: w[f"{n}/{q_}"] for nn, q_, _ in free if nn == n}}) for n, p in effects]
     log(f"joint fit of {', '.join(labels)}: D {D_start:.1f} → {float(e @ e):.1f} ({count[0]} simulations)")
+    w_first = w_of(u_start)
     return JointFit({k: w[k] for k in problem.names}, fitted_effects, y, float(e @ e), D_start, count[0], half,
-                    {lab: float(v) for lab, v in zip(labels, _si(w_of(u_start), labels))}, status, labels, G)
+                    {lab: float(w_first[lab]) for lab in labels}, status, labels, G, simulator=sim)
 
 
-def _si(w: dict[str, float], labels: list[str]) -> list[float]:
-    return [w[k] for k in labels]
+def _with_effects(config: Config, problem, effects: list[tuple[str, dict[str, Any]]]):
+    """The config's simulator (the problem's class) with ``effects`` ``[(name, parameters)]`` added."""
+    options = dict(config.simulator.options)
+    options["effects"] = list(options.get("effects") or []) + [{"name": n, **p} for n, p in effects]
+    sim_cls = type(problem.simulator)
+    return sim_cls(**validate_options(sim_cls, options, file=str(config.source_file), key="simulator.options"))
 
 
 def _half_widths(G: np.ndarray, disc: Discrepancy, noise_model, labels: list[str]) -> dict[str, float]:
@@ -235,7 +239,7 @@ def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, m
             sub = copy.copy(disc)
             sub.scale = np.where(mask.reshape(shape), disc.scale, np.inf)
             g_fit = fit_jointly(config, problem, sub, w_fit, fit.effects, {n for n, _ in fit.effects},
-                                max_evaluations=max_evaluations, suspension=free)
+                                max_evaluations=max_evaluations, suspension=free, simulator=fit.simulator)
             estimates[group.name] = {n: _percent(problem, n, g_fit.w[n] - w_fit[n]) for n in free}
     spread = {n: (max(v) - min(v)) if len(v) > 1 else 0.0
               for n in names for v in [[e[n] for e in estimates.values() if n in e]]}

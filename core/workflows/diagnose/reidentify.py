@@ -16,6 +16,7 @@ from suspid.config import Config
 from suspid.infra.files import canonical, write_text
 from suspid.infra.lock import open_run_dir
 from suspid.sections import OutputSection
+from suspid.workflows.analysis import errors_percent
 from suspid.workflows.identify import run
 from suspid.workflows.problem import build_problem
 from suspid.workflows.tasks import simulate_spectra
@@ -44,7 +45,7 @@ class Stage:
         out["w"] = {k: float(v) for k, v in self.w.items()}
         w_ref = getattr(self.problem, "w_ref", None)
         if w_ref and self.w:
-            out["errors_percent"] = errors_percent(self.problem, self.w)
+            out["errors_percent"] = errors_percent(self.problem, np.array([self.w[n] for n in self.problem.names]))
             out["w_ref"] = {k: float(w_ref[k]) for k in self.w if k in w_ref}
         if self.fit is not None:
             out["suspension_fit"] = self.fit.as_dict()
@@ -52,15 +53,6 @@ class Stage:
             out["identified"] = {"w": self.result.get("w_opt"), "errors_percent": self.result.get("errors_percent"),
                                  "trustworthy": self.result.get("trustworthy")}
         return out
-
-
-def errors_percent(problem, w: dict[str, float]) -> dict[str, float]:
-    """``|w - w_ref|`` in % of each admissible interval (a numerical experiment's measure)."""
-    out = {}
-    for n, (lo, hi) in zip(problem.names, problem.bounds):
-        if n in w and n in problem.w_ref:
-            out[n] = 100.0 * abs(float(w[n]) - float(problem.w_ref[n])) / (float(hi) - float(lo))
-    return out
 
 
 def _with_output(config: Config, run_dir: Path) -> Config:

@@ -85,7 +85,7 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     named: list[tuple[str, dict[str, Any], int]] = []
     in_data: dict[str, list[dict[str, Any]]] = {}   # effects corrected in the measured records: data.corrections
     steps: list[dict[str, Any]] = []
-    coupling = _coupling(config, problem, log)
+    coupling, records = _coupling(config, problem, log)
     rankings: list[Ranking] = []
     rank_s = 0.0
     with single_blas_thread():     # small products: OpenBLAS threads only contend (suspid.infra.threads)
@@ -100,8 +100,8 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             tilted = [r for r in (coupling or []) if r["significant"]]
             if tilted and not coupling_tried and _eligible(config, problem, "sensor-tilt"):
                 coupling_tried = True
-                record, stage = _tilt_from_coupling(config, named, in_data, tilted, coupling, current, step, grid,
-                                                    null, out_dir, noise_path, fresh, progress, log)
+                record, stage = _tilt_from_coupling(config, named, in_data, tilted, coupling, records, current, step,
+                                                    grid, null, out_dir, noise_path, fresh, progress, log)
                 steps.append(record)
                 rankings.append(Ranking([], {}, None, record["named"], record["reason"], []))
                 if stage is None:       # retracted: the catalogue is ranked at the next step, on the data as they are
@@ -224,10 +224,11 @@ def _eligible(config: Config, problem, name: str) -> bool:
     return name in names and (supported is None or name in supported)
 
 
-def _coupling(config: Config, problem, log: Callable[[str], None]) -> list[dict[str, Any]] | None:
-    """The coupling test on the measured records (None for a numerical experiment: its data are spectra)."""
+def _coupling(config: Config, problem, log: Callable[[str], None]) -> tuple[list[dict[str, Any]] | None, list]:
+    """The coupling test on the measured records, and the records (with ``data.corrections`` applied); None and
+    no records for a numerical experiment: its data are spectra."""
     if config.data.source != "measured" or config.data.measurements is None:
-        return None
+        return None, []
     _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
     records = untilt(records, config.data.corrections, problem.channels, error=config.error)
     opts = config.diagnose
@@ -241,11 +242,12 @@ def _coupling(config: Config, problem, log: Callable[[str], None]) -> list[dict[
     for r in rows:
         log(f"coupling {r['channel']} <- {r['vertical']}: beta {r['beta']:.4f} ± {r['se']:.4f} "
             f"(t {r['t']:.1f}){' significant' if r['significant'] else ''}")
-    return rows
+    return rows, records
 
 
 def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str, Any]]],
-                        tilted: list[dict[str, Any]], coupling: list[dict[str, Any]], current: Stage, step: int,
+                        tilted: list[dict[str, Any]], coupling: list[dict[str, Any]], records: list,
+                        current: Stage, step: int,
                         grid: CellGrid, null: NullCalibration, out_dir: Path, noise_path: Path, fresh: bool,
                         progress: bool, log: Callable[[str], None]) -> tuple[dict[str, Any], Stage | None]:
     """Name ``sensor-tilt`` from a significant coupling and correct it in the measured records.
@@ -273,7 +275,7 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
     named.append(("sensor-tilt", params, 2))
     in_data["sensor-tilt"] = [{"channel": r["channel"], "tilt_deg": float(r["angle_deg"]), "vertical": r["vertical"]}
                               for r in tilted]
-    corrected = Stage(current.label, current.config, _corrected_problem(config, current.problem, in_data),
+    corrected = Stage(current.label, current.config, _corrected_problem(config, current.problem, records, in_data),
                       current.w, current.y_sim, current.result, fit=current.fit)
     _locate(corrected, grid, null, opts.alpha)
     stage, record["joint_fit"] = _add_and_fit(config, named, in_data, None, corrected, step, grid, null, out_dir,
@@ -306,13 +308,12 @@ def _model_effects(named, in_data) -> list[tuple[str, dict[str, Any]]]:
     return [(n, p) for n, p, _ in named if n not in in_data]
 
 
-def _corrected_problem(config: Config, problem, in_data: dict[str, list[dict[str, Any]]]):
-    """``problem`` with y_mes from the measured records corrected by ``config.data.corrections`` and the
-    diagnosis's own corrections ``in_data``."""
+def _corrected_problem(config: Config, problem, records: list, in_data: dict[str, list[dict[str, Any]]]):
+    """``problem`` with y_mes from ``records`` (the measured records as the run read them, ``data.corrections``
+    applied) corrected by the diagnosis's own corrections ``in_data``."""
     from suspid.sections import SensorCorrection
 
-    items = list(config.data.corrections) + [SensorCorrection(**c) for c in _corrections(in_data)]
-    _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels)
+    items = [SensorCorrection(**c) for c in _corrections(in_data)]
     y_mes, freqs = compute_spectra(untilt(records, items, problem.channels, error=config.error), config.spectra)
     if y_mes.shape != problem.y_mes.shape or not np.allclose(freqs, problem.freqs):
         raise RuntimeError("corrected records give other spectra than the run's")   # same files: cannot happen
