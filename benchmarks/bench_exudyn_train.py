@@ -182,7 +182,7 @@ def dynamic_wheel_load(vehicle: str, segments, fs: float = 400.0) -> list[float]
         U = spectra.get(seg, fs, n_fft, 20.0)
         w = 2 * np.pi * np.arange(n_fft // 2 + 1) * fs / n_fft
         Z = np.zeros(w.size, dtype=complex)
-        for k, wk in enumerate(w):
+        for k, wk in enumerate(w[1:], start=1):   # the static line (k = 0) is left out: the std removes it
             rhs = sum(lin.G[j] @ U[:, k] * np.exp(1j * wk * lin.wheelset_x[j] / v) for j in range(lin.G.shape[0]))
             z = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)[rail]
             Z[k] = (p["k_track"] + 1j * wk * p["c_track"] - wk ** 2 * p["m_track"]) * z

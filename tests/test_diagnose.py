@@ -241,8 +241,11 @@ CASES = {
                       ("bogie_front_vertical", {"bogie_front_vertical", "carbody_front_vertical"},
                        300 * KMH / (math.pi * 0.92))),
     "yaw-damper-series-stiffness": ({"stiffness_n_per_m": 5e6}, 5e6, {},
-                                    # the Maxwell yaw dampers join carbody and bogies: any lateral channel
-                                    ("bogie_front_lateral", LATERAL, None)),
+                                    # the Maxwell yaw dampers join carbody and bogies: any lateral channel, or
+                                    # a carbody end's vertical one (they also hold the carbody's longitudinal
+                                    # mode on the traction rods and rolling wheelsets, which pitches it)
+                                    ("bogie_front_lateral",
+                                     LATERAL | {"carbody_front_vertical", "carbody_rear_vertical"}, None)),
     "sensor-tilt": ({"angle_deg": 10.0, "channels": ["bogie_front_lateral"]}, 10.0,    # shows most above 30 Hz
                     {"fs": 200.0, "f_max": 80.0, "n_freqs": 320},
                     ("bogie_front_lateral", {"bogie_front_lateral"}, None)),

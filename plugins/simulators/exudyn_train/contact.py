@@ -15,6 +15,7 @@ from suspid.interfaces import TrackSegment
 
 from . import parameters as P
 from .layout import layout_of
+from .modes import acting_positions
 from .solvers import InputSpectra, fft_length, output_samples
 
 
@@ -35,10 +36,14 @@ def coordinate_response(simulator, segment: TrackSegment, w=None, fs: float | No
     U = InputSpectra().get(segment, fs, n_fft, 20.0)
     omega = 2 * np.pi * np.arange(n_fft // 2 + 1) * fs / n_fft
     delay = np.exp(1j * np.outer(lin.wheelset_x, omega) / v)            # (n_wheelsets, n_freqs)
-    Q = np.empty((lin.M.shape[0], omega.size), dtype=complex)
+    Q = np.zeros((lin.M.shape[0], omega.size), dtype=complex)
+    acting = acting_positions(lin.K)     # static line: a rolling wheelset's spin angle is free (left at 0)
     for k, wk in enumerate(omega):
         rhs = np.einsum("jnc,cj->n", lin.G, U[:, k][:, None] * delay[:, k][None, :])
-        Q[:, k] = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)
+        if wk == 0.0:
+            Q[acting, k] = np.linalg.solve(lin.K[np.ix_(acting, acting)], rhs[acting])
+        else:
+            Q[:, k] = np.linalg.solve(lin.K - wk ** 2 * lin.M + 1j * wk * lin.D, rhs)
     cut = slice(int(settle_s * fs), n_t - int(settle_s * fs))
     q = np.fft.irfft(Q, n=n_fft, axis=1)[:, :n_t][:, cut]
     r = np.fft.irfft(U[None, :, :] * delay[:, None, :], n=n_fft, axis=2)[:, :, :n_t][:, :, cut]
@@ -50,7 +55,9 @@ def creep_usage(simulator, segment: TrackSegment, friction: float, w=None) -> li
 
     Per wheel: lateral creep force F_y = -f22 (y'/v - psi), longitudinal
     F_x = f11 (l0 psi'/v + lambda (y - Y) / r0) (left wheel; the right one
-    the opposite), Kalker's f11, f22 for the wheelset's own static load;
+    the opposite) plus, with rolling wheelsets, -f11 (x' - r0 pitch') / v on
+    both wheels (the larger of the two wheels counts), Kalker's f11, f22 for
+    the wheelset's own static load;
     u = |F| / (mu N) is the argument of the Shen-Hedrick-Elkins saturation
     (eps = 1 - u/3 + u^2/27: the creep force falls below the linear one
     from the smallest u).
@@ -71,7 +78,12 @@ def creep_usage(simulator, segment: TrackSegment, friction: float, w=None) -> li
         f11, f22 = P.creep_coefficients(p, load)
         fy = -f22 * (dy / v - psi)
         fx = f11 * (p["l0"] * dpsi / v + p["conicity"] / p["r0"] * (y - r[j, 1]))
+        if (name, "longitudinal") in lin.labels:      # rolling wheelsets: the common longitudinal creep
+            x, spin = q[lin.labels.index((name, "longitudinal"))], q[lin.labels.index((name, "pitch"))]
+            fx_common = -f11 * (np.gradient(x, 1 / fs) - p["r0"] * np.gradient(spin, 1 / fs)) / v
+            fx = np.maximum(np.abs(fx_common + fx), np.abs(fx_common - fx))
         u = np.hypot(fx, fy) / (friction * load)
-        out.append({"wheel_load_n": load, "fx_rms_n": float(np.std(fx)), "fy_rms_n": float(np.std(fy)),
+        out.append({"wheel_load_n": load, "fx_rms_n": float(np.sqrt(np.mean(fx ** 2))),
+                    "fy_rms_n": float(np.std(fy)),
                     "u_rms": float(np.sqrt(np.mean(u ** 2))), "u_max": float(np.max(u))})
     return out

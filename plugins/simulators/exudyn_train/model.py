@@ -17,16 +17,25 @@ between adjacent carbodies) and 2 (n + 1) wheelsets, with an articulation
 (springs and dampers k_art, c_art in x, y, z at the pivot, height h_art) and
 two longitudinal inter-car dampers c_ic between adjacent carbody ends. The
 counts below are those of one car. Degrees of freedom: all six motions of
-carbody and bogie frames (the longitudinal ones held only by the traction
-rods, the yaw dampers and the primary and secondary longitudinal springs),
-lateral, vertical, roll and yaw of the wheelsets (34 rigid-body coordinates),
-plus one internal coordinate per yaw damper (4) and the two rail masses under
-each wheelset (8): 46 free coordinates. The longitudinal coordinate and the
-pitch (spin perturbation) of the wheelsets are held by stiff restraint
-springs to ground (natural frequency :data:`RESTRAINT_HZ`, :data:`RESTRAINED`;
-the car runs at constant speed in a train) in the time solver; the linear
-analysis treats them as fixed (rows and columns removed), a difference of
-order suspension stiffness / restraint stiffness, below 1e-4.
+carbody, bogie frames and wheelsets (the carbody and bogie frames held
+longitudinally by the traction rods, the yaw dampers and the primary and
+secondary longitudinal springs; the wheelsets roll: their longitudinal motion
+and spin are held only by the longitudinal creep forces), 42 rigid-body
+coordinates, plus one internal coordinate per yaw damper (4), per secondary
+vertical damper (4) and the two rail masses under each wheelset (8). With
+rolling wheelsets the car's bodies and wheelsets can move together
+longitudinally, the wheelsets rolling without creep: a rigid-body mode, held
+here by a soft tie of each carbody to the train's mean motion
+(:data:`TIE_HZ`, :data:`TIE_DAMPING`; the rest of the train and its traction
+control). A wheelset's spin *angle* acts nowhere (only its rate enters the
+creepages): the linear analyses leave it out of the state
+(:func:`.modes.acting_positions`). This carbody longitudinal mode on the
+traction rods, coupled with the bogies' pitch and the wheelsets' rolling,
+sits near 9.5 Hz at 300 km/h, next to a first carbody bending; with the
+contact option ``wheelset_rolling: false`` the wheelsets' longitudinal motion
+and spin are held by stiff springs to ground (natural frequency
+:data:`RESTRAINT_HZ`, :data:`RESTRAINED`; the linear analysis treats them as
+fixed), which puts that mode near 5 Hz.
 
 Ground element: gravity (-m g on each body's vertical coordinate) and the
 restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
@@ -67,7 +76,10 @@ the wheelset's coordinates and its odometer (below), with
 - linearised Kalker creep with equivalent conicity lambda (creepages from the
   wheelset's lateral velocity, yaw angle, yaw rate and rolling-radius
   difference 2 lambda (y - Y)): F_y = -2 f22 (dy/dt / v - yaw),
-  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0), with Kalker's
+  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0), and (rolling
+  wheelsets) the longitudinal creepage common to both wheels,
+  F_x = -2 f11 (dx/dt - r0 dpitch/dt) / v with the moment -r0 F_x on the
+  spin, with Kalker's
   f11, f22 for the static wheel load (:func:`.parameters.creep_coefficients`);
 - gravitational stiffness W lambda / l0 on (y - Y).
 
@@ -147,8 +159,15 @@ RESTRAINT_HZ = 300.0
 """Natural frequency (Hz) of the stiff springs that hold the wheelsets' longitudinal and pitch coordinates."""
 
 RESTRAINED = {"wheelset": (0, 4)}
-"""Body kind -> coordinates held by restraint springs (not degrees of freedom): the wheelset's
-longitudinal motion (held by the longitudinal creep forces and the train) and its spin perturbation."""
+"""Body kind -> coordinates held by restraint springs (not degrees of freedom) when the wheelsets do not roll
+(contact option ``wheelset_rolling: false``): the wheelset's longitudinal motion and its spin perturbation."""
+
+TIE_HZ = 0.2
+"""Natural frequency (Hz) of the soft longitudinal tie of each carbody to the train's mean motion (rolling
+wheelsets): the rest of the train and its traction control, not modelled, keep the car at its mean speed;
+the tie removes the free rigid-body mode of the car from the linear model, well below the spectra's band."""
+TIE_DAMPING = 0.7
+"""Damping ratio of that tie."""
 
 
 BODIES = SINGLE.bodies
@@ -301,8 +320,10 @@ class TrainModel:
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
                  features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True,
-                 layout: Layout = SINGLE) -> None:
+                 layout: Layout = SINGLE, rolling: bool = True) -> None:
         self.features = features or TimeFeatures()
+        self.rolling = bool(rolling)
+        self.restrained = {} if self.rolling else dict(RESTRAINED)
         self.layout = layout
         self.bodies = layout.bodies
         self.n_wheelsets = layout.n_wheelsets
@@ -344,26 +365,39 @@ class TrainModel:
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
                         lambda q, k=kind: (q[f"I_{k}_x"], q[f"I_{k}_y"], q[f"I_{k}_z"], 0.0, 0.0, 0.0))
 
-        # gravity, and restraints of the coordinates that are not degrees of freedom (wheelset
-        # longitudinal motion and pitch, RESTRAINED: stiff springs to ground), gathered in one exudyn
+        # gravity, the restraints of the coordinates that are not degrees of freedom (wheelsets that do not
+        # roll: longitudinal motion and pitch held by stiff springs to ground) and the soft longitudinal tie
+        # of each carbody to the train's mean motion (rolling wheelsets: TIE_HZ), gathered in one exudyn
         # GenericODE2 "ground" element: gravity -m g on each body's vertical coordinate (the nodes sit at
-        # the centres of mass) and a sparse diagonal stiffness. One item instead of 7 loads and 11
+        # the centres of mass), a sparse diagonal stiffness and damping. One item instead of 7 loads and 11
         # connectors: exudyn's cost per item and step dominates this small model.
         n_r = 6 * len(self.bodies)
+        kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
         restrained = [(6 * i + k, name, k) for i, name in enumerate(self.bodies)
-                      for k in RESTRAINED.get(name.split("_")[0], ())]
+                      for k in self.restrained.get(name.split("_")[0], ())]
+        tied = [6 * self.bodies.index(c) for c in self.layout.carbodies] if self.rolling else []
         self.restraint = mbs.AddObject(ii.ObjectGenericODE2(
             nodeNumbers=[self.nodes[b] for b in self.bodies], massMatrix=_sparse(n_r, []),
-            stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i, _, _ in restrained]), dampingMatrix=_sparse(n_r, []),
-            forceVector=[0.0] * n_r))
+            stiffnessMatrix=_sparse(n_r, [(i, i, 1.0) for i in [r[0] for r in restrained] + tied]),
+            dampingMatrix=_sparse(n_r, [(i, i, 1.0) for i in tied]), forceVector=[0.0] * n_r))
+
+        def tie_mass(q):
+            """The vehicle's mass per carbody, kg: each carbody's tie holds its share of the whole car."""
+            return sum(q[f"m_{kind(b)}"] for b in self.bodies) / len(self.layout.carbodies)
 
         def restraint_stiffness(q):
             w2 = (2 * math.pi * RESTRAINT_HZ) ** 2
-            kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
-            return tuple((i, i, w2 * (q[f"m_{kind(b)}"] if k == 0 else q[f"I_{kind(b)}_y"])) for i, b, k in restrained)
+            out = [(i, i, w2 * (q[f"m_{kind(b)}"] if k == 0 else q[f"I_{kind(b)}_y"])) for i, b, k in restrained]
+            return tuple(out + [(i, i, (2 * math.pi * TIE_HZ) ** 2 * tie_mass(q)) for i in tied])
+
+        def restraint_damping(q):
+            return tuple((i, i, 2.0 * TIE_DAMPING * 2 * math.pi * TIE_HZ * tie_mass(q)) for i in tied)
 
         self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "stiffnessMatrix", _sparse(n_r, v)),
                     restraint_stiffness)
+        if tied:
+            self._track(lambda v, o=self.restraint: mbs.SetObjectParameter(o, "dampingMatrix", _sparse(n_r, v)),
+                        restraint_damping)
 
         def gravity(q):
             kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
@@ -692,6 +726,10 @@ class TrainModel:
             K[5, 1] = 2.0 * f11 * l0 * lam / r0
             D[1, 1] = 2.0 * f22 / speed
             D[5, 5] = 2.0 * f11 * l0 ** 2 / speed
+            if self.rolling:
+                # longitudinal creepage (x' - r0 pitch') / v, the same on both wheels: force -2 f11 on x,
+                # its moment -r0 F_x on the spin (contact points r0 below the axle)
+                D[np.ix_((0, 4), (0, 4))] = 2.0 * f11 / speed * np.array([[1.0, -r0], [-r0, r0 ** 2]])
         return K, D
 
     def contact_matrices(self, p: dict[str, float], speed: float, j: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -900,16 +938,21 @@ class TrainModel:
             a_long = c["l0"] * q_t[5] / v + c["lam_r0"] * (q[1] - Y)  # minus the left wheel's long. creepage
             fy_wheel = -c["f22"] * nu_y                               # lateral creep force per wheel
             fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
+            # rolling wheelsets: the common longitudinal creepage (x' - r0 pitch') / v of both wheels
+            fx_wheel = -c["f11"] * (q_t[0] - c["r0"] * q_t[4]) / v if self.rolling else 0.0
             if feat.saturation:
                 # friction limit mu N with the static wheel load N (the dynamic wheel load needs the rail
-                # deflection, which this element does not see)
+                # deflection, which this element does not see); the reduction factor of the yaw and lateral
+                # creep applies to the common longitudinal creep too
                 eps = _saturation(esym, fx_left, fy_wheel, c["mu"] * c["n0"])
                 fy = fy + 2.0 * eps * fy_wheel
                 mz = -2.0 * c["l0"] * eps * fx_left
+                fx = 2.0 * eps * fx_wheel
             else:
                 fy = fy + 2.0 * fy_wheel
                 mz = -2.0 * c["l0"] * fx_left
-            return [0.0, fy, fz, mx, 0.0, mz, 0.0]
+                fx = 2.0 * fx_wheel
+            return [fx, fy, fz, mx, -c["r0"] * fx, mz, 0.0]
 
         return force
 
@@ -928,6 +971,7 @@ class TrainModel:
             "f22": lambda q, j: P.creep_coefficients(q, load(q, j))[1],
             "yaw_y": lambda q, j: 2.0 * P.creep_coefficients(q, load(q, j))[0] * q["l0"] * q["conicity"] / q["r0"],
             "l0": lambda q, j: q["l0"],
+            "r0": lambda q, j: q["r0"],
             "lam_r0": lambda q, j: q["conicity"] / q["r0"],
             "n0": lambda q, j: load(q, j),
             "mu": lambda q, j: self.features.friction,
@@ -977,7 +1021,7 @@ class TrainModel:
             start = mbs.GetNodeODE2Index(self.nodes[name])
             self.node_index[name] = start
             for k, motion in enumerate(COORDINATES):
-                if k in RESTRAINED.get(name.split("_")[0], ()):
+                if k in self.restrained.get(name.split("_")[0], ()):
                     continue
                 free.append(start + k)
                 labels.append((name, motion))

@@ -73,14 +73,39 @@ class Mode:
         return asdict(self)
 
 
-def state_matrix(linear: LinearSystem) -> np.ndarray:
-    """A (2n x 2n) of x' = A x with x = (q, q')."""
-    n = linear.M.shape[0]
-    Minv = np.linalg.inv(linear.M)
-    A = np.zeros((2 * n, 2 * n))
-    A[:n, n:] = np.eye(n)
-    A[n:, :n] = -Minv @ linear.K
-    A[n:, n:] = -Minv @ linear.D
+def acting_positions(K: np.ndarray, *outputs: np.ndarray | None, rtol: float = 1e-12) -> np.ndarray:
+    """Indices of the coordinates whose displacement acts: a nonzero column of K or of an output matrix.
+
+    The others are cyclic: only their rate enters the equations (a rolling
+    wheelset's spin angle: the creepages read the spin rate). Their
+    displacement is a neutral direction (an eigenvalue 0 that neither decays
+    nor grows and moves nothing); the state x = (q_acting, q') leaves it out.
+
+    :param K: ``(n, n)`` stiffness; ``outputs``: ``(n_out, n)`` matrices applied to q (or None).
+    """
+    acting = np.any(np.abs(K) > rtol * max(float(np.max(np.abs(K))), 1e-300), axis=0)
+    for C in outputs:
+        if C is not None:
+            acting |= np.any(C != 0.0, axis=0)
+    return np.flatnonzero(acting)
+
+
+def state_matrix(linear: LinearSystem | None = None, *, M: np.ndarray | None = None, K: np.ndarray | None = None,
+                 D: np.ndarray | None = None, positions: np.ndarray | None = None) -> np.ndarray:
+    """A of x' = A x with x = (q[positions], q'), ``(p + n, p + n)``; positions default to
+    :func:`acting_positions` of K and of the sensors' matrices (all coordinates when none is cyclic)."""
+    if linear is not None:
+        M, K, D = linear.M, linear.K, linear.D
+        if positions is None:
+            positions = acting_positions(K, linear.C, linear.C_disp)
+    n = M.shape[0]
+    p = np.arange(n) if positions is None else np.asarray(positions)
+    m = p.size
+    Minv = np.linalg.inv(M)
+    A = np.zeros((m + n, m + n))
+    A[:m, m:] = np.eye(n)[p]
+    A[m:, :m] = -Minv @ K[:, p]
+    A[m:, m:] = -Minv @ D
     return A
 
 
@@ -104,6 +129,7 @@ def compute_modes(linear: LinearSystem) -> list[Mode]:
     n = linear.M.shape[0]
     lam, V = np.linalg.eig(state_matrix(linear))
     mass = np.abs(np.diag(linear.M))
+    V = V[-n:]          # the velocities q' = lambda phi: the kinetic energy's split is that of phi
     keep = []
     for i, l in enumerate(lam):
         if l.imag < -1e-9 * max(1.0, abs(l)):
@@ -112,7 +138,7 @@ def compute_modes(linear: LinearSystem) -> list[Mode]:
     modes = []
     for i in keep:
         l = lam[i]
-        phi = V[:n, i]
+        phi = V[:, i]
         energy = mass * np.abs(phi) ** 2
         total = energy.sum()
         energy = energy / total if total > 0 else energy
@@ -179,12 +205,8 @@ class SpeedDependentSystem:
 
     def max_growth(self, speed: float) -> float:
         """Largest real part / |eigenvalue| at ``speed`` (m/s): > 0 unstable, the least damping ratio negated."""
-        n = self.M.shape[0]
-        Minv = np.linalg.inv(self.M)
-        A = np.zeros((2 * n, 2 * n))
-        A[:n, n:] = np.eye(n)
-        A[n:, :n] = -Minv @ self.K
-        A[n:, n:] = -Minv @ (self.D_inf + self.D_creep / speed)
+        A = state_matrix(M=self.M, K=self.K, D=self.D_inf + self.D_creep / speed,
+                         positions=acting_positions(self.K))
         lam = np.linalg.eigvals(A)
         return float(np.max(lam.real / np.maximum(np.abs(lam), 1e-12)))
 

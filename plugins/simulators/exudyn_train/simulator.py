@@ -54,6 +54,9 @@ class ContactOptions(BaseModel):
     bump_gap_m: PositiveFloat = Field(default=0.025, description="free lateral play before the bump stop, m "
                                       "(Manchester Benchmark Vehicle 1, Iwnicki 1998)")
     bump_stiffness: PositiveFloat = Field(default=2.0e6, description="bump stop stiffness, N/m (assumption)")
+    wheelset_rolling: bool = Field(
+        default=True, description="the wheelsets move longitudinally and spin, held by the longitudinal creep "
+        "forces (false: their longitudinal motion and spin are held to ground, as in models that neglect them)")
 
 
 class YawDamperOptions(BaseModel):
@@ -340,7 +343,7 @@ class ExudynTrain(Simulator):
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
                 model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll,
-                                   self.opts.layout)
+                                   self.opts.layout, rolling=self.opts.contact.wheelset_rolling)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model

@@ -59,6 +59,7 @@ from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
 from suspid.infra.threads import single_blas_thread
 from .model import TABLE_PAD, TRACK_INPUTS, LinearSystem, TrainModel, quiet
+from .modes import acting_positions, state_matrix
 
 _ROWS = [IRREGULARITY_CHANNELS.index(c) for c in TRACK_INPUTS]
 
@@ -236,14 +237,15 @@ class FrequencyResponse:
 
     def __init__(self, linear: LinearSystem) -> None:
         self.linear = linear
-        M, K, D = linear.M, linear.K, linear.D
+        M = linear.M
         n = M.shape[0]
+        # state x = (q_acting, q'): the positions of cyclic coordinates (a rolling wheelset's spin angle)
+        # move nothing and are left out (:func:`.modes.acting_positions`)
+        acting = acting_positions(linear.K, linear.C, linear.C_disp)
+        p = acting.size
         with single_blas_thread():
             Minv = np.linalg.inv(M)
-            A = np.zeros((2 * n, 2 * n))
-            A[:n, n:] = np.eye(n)
-            A[n:, :n] = -Minv @ K
-            A[n:, n:] = -Minv @ D
+            A = state_matrix(linear, positions=acting)
             lam, V = np.linalg.eig(A)
             # condition number of the eigenvectors in the 1-norm (an inverse instead of an SVD: cheaper,
             # and the inverse serves the modal form)
@@ -262,19 +264,20 @@ class FrequencyResponse:
                 f"check conicity, yaw dampers and creep parameters")
         self.modal = bool(cond < 1e8)
         self.A = A
-        self.n = n
+        self.n_state = p + n
         # inputs: B_j = [0; M^-1 G_j]; outputs: accelerations C q''
-        B = np.zeros((linear.G.shape[0], 2 * n, linear.G.shape[2]))
-        B[:, n:, :] = np.einsum("ab,jbc->jac", Minv, linear.G)
+        B = np.zeros((linear.G.shape[0], p + n, linear.G.shape[2]))
+        B[:, p:, :] = np.einsum("ab,jbc->jac", Minv, linear.G)
         self.B = B
-        self.Cq = np.hstack([linear.C, np.zeros_like(linear.C)])
-        self.Cd = None if linear.C_disp is None else np.hstack([linear.C_disp, np.zeros_like(linear.C_disp)])
+        self.Cq = np.hstack([linear.C[:, acting], np.zeros_like(linear.C)])
+        self.Cd = (None if linear.C_disp is None
+                   else np.hstack([linear.C_disp[:, acting], np.zeros_like(linear.C_disp)]))
         if self.modal:
             self.L = self.Cq @ V                               # (n_out, 2n)
             self.Ld = None if self.Cd is None else self.Cd @ V
             R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, 2n, n_in)
             self.R = R
-            self.Rt = np.ascontiguousarray(R.transpose(1, 2, 0).reshape(2 * n * R.shape[2], R.shape[0]))
+            self.Rt = np.ascontiguousarray(R.transpose(1, 2, 0).reshape((p + n) * R.shape[2], R.shape[0]))
 
     def __call__(self, freqs: np.ndarray) -> np.ndarray:
         """H ``(n_freqs, n_sensors, 3)`` in (m/s^2) per m of track input at the car centre."""
@@ -286,7 +289,7 @@ class FrequencyResponse:
         w = 2 * math.pi * f
         delays = self.linear.wheelset_x / self.linear.speed                  # (n_w,)
         E = np.exp(1j * np.outer(delays, w))                                 # (n_w, n_f)
-        m2, nin = 2 * self.n, self.B.shape[2]
+        m2, nin = self.n_state, self.B.shape[2]
         nf = len(f)
         with single_blas_thread():
             if self.modal:
@@ -316,7 +319,7 @@ class FrequencyResponse:
                 if self.Ld is not None:
                     X = X + self.Ld @ S
             else:
-                state = np.linalg.solve(1j * w * np.eye(2 * self.n) - self.A, self.B[j])
+                state = np.linalg.solve(1j * w * np.eye(self.n_state) - self.A, self.B[j])
                 X = -(w ** 2) * (self.Cq @ state)
                 if self.Cd is not None:
                     X = X + self.Cd @ state
