@@ -239,6 +239,7 @@ def test_data_group_check_on_the_models_own_data_and_without_a_jacobian(tmp_path
     assert set(me["groups"]) >= {"below 3.5 Hz", "above 3.5 Hz", "vertical channels"}   # sqrt(0.4 x 30) Hz
     assert all(me["identifiable"].values()), me
     assert max(me["spread_percent"].values()) < 5.0 and fit.identifiable == me["identifiable"]
+    assert me["max_spread_percent"] == pytest.approx(6.0) and not any(me["groups_disagree"].values())
     failed = dc_replace(fit, jacobian=None, model_error=None)
     assert not any(check_groups(cfg, problem, disc, failed)["identifiable"].values())
     sub = fit_jointly(cfg, problem, disc, dict(problem.w_ref), max_evaluations=30, suspension=["c_sec_z"])

@@ -213,7 +213,10 @@ def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, m
     group's bins, G the fit's Jacobian) are fitted again by least squares on D restricted to the group, the
     effects and the other parameters fixed. The bias bound B of a parameter is half the spread of its group
     estimates; its bias-aware half-width (:func:`~suspid.method.identifiability.bias_aware_half_width`, at
-    ``n_sigmas``) with the sampling sd; it is *identifiable* when that half-width is within ``max_half_width``.
+    ``n_sigmas``) with the sampling sd; it is *identifiable* when that half-width is within ``max_half_width``
+    and, as in the identification's check, its group estimates are not further apart than ``max_spread`` and
+    2√2 sampling sd at once (the parts of the data disagree: the model's sensitivity to it differs from the
+    vehicle's).
     """
     from suspid.method.identifiability import bias_aware_half_width
     from suspid.workflows.adequacy import data_groups
@@ -247,13 +250,17 @@ def check_groups(config: Config, problem, disc: Discrepancy, fit: JointFit, *, m
     sd = np.array([(fit.half_width_percent.get(n) or 0.0) / 200.0 for n in names])
     bound = np.array([spread[n] / 200.0 for n in names])
     half = bias_aware_half_width(sd, bound, ident.n_sigmas)
+    disagree = {n: spread[n] / 100.0 > adequacy.max_spread and spread[n] / 100.0 > 2 * np.sqrt(2) * s
+                for n, s in zip(names, sd)}
     # without a sampling sd (a failed fit, a parameter the data do not move) nothing is measured: not identifiable
     out = {"groups": estimates, "information_share": shares,
            "spread_percent": {n: round(spread[n], 3) for n in names},
+           "max_spread_percent": 100 * adequacy.max_spread,
+           "groups_disagree": disagree,
            "bias_bound_percent": {n: round(100 * b, 3) for n, b in zip(names, bound)},
            "half_width_percent": {n: round(100 * h, 3) if known[n] else None for n, h in zip(names, half)},
            "max_half_width_percent": 100 * ident.model_error.max_half_width,
-           "identifiable": {n: bool(known[n] and h <= ident.model_error.max_half_width)
+           "identifiable": {n: bool(known[n] and h <= ident.model_error.max_half_width and not disagree[n])
                             for n, h in zip(names, half)}}
     log("data groups: " + ", ".join(f"{n} spread {spread[n]:.1f} %, half-width {100 * h:.1f} %"
                                     for n, h in zip(names, half) if known[n]))

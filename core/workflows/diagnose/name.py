@@ -125,7 +125,17 @@ def effect_evidence(cls, cand: Candidate, disc: Discrepancy, dmap: DiscrepancyMa
     D_own0, D_own1 = disc.within(own_bins, disc.base_means), disc.within(own_bins, cand_means)
     after = locate(grid, null, problem.y_mes, y_cand, null.noise_mean, options.alpha, options.min_db)
     new = after.flagged & ~dmap.flagged
+    # per channel: the channels the effect changes (a cell's band mean by more than half its null sd) and the
+    # change of D over each channel's bins (positive: the effect brings the model closer to the data there)
+    G, K, B = len(grid.speeds), len(grid.channels), grid.band_edges.shape[0]
+    changed_channels = changed.reshape(G, K, B).any(axis=(0, 2))
+    z0 = ((disc.target - disc.base_means) / disc.scale) ** 2
+    z1 = ((disc.target - cand_means) / disc.scale) ** 2
+    delta_channel = (z0 - z1).sum(axis=(0, 2))
     out = {"own_cells": int(own.sum()), "explained_own": (1.0 - D_own1 / D_own0) if D_own0 > 0 else 0.0,
+           "channels_changed": [c for c, k in zip(grid.channels, changed_channels) if k],
+           "delta_D_by_channel": {c: round(float(d), 3) for c, d, k in zip(grid.channels, delta_channel,
+                                                                        changed_channels) if k},
            "flagged_own_before": int((dmap.flagged & own).sum()), "flagged_own_after": int((after.flagged & own).sum()),
            "flagged_after": int(after.flagged.sum()), "new_flagged": int(new.sum()),
            "new_flagged_cells": [r for r, n in zip(after.rows(), new) if n][:20]}
@@ -146,7 +156,10 @@ def decide(ranking: list[Candidate], bumps: dict[int, Candidate], dmap: Discrepa
     Only the best-scoring effect may be named (a weaker one waits for the next step, once the best is added or
     reported as unexplained); every candidate gets its ``reason`` for the report. Checks, on the evidence of
     :func:`effect_evidence` when it is there: it beats the runner-up and the fixed bump of its size by
-    ``margin``; it explains at least ``min_explained`` of D in its own cells (the counts of flagged cells, in
+    ``margin``; an effect that changes several channels brings the model closer to the data (D down by more
+    than ``margin``) on at least two of them, since a discrepancy on one channel only is what a fault of that
+    sensor (a bracket resonance, a calibration) gives as well; it explains at least ``min_explained`` of D in
+    its own cells (the counts of flagged cells, in
     its cells and new ones, are checked after the joint fit, :func:`check_after_joint_fit`: at biased base
     parameters, which absorbed part of the effect, they can grow while D shrinks); with
     it, the local discrepancy model does better by at least ``margin`` than the local model alone.
@@ -215,6 +228,12 @@ def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None
     if explained < options.min_explained:
         where = "in its own cells" if "explained_own" in ev else "of the flagged discrepancy"
         why.append(f"it explains only {100 * explained:.0f} % of D {where} (needs {100 * options.min_explained:.0f} %)")
+    if len(ev.get("channels_changed", ())) >= 2:
+        improved = [c for c, d in ev["delta_D_by_channel"].items() if d > options.margin]
+        if len(improved) < 2:
+            why.append(f"it changes {len(ev['channels_changed'])} channels but brings the model closer to the data "
+                       f"on {improved[0] if improved else 'none of them'} only (by more than {options.margin:g} in "
+                       f"D): a discrepancy on one channel, which a fault of that sensor explains as well")
     if "score_vs_local" in ev and ev["score_vs_local"] < options.margin:
         why.append(f"a local discrepancy model (a free bump per flagged channel) explains the data as well without "
                    f"it (score with the effect {ev['score_effect_plus_local']:.1f}, without "
