@@ -156,9 +156,10 @@ def decide(ranking: list[Candidate], bumps: dict[int, Candidate], dmap: Discrepa
     Only the best-scoring effect may be named (a weaker one waits for the next step, once the best is added or
     reported as unexplained); every candidate gets its ``reason`` for the report. Checks, on the evidence of
     :func:`effect_evidence` when it is there: it beats the runner-up and the fixed bump of its size by
-    ``margin``; an effect that changes several channels brings the model closer to the data (D down by more
-    than ``margin``) on at least two of them, since a discrepancy on one channel only is what a fault of that
-    sensor (a bracket resonance, a calibration) gives as well; it explains at least ``min_explained`` of D in
+    ``margin``; an effect that changes several channels does not, outside the channel it improves most, take
+    the model further from the data (D up by more than ``margin`` over the others), since a discrepancy that
+    one channel supports and the others contradict is what a fault of that sensor (a bracket resonance, a
+    calibration) gives as well; it explains at least ``min_explained`` of D in
     its own cells (the counts of flagged cells, in
     its cells and new ones, are checked after the joint fit, :func:`check_after_joint_fit`: at biased base
     parameters, which absorbed part of the effect, they can grow while D shrinks); with
@@ -229,11 +230,13 @@ def _rejection(best: Candidate, runner: Candidate | None, bump: Candidate | None
         where = "in its own cells" if "explained_own" in ev else "of the flagged discrepancy"
         why.append(f"it explains only {100 * explained:.0f} % of D {where} (needs {100 * options.min_explained:.0f} %)")
     if len(ev.get("channels_changed", ())) >= 2:
-        improved = [c for c, d in ev["delta_D_by_channel"].items() if d > options.margin]
-        if len(improved) < 2:
-            why.append(f"it changes {len(ev['channels_changed'])} channels but brings the model closer to the data "
-                       f"on {improved[0] if improved else 'none of them'} only (by more than {options.margin:g} in "
-                       f"D): a discrepancy on one channel, which a fault of that sensor explains as well")
+        by_channel = ev["delta_D_by_channel"]
+        best_channel = max(by_channel, key=by_channel.get)
+        elsewhere = sum(d for c, d in by_channel.items() if c != best_channel)
+        if elsewhere < -options.margin:
+            why.append(f"outside {best_channel}, the {len(by_channel) - 1} other channels it changes move away from "
+                       f"the data (D up by {-elsewhere:.1f}): the data there contradict it, and a fault of that "
+                       f"sensor explains the discrepancy as well")
     if "score_vs_local" in ev and ev["score_vs_local"] < options.margin:
         why.append(f"a local discrepancy model (a free bump per flagged channel) explains the data as well without "
                    f"it (score with the effect {ev['score_effect_plus_local']:.1f}, without "

@@ -31,14 +31,17 @@ control). A wheelset's spin *angle* acts nowhere (only its rate enters the
 creepages): the linear analyses leave it out of the state
 (:func:`.modes.acting_positions`). This carbody longitudinal mode on the
 traction rods, coupled with the bogies' pitch and the wheelsets' rolling,
-sits near 9.5 Hz at 300 km/h, next to a first carbody bending; with the
+sits at 8.6 Hz at 300 km/h for the default car (9.5 Hz for the lighter
+Manchester coach), next to a first carbody bending; with the
 contact option ``wheelset_rolling: false`` the wheelsets' longitudinal motion
 and spin are held by stiff springs to ground (natural frequency
 :data:`RESTRAINT_HZ`, :data:`RESTRAINED`; the linear analysis treats them as
 fixed), which puts that mode near 5 Hz.
 
-Ground element: gravity (-m g on each body's vertical coordinate) and the
-restraint springs are one ``ObjectGenericODE2`` with a sparse stiffness: one
+Ground element: gravity (-m g on each body's vertical coordinate), the
+carbodies' longitudinal tie (rolling wheelsets) or the wheelsets' restraint
+springs (not rolling) are one ``ObjectGenericODE2`` with a sparse stiffness
+and damping: one
 exudyn item instead of 7 loads and 8 connectors (exudyn's cost per item and
 time step dominates a model this small).
 
@@ -940,18 +943,18 @@ class TrainModel:
             fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
             # rolling wheelsets: the common longitudinal creepage (x' - r0 pitch') / v of both wheels
             fx_wheel = -c["f11"] * (q_t[0] - c["r0"] * q_t[4]) / v if self.rolling else 0.0
+            fx_l, fx_r = fx_wheel + fx_left, fx_wheel - fx_left     # each wheel's longitudinal creep force
             if feat.saturation:
-                # friction limit mu N with the static wheel load N (the dynamic wheel load needs the rail
-                # deflection, which this element does not see); the reduction factor of the yaw and lateral
-                # creep applies to the common longitudinal creep too
-                eps = _saturation(esym, fx_left, fy_wheel, c["mu"] * c["n0"])
-                fy = fy + 2.0 * eps * fy_wheel
-                mz = -2.0 * c["l0"] * eps * fx_left
-                fx = 2.0 * eps * fx_wheel
+                # per wheel, friction limit mu N with the static wheel load N (the dynamic wheel load needs
+                # the rail deflection, which this element does not see)
+                eps_l = _saturation(esym, fx_l, fy_wheel, c["mu"] * c["n0"])
+                eps_r = _saturation(esym, fx_r, fy_wheel, c["mu"] * c["n0"])
+                fx_l, fx_r = eps_l * fx_l, eps_r * fx_r
+                fy = fy + (eps_l + eps_r) * fy_wheel
             else:
                 fy = fy + 2.0 * fy_wheel
-                mz = -2.0 * c["l0"] * fx_left
-                fx = 2.0 * fx_wheel
+            fx = fx_l + fx_r
+            mz = -c["l0"] * (fx_l - fx_r)
             return [fx, fy, fz, mx, -c["r0"] * fx, mz, 0.0]
 
         return force
@@ -1107,6 +1110,8 @@ class TrainModel:
             start = self.node_index[s.body]
             for k in range(6):
                 col = self.ode2_to_free.get(start + k)
+                if s.body.startswith("wheelset") and k == 4:
+                    continue   # a sensor on a wheelset sits on its axlebox, which does not spin with it
                 if col is not None:
                     R[i, :, col] = self.point_jacobians_xyz[i, :, k]
         for e in self.effects:
@@ -1155,8 +1160,8 @@ class TrainModel:
     def sensor_accelerations(self) -> np.ndarray:
         """``(n_sensors, n_records)`` accelerations from the node records of the last run: C q'' + C_disp q.
 
-        The free coordinates only, like the frequency solver (the restrained wheelset
-        longitudinal and pitch coordinates move by less than 1e-4 of the suspension motions).
+        The free coordinates only, like the frequency solver (wheelsets that do not roll: their
+        restrained longitudinal and pitch coordinates move by less than 1e-4 of the suspension motions).
         """
         C, C_disp = self.sensor_matrices()
         out = None

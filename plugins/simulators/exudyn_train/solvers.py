@@ -273,9 +273,9 @@ class FrequencyResponse:
         self.Cd = (None if linear.C_disp is None
                    else np.hstack([linear.C_disp[:, acting], np.zeros_like(linear.C_disp)]))
         if self.modal:
-            self.L = self.Cq @ V                               # (n_out, 2n)
+            self.L = self.Cq @ V                               # (n_out, p + n)
             self.Ld = None if self.Cd is None else self.Cd @ V
-            R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, 2n, n_in)
+            R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, p + n, n_in)
             self.R = R
             self.Rt = np.ascontiguousarray(R.transpose(1, 2, 0).reshape((p + n) * R.shape[2], R.shape[0]))
 
@@ -314,7 +314,7 @@ class FrequencyResponse:
         w = 2 * math.pi * float(f)
         with single_blas_thread():
             if self.modal:
-                S = self.R[j] / (1j * w - self.eigenvalues)[:, None]          # (2n, 3)
+                S = self.R[j] / (1j * w - self.eigenvalues)[:, None]          # (p + n, 3)
                 X = -(w ** 2) * (self.L @ S)
                 if self.Ld is not None:
                     X = X + self.Ld @ S
