@@ -362,7 +362,7 @@ class TrainModel:
             obj = mbs.AddObject(ii.ObjectRigidBody(nodeNumber=node, mass=1.0,
                                                    inertia=[1.0, 1.0, 1.0, 0.0, 0.0, 0.0]))
             self.nodes[name], self.objects[name] = node, obj
-            kind = name.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
+            kind = _kind(name)
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "mass", v),
                         lambda q, k=kind: q[f"m_{k}"])
             self._track(lambda v, o=obj: mbs.SetObjectParameter(o, "inertia", list(v)),
@@ -375,7 +375,6 @@ class TrainModel:
         # the centres of mass), a sparse diagonal stiffness and damping. One item instead of 7 loads and 11
         # connectors: exudyn's cost per item and step dominates this small model.
         n_r = 6 * len(self.bodies)
-        kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
         restrained = [(6 * i + k, name, k) for i, name in enumerate(self.bodies)
                       for k in self.restrained.get(name.split("_")[0], ())]
         tied = [6 * self.bodies.index(c) for c in self.layout.carbodies] if self.rolling else []
@@ -386,11 +385,11 @@ class TrainModel:
 
         def tie_mass(q):
             """The vehicle's mass per carbody, kg: each carbody's tie holds its share of the whole car."""
-            return sum(q[f"m_{kind(b)}"] for b in self.bodies) / len(self.layout.carbodies)
+            return sum(q[f"m_{_kind(b)}"] for b in self.bodies) / len(self.layout.carbodies)
 
         def restraint_stiffness(q):
             w2 = (2 * math.pi * RESTRAINT_HZ) ** 2
-            out = [(i, i, w2 * (q[f"m_{kind(b)}"] if k == 0 else q[f"I_{kind(b)}_y"])) for i, b, k in restrained]
+            out = [(i, i, w2 * (q[f"m_{_kind(b)}"] if k == 0 else q[f"I_{_kind(b)}_y"])) for i, b, k in restrained]
             return tuple(out + [(i, i, (2 * math.pi * TIE_HZ) ** 2 * tie_mass(q)) for i in tied])
 
         def restraint_damping(q):
@@ -403,10 +402,9 @@ class TrainModel:
                         restraint_damping)
 
         def gravity(q):
-            kind = lambda b: b.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
             f = np.zeros(n_r)
             for i, b in enumerate(self.bodies):
-                f[6 * i + 2] = -P.GRAVITY * q[f"m_{kind(b)}"]
+                f[6 * i + 2] = -P.GRAVITY * q[f"m_{_kind(b)}"]
             for b, bogie in enumerate(self.layout.bogies):   # dead loads of carbody ends outside the section
                 f[6 * self.bodies.index(bogie) + 2] -= self.layout.neighbour_load(q, b)
             return f
@@ -1226,6 +1224,11 @@ class quiet:
 
     def __exit__(self, *exc) -> None:
         self.cfg.suppressWarnings, self.cfg.printToConsole = self.saved
+
+
+def _kind(body: str) -> str:
+    """The parameter infix of a body's mass and inertias: carbody_2 -> car, bogie_front -> bogie, wheelset_1 -> ws."""
+    return body.split("_")[0].replace("carbody", "car").replace("wheelset", "ws")
 
 
 def _sparse(n: int, triplets) -> object:
