@@ -170,6 +170,46 @@ class Simulator(ABC):
         return {"plugin": self.name, "options": self.options}
 
 
+class DifferentiableSimulator(ABC):
+    """Optional capability of a :class:`Simulator`: the derivatives of its accelerations.
+
+    Kept apart from :class:`Simulator` as emukit keeps ``IDifferentiable`` apart
+    from ``IModel``: a simulator class that can differentiate subclasses both
+    (``class MySim(Simulator, DifferentiableSimulator)``); the core tests
+    ``isinstance(sim, DifferentiableSimulator)`` and falls back to finite
+    differences through the run's executor otherwise, and for every name that
+    :meth:`differentiable` leaves out (:func:`suspid.method.jacobian.spectra_jacobian`).
+    Parameters are any the simulator declares in :meth:`Simulator.parameters`:
+    the identified ones and model parameters that are only calibrated (a damper
+    mount's stiffness, a creep scale, the conicity).
+    :func:`suspid.testing.check_differentiable` checks the derivatives against
+    central finite differences.
+    """
+
+    @abstractmethod
+    def differentiable(self, names: Sequence[str]) -> list[str]:
+        """The names among ``names`` that :meth:`simulate_jacobian` differentiates itself, in that order.
+
+        The rest is differentiated by the caller with finite differences of
+        :meth:`Simulator.simulate` (a parameter the simulator cannot
+        differentiate, e.g. one of a nonlinear element, or one that changes the
+        model's structure).
+        """
+
+    @abstractmethod
+    def simulate_jacobian(self, w: Mapping[str, float], segments: Sequence[TrackSegment],
+                          names: Sequence[str]) -> list[tuple[Response, np.ndarray]]:
+        """:meth:`Simulator.simulate` at ``w`` and the derivatives of each record.
+
+        :param w: parameter name -> SI value, as for ``simulate``.
+        :param names: ``(n_p,)`` parameters to differentiate, all among :meth:`differentiable`.
+        :returns: per segment ``(response, dA)``, ``response`` what ``simulate`` returns and
+            ``dA`` ``(n_p, n_channels, n_t)`` in (m/s^2) per SI unit of each parameter:
+            dA[p] = ∂ accelerations / ∂ w[names[p]].
+        :raises suspid.errors.SimulatorError: when a run fails.
+        """
+
+
 class Objective(ABC):
     """Ψ_k: a per-channel comparison of measured and modelled spectra (eq. 5-8).
 

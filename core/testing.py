@@ -128,6 +128,63 @@ def check_simulator(cls: type, options: Mapping[str, Any] | None = None,
             f"moving parameter {name} to its upper bound does not change the output"
 
 
+def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
+                         segments: list[TrackSegment] | None = None, names: list[str] | None = None,
+                         w: Mapping[str, float] | None = None, rtol: float = 1e-4,
+                         rel_step: float = 1e-3) -> dict[str, float]:
+    """Check a :class:`suspid.interfaces.DifferentiableSimulator` against central finite differences.
+
+    Checks: ``differentiable`` returns a subset of the names asked, in their order;
+    ``simulate_jacobian`` returns, per segment, the records ``simulate`` returns and
+    derivatives ``(n_p, n_channels, n_t)``; for every parameter p and segment,
+    ||dA_p - (A(w + h e_p) - A(w - h e_p)) / 2h|| <= ``rtol`` ||(A(w + h e_p) - A(w - h e_p)) / 2h||
+    (2-norm over channels and samples), h = ``rel_step`` |w_p|: the difference's error is
+    O(h²) plus the simulator's rounding over h.
+
+    :param names: the parameters to check (default: every declared parameter the simulator differentiates).
+    :returns: name -> the largest relative error over the segments.
+    """
+    from suspid.interfaces import DifferentiableSimulator
+
+    sim = _build(cls, Simulator, options)
+    assert isinstance(sim, DifferentiableSimulator), f"{cls.__name__} must subclass DifferentiableSimulator"
+    declared = {p.name: p.nominal for p in sim.parameters()}
+    asked = list(names) if names is not None else list(declared)
+    offered = sim.differentiable(asked)
+    assert isinstance(offered, list) and all(n in asked for n in offered), \
+        f"differentiable() must return names among those asked, got {offered}"
+    assert offered == [n for n in asked if n in offered], "differentiable() must keep the order of the names asked"
+    assert offered, f"{cls.__name__} differentiates none of {asked}"
+    segments = segments or sample_segments()
+    point = {n: float(declared[n]) for n in declared} | dict(w or {})
+    pairs = sim.simulate_jacobian(point, segments, offered)
+    plain = sim.simulate(point, segments)
+    assert isinstance(pairs, list) and len(pairs) == len(segments), "simulate_jacobian() must return one pair per segment"
+    for (r, g), ref in zip(pairs, plain):
+        assert isinstance(r, Response), "simulate_jacobian() must return (Response, derivatives) pairs"
+        assert np.allclose(r.accelerations, ref.accelerations, rtol=1e-9, atol=0), \
+            "simulate_jacobian()'s records must be those of simulate()"
+        assert np.shape(g) == (len(offered),) + np.shape(r.accelerations), \
+            f"derivatives of shape {np.shape(g)}, expected {(len(offered),) + np.shape(r.accelerations)}"
+    errors: dict[str, float] = {}
+    for k, name in enumerate(offered):
+        x = point[name]
+        h = rel_step * abs(x) if x != 0 else rel_step
+        up = sim.simulate({**point, name: x + h}, segments)
+        down = sim.simulate({**point, name: x - h}, segments)
+        worst = 0.0
+        for (_, g), a, b in zip(pairs, up, down):
+            fd = (np.asarray(a.accelerations) - np.asarray(b.accelerations)) / (2 * h)
+            scale = np.linalg.norm(fd)
+            assert scale > 0, f"{name}: the finite difference is zero (step {h:g} too small, or no effect)"
+            worst = max(worst, float(np.linalg.norm(np.asarray(g)[k] - fd) / scale))
+        errors[name] = worst
+    bad = {n: e for n, e in errors.items() if not e <= rtol}
+    assert not bad, "derivatives differ from central finite differences by more than " \
+        f"{rtol:g} relative: " + ", ".join(f"{n} {e:.2e}" for n, e in bad.items())
+    return errors
+
+
 def check_objective(cls: type, options: Mapping[str, Any] | None = None) -> None:
     """Check an objective class against :class:`suspid.interfaces.Objective`.
 

@@ -202,6 +202,16 @@ def grid_lines(n_t: int, fs: float, options: SpectraOptions | Mapping[str, Any] 
     return start, stop
 
 
+def cell_means(power: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Mean of ``power (..., N//2 + 1)`` over the native lines of each cell of Ω (lines start+1 .. stop,
+    :func:`grid_lines`): ``(..., n_freqs)``. Linear in ``power``: the spectra's derivatives use it too."""
+    lines = power[..., 1:]
+    lines = np.concatenate([lines, np.zeros(lines.shape[:-1] + (1,))], axis=-1)  # reduceat may index the end
+    # exact sums over [start, stop) per cell (cells may overlap with smoothing): every other reduceat slot
+    sums = np.add.reduceat(lines, np.column_stack([start, stop]).ravel(), axis=-1)[..., ::2]
+    return sums / (stop - start)
+
+
 def record_spectrum(accelerations: np.ndarray, fs: float,
                     options: SpectraOptions | Mapping[str, Any] | None = None,
                     name: str = "") -> np.ndarray:
@@ -225,11 +235,7 @@ def record_spectrum(accelerations: np.ndarray, fs: float,
     start, stop = grid_lines(a.shape[1], fs, opt, what)
     count = stop - start
     f_native, a_hat = fourier_amplitude(a, fs, opt)
-    power = np.abs(a_hat[:, 1:]) ** 2
-    power = np.concatenate([power, np.zeros((power.shape[0], 1))], axis=1)  # reduceat may index the end
-    # exact sums over [start, stop) per cell (cells may overlap with smoothing): every other reduceat slot
-    sums = np.add.reduceat(power, np.column_stack([start, stop]).ravel(), axis=1)[:, ::2]
-    mean_power = sums / count
+    mean_power = cell_means(np.abs(a_hat) ** 2, start, stop)
     y = 5.0 * np.log10(np.maximum(mean_power, AMPLITUDE_FLOOR ** 2))
     if opt.log_bias_correction:
         y -= (5.0 / math.log(10.0)) * (digamma(count) - np.log(count))

@@ -11,13 +11,14 @@ from pydantic_core import InitErrorDetails
 
 from suspid.options import parse_options
 from suspid.errors import SimulatorError
-from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
+from suspid.interfaces import DifferentiableSimulator, Parameter, Response, Simulator, TrackSegment
 
 from . import effects as E
 from . import parameters as P
 from .layout import layout_of
 from .model import TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
+from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
 
@@ -230,7 +231,7 @@ def _unit(parameter: str) -> str:
     return "1"
 
 
-class ExudynTrain(Simulator):
+class ExudynTrain(Simulator, DifferentiableSimulator):
     """High-speed car built with exudyn: 7 rigid bodies, suspension, linearised wheel-rail contact.
 
     See :mod:`suspid.plugins.simulators.exudyn_train` for the model and
@@ -371,10 +372,7 @@ class ExudynTrain(Simulator):
                             blow_off_rate=o.yaw_damper.rate_after_blow_off)
 
     # ------------------------------------------------------------------ simulate
-    def simulate(self, w: Mapping[str, float], segments: Sequence[TrackSegment]) -> list[Response]:
-        segments = list(segments)
-        if not segments:
-            return []
+    def _check_segments(self, segments: Sequence[TrackSegment]) -> None:
         for s in segments:
             key = InputSpectra._fingerprint(s)
             if key not in self._checked:
@@ -382,10 +380,72 @@ class ExudynTrain(Simulator):
                 self._checked[key] = (s.irregularities, s.distance)   # keep the arrays: ids stay unique
                 if len(self._checked) > 1024:
                     self._checked.pop(next(iter(self._checked)))
+
+    def simulate(self, w: Mapping[str, float], segments: Sequence[TrackSegment]) -> list[Response]:
+        segments = list(segments)
+        if not segments:
+            return []
+        self._check_segments(segments)
         values = self.values(w)
         if self.opts.solver == "time":
             return self._simulate_time(values, segments)
         return self._simulate_frequency(values, segments)
+
+    # ------------------------------------------------------------------ derivatives
+    def differentiable(self, names: Sequence[str]) -> list[str]:
+        """The parameters :meth:`simulate_jacobian` differentiates (:mod:`.sensitivity`): with the frequency
+        solver and no effect enabled, every parameter of the vehicle table but the geometry
+        (:data:`.model.GEOMETRY`); none with the time solver (its nonlinear laws) or with effects
+        (their periodic inputs and parameters): the caller takes finite differences for those."""
+        if self.opts.solver != "frequency" or self.opts.effects:
+            return []
+        return analytic_parameters(names, {p.name for p in P.parameter_table(self.opts.preset)})
+
+    def simulate_jacobian(self, w: Mapping[str, float], segments: Sequence[TrackSegment],
+                          names: Sequence[str]) -> list[tuple[Response, np.ndarray]]:
+        """The records at ``w`` and their derivatives ``(n_p, n_channels, n_t)`` (m/s² per SI unit) with
+        respect to ``names``: dH/dp = O (dF/dp - dZ/dp Q) on the eigen-decomposition of the plain solve
+        (:mod:`.sensitivity`).
+
+        :raises SimulatorError: a name :meth:`differentiable` does not list, or a failed run.
+        """
+        names = list(names)
+        bad = [n for n in names if n not in self.differentiable([n])]
+        if bad:
+            raise SimulatorError(f"exudyn-train cannot differentiate {', '.join(map(repr, bad))} (solver "
+                                 f"{self.opts.solver!r}; see differentiable()): use finite differences")
+        segments = list(segments)
+        if not segments:
+            return []
+        self._check_segments(segments)
+        values = self.values(w)
+        varying = [s.name for s in segments if not is_constant_speed(s)]
+        if varying:
+            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
+                                 f"constant speed per segment; use solver: time")
+        o = self.opts
+        channels = tuple(s.name for s in self.sensors(values))
+        out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
+        groups: dict[float, list[int]] = {}
+        for i, s in enumerate(segments):
+            groups.setdefault(float(s.mean_speed), []).append(i)
+        for speed, idx in groups.items():
+            model = self._model(values, speed, TimeFeatures())
+            base = model.linear_system()
+            response = FrequencyResponse(base)
+            if not response.modal:
+                raise SimulatorError("exudyn-train: the eigenvectors of the linear model are ill-conditioned "
+                                     f"at {speed * 3.6:.1f} km/h; its derivatives need finite differences")
+            try:
+                derivatives = matrix_derivatives(model, values, speed, names, base)
+            except ValueError as exc:
+                raise SimulatorError(f"exudyn-train: {exc}") from exc
+            group = [segments[i] for i in idx]
+            records = simulate_frequency(response, group, o.fs_hz, o.taper_m, o.settle_s, self._spectra, channels, {})
+            grads = record_derivatives(response, derivatives, group, o.fs_hz, o.taper_m, o.settle_s, self._spectra)
+            for i, r, g in zip(idx, records, grads):
+                out[i] = (r, g)
+        return out  # type: ignore[return-value]
 
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts

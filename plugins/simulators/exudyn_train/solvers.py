@@ -255,6 +255,7 @@ class FrequencyResponse:
             except np.linalg.LinAlgError:
                 cond = math.inf
         self.eigenvalues = lam
+        self.acting, self.Minv = acting, Minv     # kept for the derivatives (:mod:`.sensitivity`)
         unstable = lam[lam.real > 1e-9 * np.maximum(1.0, np.abs(lam))]
         if unstable.size:
             worst = unstable[np.argmax(unstable.real)]
@@ -273,6 +274,7 @@ class FrequencyResponse:
         self.Cd = (None if linear.C_disp is None
                    else np.hstack([linear.C_disp[:, acting], np.zeros_like(linear.C_disp)]))
         if self.modal:
+            self.V, self.Vinv = V, Vinv
             self.L = self.Cq @ V                               # (n_out, p + n)
             self.Ld = None if self.Cd is None else self.Cd @ V
             R = np.einsum("ab,jbc->jac", Vinv, B)              # (n_w, p + n, n_in)
@@ -413,6 +415,17 @@ class InputSpectra:
         return U
 
 
+def fft_plan(response: FrequencyResponse, segments: list[TrackSegment], fs: float, settle_s: float
+             ) -> tuple[list[int], int]:
+    """The records' lengths ``n_t`` and the FFT length the frequency solver uses for ``segments``
+    (see :func:`simulate_frequency`)."""
+    lin = response.linear
+    delay = float(np.max(np.abs(lin.wheelset_x))) / lin.speed
+    pad = min(max(settle_s, response.settling_time), 120.0)
+    n_ts = [output_samples(seg, fs) for seg in segments]
+    return n_ts, fft_length(max(n_ts), fs, delay, pad)
+
+
 def simulate_frequency(response: FrequencyResponse, segments: list[TrackSegment], fs: float, taper_m: float,
                        settle_s: float, spectra: InputSpectra, channels: tuple[str, ...],
                        frf_cache: dict) -> list[Response]:
@@ -423,11 +436,7 @@ def simulate_frequency(response: FrequencyResponse, segments: list[TrackSegment]
     is longer (at most 120 s): what leaks from the end of a record into its
     start is below 5 % of the slowest mode's amplitude.
     """
-    lin = response.linear
-    delay = float(np.max(np.abs(lin.wheelset_x))) / lin.speed
-    pad = min(max(settle_s, response.settling_time), 120.0)
-    n_ts = [output_samples(seg, fs) for seg in segments]
-    n_fft = fft_length(max(n_ts), fs, delay, pad)
+    n_ts, n_fft = fft_plan(response, segments, fs, settle_s)
     H = frf_cache.get(n_fft)
     if H is None:
         H = response.by_input(np.arange(n_fft // 2 + 1) * fs / n_fft)         # (3, n_out, n_f)

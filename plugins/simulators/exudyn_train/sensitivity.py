@@ -1,0 +1,206 @@
+"""Derivatives of the frequency solver's records with respect to the model's parameters.
+
+The frequency solver (:mod:`.solvers`) computes the records from the receptance
+of the linearised model, M q'' + D q' + K q = Σ_j G_j r_j, outputs a = C q'' + C_disp q:
+
+    H(ω) = (-ω² C + C_disp) Z(ω)^-1 F(ω),   Z(ω) = -ω² M + iω D + K,   F(ω) = Σ_j G_j e^{iω a_j / v}.
+
+For a parameter p that does not move the geometry (C, C_disp and the wheelset
+positions stay), differentiating Z Z^-1 = I gives
+
+    ∂H/∂p = (-ω² C + C_disp) Z^-1 (∂F/∂p - ∂Z/∂p Z^-1 F) = O(ω) (∂F/∂p - ∂Z/∂p Q(ω)),
+
+with O = (-ω² C + C_disp) Z^-1 the sensors' response to a unit force on each
+coordinate and Q = Z^-1 F the coordinates' response to the track. Both come
+from the eigen-decomposition the plain solve has already made (the modal form
+of :class:`.solvers.FrequencyResponse`: nothing is factorised again); O is
+needed only on the coordinates where some ∂Z/∂p acts, Q only where ∂Z/∂p
+reads, and ∂Z/∂p of a spring, a damper or a mass is sparse: a few rows and
+columns per parameter. ∂Z/∂p q is written ∂K/∂p q + (∂D/∂p + iω ∂M/∂p) q'
+on the state (q_acting, q'), so that the cyclic coordinates (a wheelset's spin
+angle, left out of the state) need no position. Each record's derivative is
+then irfft(∂H/∂p U)[:n_t] with the track spectrum U of the plain solve.
+
+Semi-analytic: ∂M/∂p, ∂K/∂p, ∂D/∂p and ∂G/∂p are differences of exudyn's
+linearisation (:meth:`.model.TrainModel.linear_system`) at p and at p + h.
+For the parameters in :data:`LINEAR` the matrices are affine in p (a spring's
+or a damper's rate, a Maxwell element's mass c / (2π f_fast), the creep
+coefficients times ``kalker_scale``, the conicity), so a one-sided difference
+is exact but for rounding; the others (masses and inertias: the wheel loads
+set the Hertzian stiffness and Kalker's coefficients; ``r_rail``) take a
+central difference. What is *not* differentiated here, and is left to finite
+differences of the whole simulation by the caller
+(:meth:`.simulator.ExudynTrain.differentiable`): the geometry
+(:data:`.model.GEOMETRY`: it moves attachment points and sensors and rebuilds
+the system), the parameters of effects, and any parameter of the time solver
+(its nonlinear options: creep saturation, bump stops, blow-off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft as sfft
+
+from suspid.infra.threads import single_blas_thread
+
+from .model import GEOMETRY, LinearSystem, TrainModel
+from .solvers import FrequencyResponse, InputSpectra, fft_plan
+
+LINEAR = frozenset({
+    "k_prim_x", "c_prim_x", "k_prim_y", "k_prim_z", "c_prim_z", "k_sec_x", "k_sec_y", "k_sec_z", "c_sec_z",
+    "k_sec_z_s", "c_sec_y", "c_yaw", "k_yaw_s", "k_trac", "k_arb", "conicity", "kalker_scale", "m_track",
+    "k_track", "c_track", "k_art", "c_art", "c_ic"})
+"""Parameters on which M, K, D and G depend affinely (one linearisation per derivative suffices)."""
+
+LINEAR_STEP = 1e-2
+"""Relative step of the one-sided difference of the matrices for :data:`LINEAR` parameters (exact: affine)."""
+
+CENTRAL_STEP = 1e-4
+"""Relative step of the central difference of the matrices for the other parameters (error O(h²))."""
+
+FREQUENCY_BLOCK = 512
+"""Frequencies processed together (bounds the memory of the (n_f, n_sensors, n_coordinates) products)."""
+
+
+def analytic_parameters(names, table_names) -> list[str]:
+    """The names among ``names`` this module differentiates: parameters of the table that keep the geometry."""
+    return [n for n in names if n in table_names and n not in GEOMETRY]
+
+
+@dataclass
+class MatrixDerivative:
+    """∂M/∂p, ∂K/∂p, ∂D/∂p ``(n, n)`` and ∂G/∂p ``(n_wheelsets, n, 3)`` on the free coordinates (SI per SI of p)."""
+
+    dM: np.ndarray
+    dK: np.ndarray
+    dD: np.ndarray
+    dG: np.ndarray
+
+
+def _difference(a: LinearSystem, b: LinearSystem, h: float) -> MatrixDerivative:
+    return MatrixDerivative((a.M - b.M) / h, (a.K - b.K) / h, (a.D - b.D) / h, (a.G - b.G) / h)
+
+
+def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float, names: list[str],
+                       base: LinearSystem) -> list[MatrixDerivative]:
+    """The matrices' derivatives for each of ``names`` (see the module docstring); ``model`` is left at ``values``.
+
+    :raises ValueError: a parameter moves the sensors' matrices or the wheelsets (geometry): not differentiable here.
+    """
+    out = []
+    try:
+        for name in names:
+            x = float(values[name])
+            if name in LINEAR:
+                h = LINEAR_STEP * abs(x) if x != 0 else LINEAR_STEP
+                model.update({**values, name: x + h}, speed)
+                plus = model.linear_system()
+                out.append(_difference(plus, base, h))
+            else:
+                h = CENTRAL_STEP * abs(x) if x != 0 else CENTRAL_STEP
+                model.update({**values, name: x + h}, speed)
+                plus = model.linear_system()
+                model.update({**values, name: x - h}, speed)
+                minus = model.linear_system()
+                out.append(_difference(plus, minus, 2 * h))
+            if not (np.array_equal(plus.C, base.C) and np.array_equal(plus.wheelset_x, base.wheelset_x)
+                    and (plus.C_disp is None) == (base.C_disp is None)
+                    and (plus.C_disp is None or np.array_equal(plus.C_disp, base.C_disp))):
+                raise ValueError(f"parameter {name!r} moves the sensors or the wheelsets")
+    finally:
+        model.update(values, speed)
+    return out
+
+
+def _support(*matrices: np.ndarray, axis: int) -> np.ndarray:
+    """Indices where any of ``matrices`` has a nonzero entry along ``axis`` (0: rows, 1: columns)."""
+    hit = None
+    for m in matrices:
+        a = np.abs(m) > 0
+        h = np.any(a, axis=1 - axis) if m.ndim == 2 else np.any(a, axis=(0, 2))
+        hit = h if hit is None else hit | h
+    return np.flatnonzero(hit)
+
+
+def receptance_derivatives(response: FrequencyResponse, derivatives: list[MatrixDerivative],
+                           freqs: np.ndarray) -> np.ndarray:
+    """∂H/∂p ``(n_p, 3, n_sensors, n_freqs)`` in the layout of :meth:`.solvers.FrequencyResponse.by_input`.
+
+    :param freqs: ``(n_freqs,)`` Hz (0 included: the modal form holds at ω = 0).
+    """
+    lin = response.linear
+    acting = response.acting
+    p = acting.size
+    n = lin.M.shape[0]
+    m2 = p + n
+    position_of = np.full(n, -1)
+    position_of[acting] = np.arange(p)
+    # per parameter: force rows, and the state columns read (positions through ∂K, velocities through ∂D, ∂M)
+    plans = []
+    for d in derivatives:
+        rows = _support(d.dK, d.dD, d.dM, d.dG, axis=0)
+        k_cols = _support(d.dK, axis=1)
+        if np.any(position_of[k_cols] < 0):
+            raise ValueError("a stiffness derivative acts on a cyclic coordinate")
+        v_cols = _support(d.dD, d.dM, axis=1)
+        state_cols = np.concatenate([position_of[k_cols], p + v_cols])
+        plans.append((rows, k_cols, v_cols, state_cols))
+    all_rows = np.unique(np.concatenate([r for r, *_ in plans] + [np.zeros(0, int)]))
+    all_cols = np.unique(np.concatenate([c for *_, c in plans] + [np.zeros(0, int)]))
+    row_at = {r: i for i, r in enumerate(all_rows)}
+    col_at = {c: i for i, c in enumerate(all_cols)}
+    f = np.asarray(freqs, dtype=float)
+    nf = f.size
+    n_out = lin.C.shape[0]
+    out = np.zeros((len(derivatives), 3, n_out, nf), dtype=complex)
+    if not derivatives:
+        return out
+    lam = response.eigenvalues
+    delays = lin.wheelset_x / lin.speed
+    with single_blas_thread():
+        # sensors per unit force on the touched coordinates: (-ω² C + C_disp) V diag(z) V^-1 [0; M^-1]
+        Psi = response.Vinv[:, p:] @ response.Minv[:, all_rows]                      # (m2, n_rows)
+        V_cols = response.V[all_cols]                                                  # (n_cols, m2)
+        Ld = response.Ld if response.Ld is not None else np.zeros_like(response.L)
+        for lo in range(0, nf, FREQUENCY_BLOCK):
+            sl = slice(lo, min(nf, lo + FREQUENCY_BLOCK))
+            w = 2 * math.pi * f[sl]
+            s = 1j * w
+            z = 1.0 / (s[:, None] - lam[None, :])                                     # (b, m2)
+            E = np.exp(1j * np.outer(delays, w))                                       # (n_w, b)
+            # the state's response to the track, on the columns read: V diag(z) V^-1 B(ω)
+            S = (response.Rt @ E).reshape(m2, 3, -1) * z.T[:, None, :]                 # (m2, 3, b)
+            X = (V_cols @ S.reshape(m2, -1)).reshape(len(all_cols), 3, -1)             # (n_cols, 3, b)
+            Lw = (-(w ** 2))[:, None, None] * response.L[None] + Ld[None]              # (b, n_out, m2)
+            O = (Lw * z[:, None, :]) @ Psi                                             # (b, n_out, n_rows)
+            for k, (d, (rows, k_cols, v_cols, state_cols)) in enumerate(zip(derivatives, plans)):
+                if rows.size == 0:
+                    continue
+                Xk = X[[col_at[c] for c in position_of[k_cols]]]                       # (nk, 3, b)
+                Xv = X[[col_at[c] for c in p + v_cols]]                                # (nv, 3, b)
+                dZq = np.einsum("rc,cjb->rjb", d.dK[np.ix_(rows, k_cols)], Xk)
+                dZq += np.einsum("rc,cjb->rjb", d.dD[np.ix_(rows, v_cols)], Xv)
+                dZq += np.einsum("rc,cjb->rjb", d.dM[np.ix_(rows, v_cols)], Xv) * s[None, None, :]
+                dF = np.einsum("wrj,wb->rjb", d.dG[:, rows, :], E)
+                Or = O[:, :, [row_at[r] for r in rows]]                                 # (b, n_out, r)
+                out[k, :, :, sl] = np.einsum("bor,rjb->job", Or, dF - dZq)
+    return out
+
+
+def record_derivatives(response: FrequencyResponse, derivatives: list[MatrixDerivative], segments: list,
+                       fs: float, taper_m: float, settle_s: float, spectra: InputSpectra) -> list[np.ndarray]:
+    """Per segment ``(n_p, n_sensors, n_t)``: the derivatives of the records
+    :func:`.solvers.simulate_frequency` makes (same FFT length, same track spectra), (m/s²) per SI unit."""
+    n_ts, n_fft = fft_plan(response, segments, fs, settle_s)
+    dH = receptance_derivatives(response, derivatives, np.arange(n_fft // 2 + 1) * fs / n_fft)
+    out = []
+    for seg, n in zip(segments, n_ts):
+        U = spectra.get(seg, fs, n_fft, taper_m)                                       # (3, n_f)
+        dY = dH[:, 0] * U[0]
+        dY += dH[:, 1] * U[1]
+        dY += dH[:, 2] * U[2]
+        out.append(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n]))
+    return out
