@@ -399,6 +399,20 @@ class OptimizerResult:
         return int(self.y.shape[0])
 
 
+class SpectraModel(ABC):
+    """What a gradient-based :class:`Optimizer` may ask of the run besides J: the spectra, their
+    Jacobian and J of given spectra (the driver's :class:`suspid.workflows.gradient.ProblemSpectraModel`)."""
+
+    @abstractmethod
+    def jacobian(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """y_sim ``(v, n_channels, n_freqs)`` dB at ``x (q,)`` SI and ∂y_sim/∂x ``(v, n_channels, n_freqs, q)``
+        dB per SI unit (analytic where the simulator offers it, finite differences otherwise)."""
+
+    @abstractmethod
+    def objective(self, y_sim: np.ndarray) -> float:
+        """J (eq. 5) of spectra ``(v, n_channels, n_freqs)`` dB with the run's data: no simulation."""
+
+
 class Optimizer(ABC):
     """A maximiser of J over the parameter box, driven by **ask/tell** (the model is :class:`suspid.optimize.ego.EGO`)::
 
@@ -436,6 +450,12 @@ class Optimizer(ABC):
     #: Optional sink the driver sets: ``on_record(run, index, record)`` stores one JSON-able row
     #: of the optimiser's own log (e.g. EI and hyperparameters per EGO iteration) in the run ledger.
     on_record: Callable[[str, int, dict], None] | None = None
+    #: Optional capability: an optimiser that sets it True is given :attr:`spectra_model` (a
+    #: :class:`SpectraModel` of the run) by the driver before its first :meth:`ask`, to linearise
+    #: the model (a gradient-based search). Its Jacobians are not told evaluations: the driver counts
+    #: and reports them apart from the budget of simulator calls.
+    uses_jacobian: ClassVar[bool] = False
+    spectra_model: "SpectraModel | None" = None
 
     def __init__(self, bounds: Any, *, budget: int, seed: int = 0, design: Any = None, surrogate: Any = None,
                  **options: Any) -> None:

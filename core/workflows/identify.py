@@ -44,6 +44,7 @@ from suspid.optimize.ego import EGOResult
 from suspid.workflows.analysis import analyse
 from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
+from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import write_report
 
@@ -231,6 +232,11 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, p
         "anytime": {"J": [None if not np.isfinite(v) else float(v) for v in opt_result.y],
                     "w_normalized": problem.to_unit(opt_result.X).tolist() if len(opt_result.X) else []},
     })
+    model = getattr(optimizer, "spectra_model", None)
+    if isinstance(model, ProblemSpectraModel):   # Jacobians: counted apart from the simulator calls
+        # a plain simulation's wall time: the evaluations asked one at a time, after the design's batch
+        walls = [ev.wall_time_s for ev in ledger.evaluations("ok") if ev.wall_time_s][int(ego.n_initial):]
+        result["jacobian"] = model.summary(float(np.median(walls)) if walls else None)
     floor = problem.noise_model.floor_
     if floor is not None:
         result["noise_floor"] = {"mode": config.noise.floor if config.noise.path is None else "file",
@@ -263,6 +269,8 @@ def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_
         ledger.put_iteration(run, index, row)
 
     optimizer.on_record = on_record
+    if getattr(optimizer, "uses_jacobian", False):
+        optimizer.spectra_model = ProblemSpectraModel(problem, ledger, executor)
     label = optimizer.name  # the phase of a failed point after the design
     task = bars.add_task(label, total=optimizer.budget, status="")
     failed: list[dict[str, Any]] = []

@@ -1,0 +1,192 @@
+"""Spectra with their derivatives: the Jacobian's accuracy and cost, and the gradient method against EGO.
+
+Two parts, each measured in one run so that the ratios hold on a loaded machine:
+
+1. ``jacobian``: on the presets of ``configs/quickstart.yaml`` (conventional-hs) and
+   ``configs/table1.yaml`` (tgv-articulated), every parameter ``exudyn-train``
+   differentiates, its analytic derivatives of the records against central finite
+   differences (relative step 1e-3, the 2-norm over channels and samples); then the cost of
+   the spectra's Jacobian (the records' derivatives carried through eq. 1-2, y included) for
+   the identified q parameters and for all of them, against a plain solve of the same
+   segments (median of ``--repeats``).
+2. ``identify``: both problems over ``--seeds``, three methods from the same config:
+   the paper's EGO (``ego.refine`` off), EGO + refinement, and ``gauss-newton``. For each run:
+   the simulations after which the best-J point's worst identifiable error first is ≤ 2 %
+   (the study's anytime curve), that run's wall time scaled to that point (wall × calls to
+   reach / calls), the worst error at the end, the coverage of the intervals, and for the
+   gradient method its Jacobians (count, and cost in plain-solve equivalents). Every method of
+   a seed is judged on the components the paper's EGO flags identifiable in that seed (the
+   study's rule); each run's own flags are printed too.
+
+Usage::
+
+    python benchmarks/bench_gradient.py jacobian
+    python benchmarks/bench_gradient.py identify --seeds 1 2 3 4 5 --out /tmp/bench_gradient
+    python benchmarks/bench_gradient.py identify --problems quickstart --table1-m0 60
+
+The Table 1 analogue's paper design has m0 = 500 (``configs/table1.yaml``); ``--table1-m0``
+sets the EGO variants' design (default 60, the config's own small-design variant: the
+m0 = 500 runs take minutes each on a shared 2-core machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+PROBLEMS = {"quickstart": ROOT / "configs" / "quickstart.yaml", "table1": ROOT / "configs" / "table1.yaml"}
+TARGET = 2.0
+
+
+def header(what: str) -> None:
+    load = os.getloadavg()
+    print(f"# bench_gradient {what}  {time.strftime('%Y-%m-%d %H:%M')}  python {platform.python_version()}  "
+          f"numpy {np.__version__}  {os.cpu_count()} cpus  load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+
+
+# ------------------------------------------------------------------------------------------- jacobian
+def jacobian_part(repeats: int, n_segments: int | None) -> None:
+    from suspid.config import build_simulator, load_config
+    from suspid.method.jacobian import spectra_jacobian
+    from suspid.testing import check_differentiable
+    from suspid.workflows.problem import synthetic_track
+    from suspid.workflows.tasks import simulate_spectra
+
+    header("jacobian")
+    for problem, path in PROBLEMS.items():
+        config = load_config(path)
+        sim = build_simulator(config)
+        names_all = sim.differentiable([p.name for p in sim.parameters()])
+        identified = [n for n in config.parameters] if config.parameters else sim.default_parameters()
+        segments = synthetic_track(config, "measurement")
+        if n_segments:
+            segments = segments[:n_segments]
+        # accuracy: two segments of the run's own track
+        t0 = time.perf_counter()
+        errors = check_differentiable(type(sim), dict(sim.options), segments[:2], names=names_all, rtol=1e-4)
+        worst = max(errors, key=errors.get)
+        print(f"{problem} ({sim.opts.preset}): {len(names_all)} parameters differentiated; largest relative "
+              f"difference to central FD {errors[worst]:.2e} ({worst}); median {statistics.median(errors.values()):.1e} "
+              f"[{time.perf_counter() - t0:.0f} s]")
+        print("  per parameter: " + ", ".join(f"{n} {e:.1e}" for n, e in errors.items()))
+        # cost, on the run's segments
+        w = {n: float(v) for n, v in config.data.w_ref.items()}
+        simulate_spectra(sim, w, segments, config.spectra)
+        spectra_jacobian(sim, w, identified, segments, config.spectra)
+        plain, jac_q, jac_all = [], [], []
+        for k in range(repeats):
+            wk = {**w, identified[0]: w.get(identified[0], sim.values({})[identified[0]]) * (1 + 1e-6 * (k + 1))}
+            t = time.perf_counter()
+            simulate_spectra(sim, wk, segments, config.spectra)
+            plain.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            spectra_jacobian(sim, wk, identified, segments, config.spectra)
+            jac_q.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            spectra_jacobian(sim, wk, names_all, segments, config.spectra)
+            jac_all.append(time.perf_counter() - t)
+        p, jq, ja = (statistics.median(x) for x in (plain, jac_q, jac_all))
+        print(f"  cost on {len(segments)} segments (median of {repeats}): plain solve {p:.3f} s; y + Jacobian for the "
+              f"q = {len(identified)} identified {jq:.3f} s = {jq / p:.2f} plain (central FD: {2 * len(identified) + 1}); "
+              f"for all {len(names_all)} {ja:.3f} s = {ja / p:.2f} plain (central FD: {2 * len(names_all) + 1})")
+
+
+# ------------------------------------------------------------------------------------------- identify
+METHODS = {
+    "ego": {"ego.refine.enabled": False},
+    "ego+refine": {"ego.refine.enabled": True},
+    "gauss-newton": {"optimizer.plugin": "gauss-newton"},
+}
+
+
+def one_run(problem: str, method: str, seed: int, out: Path, table1_m0: int) -> dict:
+    import suspid
+
+    overrides = {"seed": seed, "output.dir": str(out / problem / method / str(seed))} | METHODS[method]
+    if problem == "table1" and method != "gauss-newton":
+        overrides["design.n_initial"] = table1_m0
+    t = time.perf_counter()
+    r = suspid.identify(str(PROBLEMS[problem]), overrides, fresh=True)
+    wall = time.perf_counter() - t
+    result = r.to_dict()
+    return {"result": result, "ledger": str(r.run_dir / "ledger.sqlite"), "wall": wall}
+
+
+def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: int) -> None:
+    from suspid.workflows.study_stats import anytime_errors
+
+    header("identify")
+    rows = []
+    for problem in problems:
+        for seed in seeds:
+            runs = {m: one_run(problem, m, seed, out, table1_m0) for m in METHODS}
+            reference = runs["ego"]["result"]["identifiable"]
+            for method, run in runs.items():
+                res = dict(run["result"])
+                own = res["identifiable"]
+                res["identifiable"] = reference          # judged on the paper's EGO's identifiable components
+                curve = anytime_errors(run["ledger"], res)
+                reached = float(np.flatnonzero(curve <= TARGET)[0] + 1) if np.any(curve <= TARGET) else math.nan
+                n = int(res["n_simulator_calls"])
+                names = [k for k in res["parameters"] if reference[k]]
+                inside = [res["interval"][k][0] <= res["w_ref"][k] <= res["interval"][k][1] for k in names]
+                jac = res.get("jacobian") or {}
+                row = {"problem": problem, "seed": seed, "method": method, "calls": n, "wall_s": run["wall"],
+                       "calls_to_2pct": reached,
+                       "wall_to_2pct_s": run["wall"] * reached / n if math.isfinite(reached) else math.nan,
+                       "worst_final": float(curve[-1]) if curve.size else math.nan,
+                       "coverage": float(np.mean(inside)) if inside else math.nan,
+                       "not_identifiable_own": [k for k in res["parameters"] if not own[k]],
+                       "jacobians": jac.get("n_jacobians", 0),
+                       "jacobian_plain_equivalents": jac.get("plain_solve_equivalents_each")}
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "rows.json").write_text(json.dumps(rows, indent=1))
+    print()
+    print("| problem | method | simulations (mean) | reached ≤ 2 % | simulations to ≤ 2 % (mean over those) | "
+          "wall to ≤ 2 % (s) | worst final % (mean, max) | coverage | Jacobians (mean) | Jacobian cost (plain solves) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for problem in problems:
+        for method in METHODS:
+            sel = [r for r in rows if r["problem"] == problem and r["method"] == method]
+            ok = [r for r in sel if math.isfinite(r["calls_to_2pct"])]
+            mean = lambda key, rs=sel: float(np.nanmean([r[key] for r in rs])) if rs else math.nan  # noqa: E731
+            eq = [r["jacobian_plain_equivalents"] for r in sel if r["jacobian_plain_equivalents"]]
+            print(f"| {problem} | {method} | {mean('calls'):.1f} | {len(ok)}/{len(sel)} | "
+                  f"{mean('calls_to_2pct', ok):.1f} | {mean('wall_to_2pct_s', ok):.1f} | "
+                  f"{mean('worst_final'):.2f}, {max(r['worst_final'] for r in sel):.2f} | "
+                  f"{mean('coverage'):.2f} | {mean('jacobians'):.1f} | "
+                  f"{np.median(eq) if eq else float('nan'):.1f} |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("part", choices=["jacobian", "identify"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
+    ap.add_argument("--problems", nargs="+", choices=list(PROBLEMS), default=list(PROBLEMS))
+    ap.add_argument("--out", type=Path, default=Path("/tmp/bench_gradient"))
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--segments", type=int, default=None, help="jacobian: first N segments only")
+    ap.add_argument("--table1-m0", type=int, default=60)
+    args = ap.parse_args(argv)
+    sys.path.insert(0, str(ROOT))
+    if args.part == "jacobian":
+        jacobian_part(args.repeats, args.segments)
+    else:
+        identify_part(args.problems, args.seeds, args.out, args.table1_m0)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
