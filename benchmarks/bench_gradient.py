@@ -10,7 +10,8 @@ Two parts, each measured in one run so that the ratios hold on a loaded machine:
    the identified q parameters and for all of them, against a plain solve of the same
    segments (median of ``--repeats``).
 2. ``identify``: both problems over ``--seeds``, three methods from the same config:
-   the paper's EGO (``ego.refine`` off), EGO + refinement, and ``gauss-newton``. For each run:
+   the paper's EGO (``ego.refine`` off; on the Table 1 analogue the paper's loop of the
+   ``ego.refine`` run, which is the same run up to its stop), EGO + refinement, and ``gauss-newton``. For each run:
    the simulations after which the best-J point's worst identifiable error first is ≤ 2 %
    (the study's anytime curve), that run's wall time scaled to that point (wall × calls to
    reach / calls), the worst error at the end, the coverage of the intervals, and for the
@@ -102,7 +103,7 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
 
 
 # ------------------------------------------------------------------------------------------- identify
-METHODS = {
+RUNS = {
     "ego": {"ego.refine.enabled": False},
     "ego+refine": {"ego.refine.enabled": True},
     "gauss-newton": {"optimizer.plugin": "gauss-newton"},
@@ -112,56 +113,75 @@ METHODS = {
 def one_run(problem: str, method: str, seed: int, out: Path, table1_m0: int) -> dict:
     import suspid
 
-    overrides = {"seed": seed, "output.dir": str(out / problem / method / str(seed))} | METHODS[method]
+    overrides = {"seed": seed, "output.dir": str(out / problem / method / str(seed))} | RUNS[method]
     if problem == "table1" and method != "gauss-newton":
         overrides["design.n_initial"] = table1_m0
     t = time.perf_counter()
     r = suspid.identify(str(PROBLEMS[problem]), overrides, fresh=True)
-    wall = time.perf_counter() - t
-    result = r.to_dict()
-    return {"result": result, "ledger": str(r.run_dir / "ledger.sqlite"), "wall": wall}
+    return {"result": r.to_dict(), "ledger": str(r.run_dir / "ledger.sqlite"), "wall": time.perf_counter() - t}
+
+
+def row_of(problem: str, seed: int, method: str, run: dict, reference: dict, paper_loop: bool = False) -> dict:
+    """One run's figures on the ``reference`` identifiable components; ``paper_loop``: the EGO loop's prefix
+    of an ``ego+refine`` run (its curve up to where the paper's loop stopped; no interval of its own)."""
+    from suspid.workflows.study_stats import anytime_errors
+
+    res = dict(run["result"])
+    own = res["identifiable"]
+    res["identifiable"] = reference
+    curve = anytime_errors(run["ledger"], res)
+    n_total = int(res["n_simulator_calls"])
+    n = int(res["paper_loop"]["n_simulator_calls"]) if paper_loop else n_total
+    curve = curve[:n]
+    reached = float(np.flatnonzero(curve <= TARGET)[0] + 1) if np.any(curve <= TARGET) else math.nan
+    names = [k for k in res["parameters"] if reference[k]]
+    inside = [res["interval"][k][0] <= res["w_ref"][k] <= res["interval"][k][1] for k in names]
+    jac = res.get("jacobian") or {}
+    wall = run["wall"] * n / n_total        # the run's wall time, pro rata of its simulations (a prefix)
+    return {"problem": problem, "seed": seed, "method": method, "calls": n, "wall_s": wall,
+            "calls_to_2pct": reached, "wall_to_2pct_s": wall * reached / n if math.isfinite(reached) else math.nan,
+            "worst_final": float(curve[-1]) if curve.size else math.nan,
+            "coverage": math.nan if paper_loop else (float(np.mean(inside)) if inside else math.nan),
+            "not_identifiable_own": [] if paper_loop else [k for k in res["parameters"] if not own[k]],
+            "jacobians": jac.get("n_jacobians", 0), "jacobian_plain_equivalents": jac.get("plain_solve_equivalents_each")}
 
 
 def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: int) -> None:
-    from suspid.workflows.study_stats import anytime_errors
-
     header("identify")
     rows = []
+    methods = ["ego", "ego+refine", "gauss-newton"]
     for problem in problems:
         for seed in seeds:
-            runs = {m: one_run(problem, m, seed, out, table1_m0) for m in METHODS}
-            reference = runs["ego"]["result"]["identifiable"]
-            for method, run in runs.items():
-                res = dict(run["result"])
-                own = res["identifiable"]
-                res["identifiable"] = reference          # judged on the paper's EGO's identifiable components
-                curve = anytime_errors(run["ledger"], res)
-                reached = float(np.flatnonzero(curve <= TARGET)[0] + 1) if np.any(curve <= TARGET) else math.nan
-                n = int(res["n_simulator_calls"])
-                names = [k for k in res["parameters"] if reference[k]]
-                inside = [res["interval"][k][0] <= res["w_ref"][k] <= res["interval"][k][1] for k in names]
-                jac = res.get("jacobian") or {}
-                row = {"problem": problem, "seed": seed, "method": method, "calls": n, "wall_s": run["wall"],
-                       "calls_to_2pct": reached,
-                       "wall_to_2pct_s": run["wall"] * reached / n if math.isfinite(reached) else math.nan,
-                       "worst_final": float(curve[-1]) if curve.size else math.nan,
-                       "coverage": float(np.mean(inside)) if inside else math.nan,
-                       "not_identifiable_own": [k for k in res["parameters"] if not own[k]],
-                       "jacobians": jac.get("n_jacobians", 0),
-                       "jacobian_plain_equivalents": jac.get("plain_solve_equivalents_each")}
-                rows.append(row)
+            # Table 1: the paper's loop is the prefix of the ego+refine run (same design, same points)
+            kinds = ["ego+refine", "gauss-newton"] if problem == "table1" else methods
+            runs = {m: one_run(problem, m, seed, out, table1_m0) for m in kinds}
+            ref_run = runs.get("ego", runs["ego+refine"])
+            reference = ref_run["result"]["identifiable"]
+            if problem == "table1":
+                new = [row_of(problem, seed, "ego", runs["ego+refine"], reference, paper_loop=True)]
+            else:
+                new = [row_of(problem, seed, "ego", runs["ego"], reference)]
+            new += [row_of(problem, seed, m, runs[m], reference) for m in ("ego+refine", "gauss-newton")]
+            for row in new:
                 print(json.dumps(row), flush=True)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "rows.json").write_text(json.dumps(rows, indent=1))
+            rows += new
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "rows.json").write_text(json.dumps(rows, indent=1))
     print()
     print("| problem | method | simulations (mean) | reached ≤ 2 % | simulations to ≤ 2 % (mean over those) | "
           "wall to ≤ 2 % (s) | worst final % (mean, max) | coverage | Jacobians (mean) | Jacobian cost (plain solves) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for problem in problems:
-        for method in METHODS:
+        for method in methods:
             sel = [r for r in rows if r["problem"] == problem and r["method"] == method]
+            if not sel:
+                continue
             ok = [r for r in sel if math.isfinite(r["calls_to_2pct"])]
-            mean = lambda key, rs=sel: float(np.nanmean([r[key] for r in rs])) if rs else math.nan  # noqa: E731
+
+            def mean(key, rs=sel):
+                vals = [r[key] for r in rs if r[key] is not None and math.isfinite(r[key])]
+                return float(np.mean(vals)) if vals else math.nan
+
             eq = [r["jacobian_plain_equivalents"] for r in sel if r["jacobian_plain_equivalents"]]
             print(f"| {problem} | {method} | {mean('calls'):.1f} | {len(ok)}/{len(sel)} | "
                   f"{mean('calls_to_2pct', ok):.1f} | {mean('wall_to_2pct_s', ok):.1f} | "

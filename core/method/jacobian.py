@@ -25,7 +25,6 @@ from the same Jacobian.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 from typing import Any, Literal, Mapping, Sequence
@@ -35,8 +34,7 @@ import numpy as np
 from suspid import registry
 from suspid.errors import PluginBugError, SimulatorError, SuspidError
 from suspid.interfaces import DifferentiableSimulator, Executor, Response, Simulator, TrackSegment
-from suspid.method.spectra import (AMPLITUDE_FLOOR, SpectraOptions, cell_means, fourier_amplitude, grid_lines,
-                                   record_spectrum)
+from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
 from suspid.options import parse_options
 
 __all__ = ["SpectraJacobian", "JacobianTask", "spectra_jacobian", "spectra_derivatives",
@@ -50,7 +48,8 @@ itself differenced) dominates the error of a central difference, above it the cu
 def spectra_derivatives(responses: Sequence[Response], d_accelerations: Sequence[np.ndarray],
                         options: SpectraOptions | Mapping[str, Any] | None = None
                         ) -> tuple[np.ndarray, np.ndarray]:
-    """y (eq. 1-2) of each record and its derivatives from those of the accelerations.
+    """y (eq. 1-2) of each record and its derivatives from those of the accelerations
+    (:func:`~suspid.method.spectra.record_spectrum_derivatives`).
 
     :param responses: one per segment, as :func:`~suspid.method.spectra.compute_spectra` takes them.
     :param d_accelerations: per segment ``(n_p, n_channels, n_t)``, (m/s²) per SI unit of each parameter.
@@ -59,15 +58,7 @@ def spectra_derivatives(responses: Sequence[Response], d_accelerations: Sequence
     opt = parse_options(SpectraOptions, options, "spectra")
     ys, dys = [], []
     for i, (r, da) in enumerate(zip(responses, d_accelerations)):
-        a = np.asarray(r.accelerations, dtype=float)
-        y = record_spectrum(a, r.fs, opt, name=r.segment or str(i))     # validates the record
-        start, stop = grid_lines(a.shape[1], r.fs, opt)
-        _, a_hat = fourier_amplitude(a, r.fs, opt)                        # (n_ch, n_lines)
-        _, da_hat = fourier_amplitude(np.asarray(da, dtype=float), r.fs, opt)   # (n_p, n_ch, n_lines)
-        mean = cell_means(np.abs(a_hat) ** 2, start, stop)                # (n_ch, n_f)
-        dmean = cell_means(2.0 * np.real(np.conj(a_hat)[None] * da_hat), start, stop)   # (n_p, n_ch, n_f)
-        live = mean > AMPLITUDE_FLOOR ** 2
-        dy = np.where(live[None], (5.0 / math.log(10.0)) * dmean / np.where(live, mean, 1.0)[None], 0.0)
+        y, dy = record_spectrum_derivatives(r.accelerations, da, r.fs, opt, name=r.segment or str(i))
         ys.append(y)
         dys.append(np.moveaxis(dy, 0, -1))
     return np.stack(ys), np.stack(dys)

@@ -212,6 +212,18 @@ def cell_means(power: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.nda
     return sums / (stop - start)
 
 
+def _checked(accelerations: np.ndarray, fs: float, what: str) -> np.ndarray:
+    """The record as a float array, or a :class:`DataError` naming it."""
+    a = np.asarray(accelerations, dtype=float)
+    if a.ndim != 2 or a.shape[1] < 2:
+        raise DataError(f"{what}: accelerations must be (n_channels, n_t) with n_t >= 2, got shape {a.shape}")
+    if not (math.isfinite(fs) and fs > 0):
+        raise DataError(f"{what}: sampling rate must be a positive number of Hz, got {fs!r}")
+    if not np.all(np.isfinite(a)):
+        raise DataError(f"{what}: accelerations contain NaN or infinite values")
+    return a
+
+
 def record_spectrum(accelerations: np.ndarray, fs: float,
                     options: SpectraOptions | Mapping[str, Any] | None = None,
                     name: str = "") -> np.ndarray:
@@ -225,13 +237,13 @@ def record_spectrum(accelerations: np.ndarray, fs: float,
     """
     opt = parse_options(SpectraOptions, options, "spectra")
     what = f"record '{name}'" if name else "record"
-    a = np.asarray(accelerations, dtype=float)
-    if a.ndim != 2 or a.shape[1] < 2:
-        raise DataError(f"{what}: accelerations must be (n_channels, n_t) with n_t >= 2, got shape {a.shape}")
-    if not (math.isfinite(fs) and fs > 0):
-        raise DataError(f"{what}: sampling rate must be a positive number of Hz, got {fs!r}")
-    if not np.all(np.isfinite(a)):
-        raise DataError(f"{what}: accelerations contain NaN or infinite values")
+    a = _checked(accelerations, fs, what)
+    return _record_power(a, fs, opt, what)[0]
+
+
+def _record_power(a: np.ndarray, fs: float, opt: SpectraOptions, what: str = "record"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(y, mean_power, a_hat, start, stop)`` of a checked record ``(n_channels, n_t)`` (:func:`record_spectrum`)."""
     start, stop = grid_lines(a.shape[1], fs, opt, what)
     count = stop - start
     f_native, a_hat = fourier_amplitude(a, fs, opt)
@@ -239,7 +251,30 @@ def record_spectrum(accelerations: np.ndarray, fs: float,
     y = 5.0 * np.log10(np.maximum(mean_power, AMPLITUDE_FLOOR ** 2))
     if opt.log_bias_correction:
         y -= (5.0 / math.log(10.0)) * (digamma(count) - np.log(count))
-    return y
+    return y, mean_power, a_hat, start, stop
+
+
+def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.ndarray, fs: float,
+                                options: SpectraOptions | Mapping[str, Any] | None = None,
+                                name: str = "") -> tuple[np.ndarray, np.ndarray]:
+    """Y (:func:`record_spectrum`) and its derivatives from those of the accelerations.
+
+    Detrend, window and transform are linear, so dÂ is the amplitude of dA; with P_j the mean of |Â|² over
+    cell j, Y_j = 5 log10 P_j and dY_j = (5 / ln 10) dP_j / P_j, dP_j the cell mean of 2 Re(conj(Â) dÂ)
+    (0 where P_j sits at the amplitude floor).
+
+    :param d_accelerations: ``(n_p, n_channels, n_t)``, (m/s²) per unit of each parameter.
+    :returns: ``Y (n_channels, n_freqs)`` dB and ``dY (n_p, n_channels, n_freqs)`` dB per unit.
+    """
+    opt = parse_options(SpectraOptions, options, "spectra")
+    what = f"record '{name}'" if name else "record"
+    a = _checked(accelerations, fs, what)
+    y, mean, a_hat, start, stop = _record_power(a, fs, opt, what)
+    _, da_hat = fourier_amplitude(np.asarray(d_accelerations, dtype=float), fs, opt)
+    dmean = cell_means(2.0 * np.real(np.conj(a_hat)[None] * da_hat), start, stop)
+    live = mean > AMPLITUDE_FLOOR ** 2
+    dy = np.where(live[None], (5.0 / math.log(10.0)) * dmean / np.where(live, mean, 1.0)[None], 0.0)
+    return y, dy
 
 
 def compute_spectra(responses: Sequence[Response],
