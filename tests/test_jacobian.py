@@ -127,3 +127,17 @@ def test_gauss_newton_finds_the_maximum_of_a_closed_form_model_in_a_few_steps():
     np.testing.assert_allclose(res.x_opt, target, rtol=1e-3)
     assert res.n_initial == 6 and res.n_evaluations <= 12          # exact in log w: one or two steps
     assert model.n_jacobians <= res.n_evaluations - res.n_initial + 1
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("preset", ["conventional-hs", "tgv-articulated"])
+def test_every_parameter_of_the_presets_matches_central_differences(train, preset):
+    """The acceptance of the analytic Jacobian: every parameter exudyn-train differentiates, both presets the
+    quickstart and the Table 1 analogue use, to 1e-4 relative (2-norm over channels and samples)."""
+    sim = train(solver="frequency", vehicle=preset)
+    names = sim.differentiable([p.name for p in sim.parameters()])
+    assert len(names) >= 30
+    segments = sample_segments(1, length_m=700.0, speed_mps=83.3, seed=5)
+    errors = check_differentiable(train, {"solver": "frequency", "vehicle": preset}, segments, names=names,
+                                  rtol=1e-4)
+    assert set(errors) == set(names)

@@ -179,14 +179,17 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
             for k, (d, (rows, k_cols, v_cols, state_cols)) in enumerate(zip(derivatives, plans)):
                 if rows.size == 0:
                     continue
-                Xk = X[[col_at[c] for c in position_of[k_cols]]]                       # (nk, 3, b)
-                Xv = X[[col_at[c] for c in p + v_cols]]                                # (nv, 3, b)
-                dZq = np.einsum("rc,cjb->rjb", d.dK[np.ix_(rows, k_cols)], Xk)
-                dZq += np.einsum("rc,cjb->rjb", d.dD[np.ix_(rows, v_cols)], Xv)
-                dZq += np.einsum("rc,cjb->rjb", d.dM[np.ix_(rows, v_cols)], Xv) * s[None, None, :]
-                dF = np.einsum("wrj,wb->rjb", d.dG[:, rows, :], E)
-                Or = O[:, :, [row_at[r] for r in rows]]                                 # (b, n_out, r)
-                out[k, :, :, sl] = np.einsum("bor,rjb->job", Or, dF - dZq)
+                nb = X.shape[2]
+                Xk = X[[col_at[c] for c in position_of[k_cols]]].reshape(len(k_cols), 3 * nb)   # (nk, 3 b)
+                Xv = X[[col_at[c] for c in p + v_cols]].reshape(len(v_cols), 3 * nb)          # (nv, 3 b)
+                r = rows.size
+                dZq = (d.dK[np.ix_(rows, k_cols)] @ Xk + d.dD[np.ix_(rows, v_cols)] @ Xv).reshape(r, 3, nb)
+                dZq += (d.dM[np.ix_(rows, v_cols)] @ Xv).reshape(r, 3, nb) * s[None, None, :]
+                # dF(ω) = Σ_j dG_j e^{iω a_j / v}
+                dF = (d.dG[:, rows, :].reshape(d.dG.shape[0], -1).T @ E).reshape(r, 3, nb)
+                Or = O[:, :, [row_at[i] for i in rows]]                                 # (b, n_out, r)
+                W = np.ascontiguousarray((dF - dZq).transpose(2, 0, 1))                 # (b, r, 3)
+                out[k, :, :, sl] = (Or @ W).transpose(2, 1, 0)                          # (3, n_out, b)
     return out
 
 
