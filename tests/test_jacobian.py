@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 from suspid import registry
 from suspid.interfaces import DifferentiableSimulator
-from suspid.method.jacobian import gauss_newton_information, spectra_jacobian
+from suspid.method.jacobian import gauss_newton_information, linearised_shift, spectra_jacobian
 from suspid.testing import check_differentiable, sample_segments
 
 SPECTRA = {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 60}
@@ -141,3 +141,16 @@ def test_every_parameter_of_the_presets_matches_central_differences(train, prese
     errors = check_differentiable(train, {"solver": "frequency", "vehicle": preset}, segments, names=names,
                                   rtol=1e-4)
     assert set(errors) == set(names)
+
+
+def test_linearised_shift_is_the_refit_of_a_linear_model():
+    rng = np.random.default_rng(2)
+    A, B = rng.normal(size=(4, 3, 5, 2)), rng.normal(size=(4, 3, 5, 1))
+    var = rng.uniform(0.5, 2.0, size=(3, 5))
+    w_true, theta_true, dtheta = np.array([1.0, -2.0]), np.array([0.5]), np.array([0.3])
+    data = A @ w_true + B @ theta_true
+    # weighted least squares with θ held at θ_true + Δθ
+    s = np.sqrt(1 / np.broadcast_to(var, (4, 3, 5))).reshape(-1)
+    rhs = (data - B @ (theta_true + dtheta)).reshape(-1) * s
+    w_fit = np.linalg.lstsq(A.reshape(-1, 2) * s[:, None], rhs, rcond=None)[0]
+    np.testing.assert_allclose(w_fit - w_true, linearised_shift(A, B, var) @ dtheta, atol=1e-12)

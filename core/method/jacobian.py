@@ -19,8 +19,9 @@ needs. :func:`spectra_jacobian` gives it for any simulator:
 
 The result says which parameter took which method and how many plain
 simulations the finite differences cost, so that callers count simulations
-honestly. Helpers for the trust checks (:func:`gauss_newton_information`) work
-from the same Jacobian.
+honestly. Helpers for the trust checks work from the same Jacobians: the
+Fisher information (:func:`gauss_newton_information`) and the first-order shift of
+the estimate with a model parameter held at a wrong value (:func:`linearised_shift`).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
 from suspid.options import parse_options
 
 __all__ = ["SpectraJacobian", "JacobianTask", "spectra_jacobian", "spectra_derivatives",
-           "gauss_newton_information", "DEFAULT_REL_STEP"]
+           "gauss_newton_information", "linearised_shift", "DEFAULT_REL_STEP"]
 
 DEFAULT_REL_STEP = 1e-4
 """Relative step of the finite differences: below it the simulators' own rounding (an exudyn linearisation is
@@ -231,3 +232,24 @@ def gauss_newton_information(jacobian: np.ndarray, variance: np.ndarray) -> np.n
     flat = Jm.reshape(-1, Jm.shape[-1])
     weights = np.broadcast_to(inv[None], Jm.shape[:-1]).reshape(-1)
     return flat.T @ (flat * weights[:, None])
+
+
+def linearised_shift(jacobian_w: np.ndarray, jacobian_theta: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """How the estimate of w moves with model parameters θ held at wrong values, to first order: ``(q, n_θ)``.
+
+    Implicit-function theorem on the weighted least-squares fit of the mean spectra: at the optimum
+    J_wᵀ W r = 0 with r = y_data - y_sim(w, θ) and W = 1/σ²; moving θ by Δθ moves the optimum by
+    Δw = -(J_wᵀ W J_w)^-1 J_wᵀ W J_θ Δθ. A helper for the linearised model-error checks (a nuisance
+    parameter's shift without a re-identification); it is exact for a model linear in (w, θ).
+
+    :param jacobian_w: ``(v, n_channels, n_freqs, q)`` ∂y_sim/∂w (SI or scaled units, see :meth:`SpectraJacobian.scaled`).
+    :param jacobian_theta: ``(v, n_channels, n_freqs, n_θ)`` ∂y_sim/∂θ at the same point.
+    :param variance: ``(n_channels, n_freqs)`` dB², the weights' inverse.
+    :returns: dw/dθ in the units of the two Jacobians.
+    """
+    Jw = np.asarray(jacobian_w, dtype=float)
+    Jt = np.asarray(jacobian_theta, dtype=float)
+    inv = np.broadcast_to(1.0 / np.maximum(np.asarray(variance, dtype=float), 1e-300)[None], Jw.shape[:-1])
+    A = Jw.reshape(-1, Jw.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
+    B = Jt.reshape(-1, Jt.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
+    return -np.linalg.lstsq(A, B, rcond=None)[0]
