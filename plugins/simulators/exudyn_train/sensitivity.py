@@ -164,7 +164,12 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
         # sensors per unit force on the touched coordinates: (-ω² C + C_disp) V diag(z) V^-1 [0; M^-1]
         Psi = response.Vinv[:, p:] @ response.Minv[:, all_rows]                      # (m2, n_rows)
         V_cols = response.V[all_cols]                                                  # (n_cols, m2)
-        Ld = response.Ld if response.Ld is not None else np.zeros_like(response.L)
+        # O(ω) = Σ_m z_m(ω) (-ω² L[:, m] + Ld[:, m]) Psi[m, :]: two products of (n_f, m2) by the modes'
+        # outer products (m2, n_out n_rows), one large matrix product each instead of n_f small ones
+        n_rows = all_rows.size
+        T_L = (response.L[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
+        T_Ld = None if response.Ld is None else \
+            (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
         for lo in range(0, nf, FREQUENCY_BLOCK):
             sl = slice(lo, min(nf, lo + FREQUENCY_BLOCK))
             w = 2 * math.pi * f[sl]
@@ -174,8 +179,10 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
             # the state's response to the track, on the columns read: V diag(z) V^-1 B(ω)
             S = (response.Rt @ E).reshape(m2, 3, -1) * z.T[:, None, :]                 # (m2, 3, b)
             X = (V_cols @ S.reshape(m2, -1)).reshape(len(all_cols), 3, -1)             # (n_cols, 3, b)
-            Lw = (-(w ** 2))[:, None, None] * response.L[None] + Ld[None]              # (b, n_out, m2)
-            O = (Lw * z[:, None, :]) @ Psi                                             # (b, n_out, n_rows)
+            O = ((-(w ** 2))[:, None] * z) @ T_L                                       # (b, n_out n_rows)
+            if T_Ld is not None:
+                O += z @ T_Ld
+            O = O.reshape(-1, n_out, n_rows)                                           # (b, n_out, n_rows)
             for k, (d, (rows, k_cols, v_cols, state_cols)) in enumerate(zip(derivatives, plans)):
                 if rows.size == 0:
                     continue
