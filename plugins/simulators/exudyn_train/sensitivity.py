@@ -167,9 +167,16 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
         # O(ω) = Σ_m z_m(ω) (-ω² L[:, m] + Ld[:, m]) Psi[m, :]: two products of (n_f, m2) by the modes'
         # outer products (m2, n_out n_rows), one large matrix product each instead of n_f small ones
         n_rows = all_rows.size
-        T_L = (response.L[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
-        T_Ld = None if response.Ld is None else \
-            (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
+        n_ld = 1 if response.Ld is None else 2
+        # which order is cheaper per frequency: O for every touched row once, then a small product per
+        # parameter; or per parameter Psi[:, rows] W, then z, then the sensors (right to left)
+        by_rows = n_ld * m2 * n_out * n_rows + sum(n_out * p_[0].size * 3 for p_ in plans)
+        by_parameter = sum(m2 * p_[0].size * 3 + n_ld * n_out * m2 * 3 for p_ in plans)
+        right_first = by_parameter < by_rows
+        if not right_first:
+            T_L = (response.L[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
+            T_Ld = None if response.Ld is None else \
+                (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
         for lo in range(0, nf, FREQUENCY_BLOCK):
             sl = slice(lo, min(nf, lo + FREQUENCY_BLOCK))
             w = 2 * math.pi * f[sl]
@@ -179,10 +186,11 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
             # the state's response to the track, on the columns read: V diag(z) V^-1 B(ω)
             S = (response.Rt @ E).reshape(m2, 3, -1) * z.T[:, None, :]                 # (m2, 3, b)
             X = (V_cols @ S.reshape(m2, -1)).reshape(len(all_cols), 3, -1)             # (n_cols, 3, b)
-            O = ((-(w ** 2))[:, None] * z) @ T_L                                       # (b, n_out n_rows)
-            if T_Ld is not None:
-                O += z @ T_Ld
-            O = O.reshape(-1, n_out, n_rows)                                           # (b, n_out, n_rows)
+            if not right_first:
+                O = ((-(w ** 2))[:, None] * z) @ T_L                                   # (b, n_out n_rows)
+                if T_Ld is not None:
+                    O += z @ T_Ld
+                O = O.reshape(-1, n_out, n_rows)                                       # (b, n_out, n_rows)
             for k, (d, (rows, k_cols, v_cols, state_cols)) in enumerate(zip(derivatives, plans)):
                 if rows.size == 0:
                     continue
@@ -194,6 +202,16 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
                 dZq += (d.dM[np.ix_(rows, v_cols)] @ Xv).reshape(r, 3, nb) * s[None, None, :]
                 # dF(ω) = Σ_j dG_j e^{iω a_j / v}
                 dF = (d.dG[:, rows, :].reshape(d.dG.shape[0], -1).T @ E).reshape(r, 3, nb)
+                if right_first:
+                    # (-ω² L + Ld) diag(z) Psi[:, rows] W, right to left
+                    u = (Psi[:, [row_at[i] for i in rows]] @ (dF - dZq).reshape(r, 3 * nb)).reshape(m2, 3, nb)
+                    u *= z.T[:, None, :]
+                    u = u.reshape(m2, 3 * nb)
+                    res = (response.L @ u).reshape(n_out, 3, nb) * (-(w ** 2))[None, None, :]
+                    if response.Ld is not None:
+                        res += (response.Ld @ u).reshape(n_out, 3, nb)
+                    out[k, :, :, sl] = res.transpose(1, 0, 2)
+                    continue
                 Or = O[:, :, [row_at[i] for i in rows]]                                 # (b, n_out, r)
                 W = np.ascontiguousarray((dF - dZq).transpose(2, 0, 1))                 # (b, r, 3)
                 out[k, :, :, sl] = (Or @ W).transpose(2, 1, 0)                          # (3, n_out, b)
