@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import datetime as dt
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
@@ -136,6 +136,10 @@ class DataSection(Section):
         return self
 
 
+W_REF_MEASURED = "w_ref belongs to numerical experiments, not to measured data"
+"""The one message for ``data.w_ref`` given with measured data (``run``, ``validate`` and ``monitor`` alike)."""
+
+
 class MeasuredReference(Section):
     """``noise.reference``: the reference date's measured data (two-date protocol on measured data).
 
@@ -181,7 +185,8 @@ class StudyOptions(Section):
     """``study:``: variants of the config, each run in its own directory (:mod:`suspid.workflows.study`)."""
 
     variants: list[Variant] = Field(min_length=1)
-    seeds: list[int] | None = None
+    seeds: list[Annotated[int, Field(ge=0, lt=2**32)]] | None = Field(
+        default=None, min_length=1, description="every variant once per seed (each as the top-level seed: 0 <= seed < 2**32); leave it out to run each variant once with the config's seed")
     compare: list[str] | None = Field(default=None, description="two variant names: a paired test over the seeds")
     checkpoints: list[int] = Field(default=[100, 300], min_length=1, description="simulator calls N at which the worst "
                                    "identifiable error is reported")

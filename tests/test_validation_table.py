@@ -172,3 +172,57 @@ def test_cross_section_checks_are_in_validate_too(tmp_path, capsys, mutate, key,
         assert code == 2, (command, out, err)
         assert len(err.strip().splitlines()) == 1 and f"key '{key}'" in err and words in err, err
         assert not (tmp_path / "runs").exists()
+
+
+def _measured_files(tmp_path: Path) -> dict:
+    """Four measured segments (random records of the simulator's channels, their track): enough for validate."""
+    import numpy as np
+
+    from suspid.data.files import write_accelerations_csv, write_track
+    from suspid.data.track import synthetic_segments
+    from suspid.interfaces import Response
+    from suspid.registry import get
+
+    segs = synthetic_segments({"n_segments": 4, "length_m": 600.0, "dx_m": 0.25, "speed_kmh": 300.0, "seed": 4})
+    write_track(segs, tmp_path / "track")
+    channels = get("simulator", "exudyn-train")(solver="frequency", fs_hz=50.0).channels()
+    rng = np.random.default_rng(0)
+    for s in segs:
+        a = 0.3 * rng.standard_normal((len(channels), int(round(s.duration() * 50.0))))
+        write_accelerations_csv(Response(tuple(channels), 50.0, a, s.name), tmp_path / "acc" / f"{s.name}.csv")
+    return {"source": "measured", "measurements": str(tmp_path / "acc"), "track_file": str(tmp_path / "track")}
+
+
+def _measured(cfg: dict, data: dict, **extra) -> None:
+    cfg["data"] = dict(data) | extra
+    cfg.pop("monitor")
+
+
+# what run refuses from the config and the data alone: (mutation of the base config, key, words)
+RUN_REFUSES = {
+    "measured_data_without_noise_model": (lambda c, d: _measured(c, d), "noise", "need the noise model"),
+    "one_segment_for_the_noise_model": (lambda c, d: c["data"]["track"].update(n_segments=1),
+                                        "data.track.n_segments", "at least 2 segments"),
+    "w_ref_with_measured_data": (lambda c, d: (_measured(c, d, w_ref={"k_sec_z": 4.0e5}), c["noise"].update(
+        reference={"measurements": d["measurements"], "track_file": d["track_file"]})),
+                                 "data.w_ref", "w_ref belongs to numerical experiments"),
+    "empty_study_seeds": (lambda c, d: c["study"].update(seeds=[]), "study.seeds", "at least 1 item"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(RUN_REFUSES))
+def test_validate_refuses_what_run_refuses_with_the_same_line(tmp_path, capsys, name):
+    mutate, key, words = RUN_REFUSES[name]
+    cfg = yaml.safe_load(yaml.safe_dump(BASE))
+    cfg["study"], cfg["monitor"] = copy.deepcopy(STUDY), copy.deepcopy(MONITOR)
+    mutate(cfg, _measured_files(tmp_path))
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    lines = {}
+    for command in ("validate", "run"):
+        code, out, err = _cli(capsys, command, str(path))
+        assert code == 2, (command, out, err)
+        lines[command] = err.strip().splitlines()
+        assert len(lines[command]) == 1 and f"key '{key}'" in err and words in err, err
+        assert not (tmp_path / "runs").exists()
+    assert lines["validate"] == lines["run"]

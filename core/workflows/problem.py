@@ -184,12 +184,40 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
     return segments, [r for _, r in records]
 
 
+NO_NOISE_MODEL = ("measured data need the noise model of the reference date: noise.reference (the reference "
+                  "date's measured data) or noise.path (a noise model file)")
+
+
+def check_noise_source(config: Config) -> None:
+    """The run has a noise model B: a file (``noise.path``), or reference-date data to identify it from.
+
+    Measured data need ``noise.path`` or ``noise.reference``; a numerical experiment identifies B on its own
+    reference date, whose segments (``data.reference.n_segments``, default ``data.track.n_segments``) must be
+    at least 2: B's covariance is taken over segments (eq. 3). A ``monitor:`` config gets ``noise.path`` from
+    its own reference date (:mod:`suspid.workflows.monitor` checks that).
+
+    :raises ConfigError: naming the key to set.
+    """
+    if config.noise.path is not None:
+        return
+    if config.data.source == "measured":
+        if config.noise.reference is None and config.monitor is None:
+            raise config.error(NO_NOISE_MODEL, "noise")
+        return
+    n_ref = config.data.reference.n_segments or config.data.track.n_segments
+    if n_ref < 2:
+        key = "data.reference.n_segments" if config.data.reference.n_segments else "data.track.n_segments"
+        raise config.error(f"the noise model of the reference date needs at least 2 segments (its covariance "
+                           f"is taken over segments, eq. 3), got {n_ref}; or give noise.path", key)
+
+
 def validate_data(config: Config) -> int:
     """Read and check measured data as a run would (files, channels, durations, spectra grid).
 
     :returns: the number of measured segments (0 for a numerical experiment).
     :raises DataError: one line naming the file and what is wrong.
     """
+    check_noise_source(config)
     if config.data.source != "measured":
         return 0
     simulator = build_simulator(config)
@@ -347,8 +375,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           freqs=freqs, channels=channels,
                                           speeds=segment_speeds(reference_segments))
         else:
-            raise config.error("measured data need the noise model of the reference date: noise.reference "
-                               "(the reference date's measured data) or noise.path (a noise model file)", "noise")
+            raise config.error(NO_NOISE_MODEL, "noise")
     noise_model.check_grid(freqs, channels)
     b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), segment_speeds(segments))
 
