@@ -20,7 +20,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, unknown_channel
+from ._common import as_float, check_exists, library_errors, unknown_channel
 from .hdf5 import datasets
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -58,13 +58,12 @@ class MatReader(Reader):
         if self._names is None:
             check_exists(self.path)
             if is_v73(self.path):
-                self._h5 = h5py.File(self.path, "r")
-                self._names = [n for n in datasets(self._h5) if not n.startswith("#")]
+                with library_errors(self.path, "MATLAB 7.3 (HDF5)"):
+                    self._h5 = h5py.File(self.path, "r")
+                    self._names = [n for n in datasets(self._h5) if not n.startswith("#")]
             else:
-                try:
+                with library_errors(self.path, "MATLAB"):   # scipy raises several types for a file that is not MAT
                     info = scipy.io.whosmat(str(self.path))
-                except Exception as exc:  # scipy raises several types for a file that is not MAT
-                    raise DataError(f"{self.path}: not a readable MATLAB file ({exc})") from None
                 self._names = [name for name, shape, cls in info
                                if cls in ("double", "single", "int8", "int16", "int32", "int64", "uint8",
                                           "uint16", "uint32", "uint64") and len(shape) == 2 and min(shape) == 1]
@@ -77,9 +76,10 @@ class MatReader(Reader):
         names = self._open()
         if name not in names:
             raise unknown_channel(self.path, name, [n for n in names if n != self.opts.index])
-        if self._h5 is not None:
-            return as_float(self._h5[name][()], self.path, name)
-        return as_float(scipy.io.loadmat(str(self.path), variable_names=[name])[name], self.path, name)
+        with library_errors(self.path, "MATLAB"):
+            if self._h5 is not None:
+                return as_float(self._h5[name][()], self.path, name)
+            return as_float(scipy.io.loadmat(str(self.path), variable_names=[name])[name], self.path, name)
 
     def read(self, channel: str) -> Signal:
         values = self._vector(channel)
