@@ -52,7 +52,7 @@ class Mdf4Reader(Reader):
             check_exists(self.path)
             asammdf = optional_library("asammdf", "asammdf", self.path)
             try:
-                with library_errors(self.path, "MDF", "asammdf"):   # asammdf raises many types for a damaged file
+                with library_errors(self.path, "MDF"):   # asammdf raises many types for a damaged file
                     self._stream = open(self.path, "rb")
                     self._mdf = asammdf.MDF(self._stream)   # a stream, not a path: no memory map of the file
             except DataError:
@@ -62,7 +62,7 @@ class Mdf4Reader(Reader):
 
     def channels(self) -> list[str]:
         mdf = self._file()
-        with library_errors(self.path, "MDF", "asammdf"):
+        with library_errors(self.path, "MDF"):
             masters = {mdf.groups[i].channels[mdf.masters_db[i]].name for i in mdf.masters_db} \
                 if hasattr(mdf, "masters_db") else set()
             return [n for n in mdf.channels_db if n not in masters]
@@ -75,7 +75,7 @@ class Mdf4Reader(Reader):
         n = int(mdf.groups[group].channel_group.cycles_nr)
         step = self.opts.chunk_records
         values, times, unit = np.empty(n), np.empty(n), ""
-        with library_errors(self.path, "MDF", "asammdf"):
+        with library_errors(self.path, "MDF"):
             for start in range(0, max(n, 1), step):
                 sig = mdf.get(channel, group=group, index=index, record_offset=start,
                               record_count=min(step, n - start))
