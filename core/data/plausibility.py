@@ -194,8 +194,8 @@ def judge(doubts: Sequence[Doubt], where: Path | str, *, accept: Collection[str]
     :param accept: the checks the user accepts (their findings become warnings).
     :param strict: unusual findings are errors too.
     :param accept_key: the key that takes ``accept`` (``data.accept``, ``quality.accept``), for the message.
-    :param emit: send each warning as a :class:`~suspid.errors.DataWarning` (False: the caller reports them,
-        as ``suspid ingest`` does in its quality report).
+    :param emit: send the warnings as one :class:`~suspid.errors.DataWarning` (the first, with how many more;
+        False: the caller reports them, as ``suspid ingest`` does in its quality report).
     :returns: the warnings, one line each.
     :raises DataError: the first finding that is refused, one line naming ``where``.
     """
@@ -208,6 +208,7 @@ def judge(doubts: Sequence[Doubt], where: Path | str, *, accept: Collection[str]
     if strict and any(d.check is None for d in doubts):
         first = next(m for m, d in zip(messages, doubts) if d.check is None)
         raise DataError(first + " (refused in strict mode)")
-    for m in messages if emit else ():
-        warnings.warn(m, DataWarning, stacklevel=stacklevel + 1)
+    if emit and messages:   # one line per record: ten channels of one file in mm/s^2 are one finding
+        more = f" (and {len(messages) - 1} more like it here)" if len(messages) > 1 else ""
+        warnings.warn(messages[0] + more, DataWarning, stacklevel=stacklevel + 1)
     return messages
