@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.io
 import yaml
 
 import suspid
@@ -284,6 +285,8 @@ INGEST_FAULTS = {
                        "recording.tdms: damaged or truncated TDMS file ("),
     "mf4_truncated": ("mf4", lambda f: {"recording.path": _truncated(f, "recording.mf4")},
                       "recording.mf4: damaged or unreadable MDF file (struct.error"),
+    "mat5_truncated": ("mat", lambda f: {"recording.path": _truncated(f, "recording.mat")},
+                       "recording.mat: damaged or truncated MATLAB file (the variable at byte"),
     "mat73_truncated": ("mat73", lambda f: {"recording.path": _truncated(f, "recording-v73.mat")},
                         "recording-v73.mat: damaged or unreadable MATLAB 7.3 (HDF5) file (OSError"),
     "sparse_time_stamps": ("csv", lambda f: {"recording.path": _sparse_time(f, "recording.csv")},
@@ -332,6 +335,18 @@ def test_damaged_recordings_and_typos_are_one_line_naming_the_file_or_key(record
         assert head == str(path) and blocks.pop(0).strip() == "exit 2", (name, lines)
         assert len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], (name, lines)
         assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("compress", [False, True])
+def test_a_whole_matlab_5_file_is_not_taken_for_a_cut_one(tmp_path, compress):
+    """(scipy lists the variables of a cut file up to the cut: the mapped channel after it was "absent")"""
+    from suspid.plugins.readers.mat import v5_cut
+
+    path = tmp_path / "r.mat"
+    scipy.io.savemat(path, {"a": np.arange(1001.0), "b": np.ones(7), "s": "text"}, do_compression=compress)
+    assert v5_cut(path) is None
+    path.write_bytes(path.read_bytes()[:-3])
+    assert "needs" in v5_cut(path)
 
 
 def test_a_lab_can_add_its_own_reader(recordings, tmp_path):
