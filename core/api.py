@@ -164,7 +164,7 @@ def segments(config: ConfigSource, overrides: Overrides = None) -> list[TrackSeg
         return synthetic_track(cfg, "measurement")
     if cfg.data.track_file is None:
         raise cfg.error("measured data need data.track_file", "data.track_file")
-    return read_track(cfg.data.track_file, strict=cfg.data.strict)
+    return read_track(cfg.data.track_file, strict=cfg.data.strict, accept=cfg.data.accept)
 
 
 def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[str, float] | None = None,

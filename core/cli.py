@@ -30,8 +30,8 @@ console = Console(soft_wrap=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
 SetOpt = typer.Option(None, "--set", help="Override a config value: key.path=value (repeatable).")
-StrictOpt = typer.Option(False, "--strict", help="Implausible measured data (units, dead channels) are errors, "
-                                                 "not warnings (data.strict).")
+StrictOpt = typer.Option(False, "--strict", help="Unusual measured data (higher vibration or speed than usual) "
+                                                 "are errors, not warnings (data.strict).")
 
 
 def _overrides(set_: Optional[List[str]], strict: bool) -> list[str]:

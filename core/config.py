@@ -39,7 +39,7 @@ from suspid.method.spectra import SpectraOptions
 from suspid.optimize.design import DesignOptions, default_n_initial
 from suspid.optimize.ego import EGOOptions
 from suspid.options import Section, against, key_error, raise_validation_error
-from suspid.sections import (DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
+from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
 
@@ -352,6 +352,8 @@ def check_config_plugins(config: Config) -> None:
                              key=f"data.{date}.simulator_options", lines=config._lines, base_dir=base_dir)
     simulator = build_simulator(config)
     check_parameters(config, simulator)
+    if config.data.source == "measured" and config.data.w_ref:   # measured data have no known truth to use
+        raise config.error(W_REF_MEASURED, "data.w_ref")
     check_nuisance(config, simulator)
     channels = simulator.channels()
     channel_weights(config, channels)

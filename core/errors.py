@@ -70,7 +70,8 @@ class PluginBugError(PluginError):
 
 
 class DataWarning(UserWarning):
-    """Data that are possible but implausible (units, a dead channel); an error in strict mode."""
+    """Data that are possible but unusual (an error in strict mode), or impossible ones the user accepted
+    (``data.accept``); see :mod:`suspid.data.plausibility`."""
 
 
 class LedgerError(SuspidError):

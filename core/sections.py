@@ -16,11 +16,12 @@ from __future__ import annotations
 
 import datetime as dt
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from suspid.data.experiment import MeasurementOptions, ReferenceOptions
+from suspid.data.plausibility import Check
 from suspid.data.track import TrackOptions
 from suspid.method.noise import NoiseOptions
 from suspid.options import ConfigPath, Section
@@ -103,8 +104,12 @@ class DataSection(Section):
         "(experiment), e.g. simulator_options with a hidden effect")
     measurements: ConfigPath | None = Field(default=None, description="measured data file or folder")
     track_file: ConfigPath | None = Field(default=None, description="measured track geometry file or folder")
-    strict: bool = Field(default=False, description="implausible measured data (units, dead channels) are "
-                         "errors, not warnings (``--strict``)")
+    strict: bool = Field(default=False, description="unusual measured data (a vibration or a speed higher than "
+                         "usual) are errors, not warnings (``--strict``)")
+    accept: list[Check] = Field(default_factory=list, description="checks of physically impossible data to let pass "
+                                "with a warning: implausible_amplitude (values 1000 times too large: mm/s^2 or mm "
+                                "for SI units), dead_channel (a constant or silent channel), implausible_speed "
+                                "(km/h for m/s); see suspid.data.plausibility")
     corrections: list[SensorCorrection] = Field(
         default_factory=list, description="sensor faults corrected in the measured records before their spectra "
         "(measured data; the reference date's records are taken as they are)")
@@ -134,6 +139,10 @@ class DataSection(Section):
             raise ValueError("corrections apply to measured records (data.source: measured); a numerical "
                              "experiment has none")
         return self
+
+
+W_REF_MEASURED = "w_ref belongs to numerical experiments, not to measured data"
+"""The one message for ``data.w_ref`` given with measured data (``run``, ``validate`` and ``monitor`` alike)."""
 
 
 class MeasuredReference(Section):
@@ -181,7 +190,9 @@ class StudyOptions(Section):
     """``study:``: variants of the config, each run in its own directory (:mod:`suspid.workflows.study`)."""
 
     variants: list[Variant] = Field(min_length=1)
-    seeds: list[int] | None = None
+    seeds: list[Annotated[int, Field(ge=0, lt=2**32)]] | None = Field(
+        default=None, min_length=1, description="every variant once per seed (each as the top-level seed: "
+        "0 <= seed < 2**32); leave it out to run each variant once with the config's seed")
     compare: list[str] | None = Field(default=None, description="two variant names: a paired test over the seeds")
     checkpoints: list[int] = Field(default=[100, 300], min_length=1, description="simulator calls N at which the worst "
                                    "identifiable error is reported")

@@ -1,4 +1,4 @@
-"""Faulty track and acceleration files: one-line errors naming the file, warnings for implausible data.
+"""Faulty track and acceleration files: one-line errors naming the file; impossible data refused, unusual warned.
 
 Every case: the reader raises a :class:`suspid.errors.SuspidError` subclass
 whose message is one line naming the file (and the segment, dataset or
@@ -354,17 +354,28 @@ def _acc_file(tmp, edit_channel):
     return write_accelerations_csv(Response(r.channels, r.fs, a, r.segment), tmp / "r.csv")
 
 
-IMPLAUSIBLE = {
+IMPOSSIBLE = {   # values no train in service gives: (file, reader, the check, words of the one-line error)
     "accelerations_in_mm_per_s2": (lambda tmp: _acc_file(tmp, lambda a: a * 1000.0), read_accelerations,
-                                   "channel 'carbody_front_vertical' has an rms of"),
-    "dead_channel_all_zero": (lambda tmp: _acc_file(tmp, lambda a: 0.0 * a), read_accelerations,
-                              "channel 'carbody_front_vertical' is constant (0 m/s^2)"),
-    "dead_channel_tiny_rms": (lambda tmp: _acc_file(tmp, lambda a: 1e-8 * a), read_accelerations,
-                              "below what a working accelerometer"),
+                                   "implausible_amplitude", "channel 'carbody_front_vertical' vibrates with 498 m/s^2 "
+                                   "rms, beyond a carbody of a train in service (at most 20 m/s^2)"),
+    "dead_channel_all_zero": (lambda tmp: _acc_file(tmp, lambda a: 0.0 * a), read_accelerations, "dead_channel",
+                              "channel 'carbody_front_vertical' is constant: a dead or disconnected sensor"),
+    "dead_channel_tiny_rms": (lambda tmp: _acc_file(tmp, lambda a: 1e-8 * a), read_accelerations, "dead_channel",
+                              "below the noise of any working accelerometer"),
     "track_in_mm": (lambda tmp: write_track([_scaled(segments(1)[0], 1000.0)], tmp / "t.h5"), read_track,
-                    "values in mm instead of m?"),
+                    "implausible_amplitude", "in the 3-25 m wavelength band (EN 13848 D1), beyond any track open to "
+                                             "traffic (at most 0.05 m): values in mm instead of m?"),
     "speed_in_kmh": (lambda tmp: write_track_csv(_speed(segments(1)[0], 300.0), tmp / "t.csv"), read_track,
-                     "speed 300 m/s (1080 km/h)"),
+                     "implausible_speed", "speed 300 m/s (1080 km/h) is above any train's"),
+}
+
+UNUSUAL = {   # possible but unusual: a warning, an error in strict mode
+    "carbody_vibrating_5_m_per_s2": (lambda tmp: _acc_file(tmp, lambda a: a * 10.0), read_accelerations,
+                                     "more than a carbody of a train in service usually does (up to 2 m/s^2)"),
+    "track_d1_rms_25_mm": (lambda tmp: write_track([_d1(segments(1)[0], 0.025)], tmp / "t.h5"), read_track,
+                           "more than a track in service usually has (up to 0.015 m)"),
+    "speed_400_kmh": (lambda tmp: write_track_csv(_speed(segments(1)[0], 400 / 3.6), tmp / "t.csv"), read_track,
+                      "is above every commercial service (100 m/s)"),
 }
 
 
@@ -373,14 +384,40 @@ def _scaled(seg, k):
     return seg
 
 
+def _d1(seg, rms):
+    """The segment scaled so that its vertical channel has ``rms`` (m) in the D1 band."""
+    from suspid.data.plausibility import d1_rms
+
+    return _scaled(seg, rms / d1_rms(seg.irregularities[0], float(seg.distance[1] - seg.distance[0])))
+
+
 def _speed(seg, v):
     seg.speed = v
     return seg
 
 
-@pytest.mark.parametrize("name", sorted(IMPLAUSIBLE))
-def test_implausible_data_warn_and_strict_refuses(tmp_path, name):
-    make, read, fragment = IMPLAUSIBLE[name]
+@pytest.mark.parametrize("name", sorted(IMPOSSIBLE))
+def test_impossible_data_are_refused_unless_the_check_is_accepted(tmp_path, name):
+    """Each read with a warning before; now one line naming the file, the channel, the limit and the key that
+    accepts it; with the check in ``accept`` the data are read, with one warning."""
+    make, read, check, fragment = IMPOSSIBLE[name]
+    path = make(tmp_path)
+    with pytest.raises(DataError) as err:
+        read(path)
+    assert_one_line(err.value, str(path), fragment, f"(if these values are right, add {check} to data.accept)")
+    others = [c for c in ("implausible_amplitude", "dead_channel", "implausible_speed") if c != check]
+    with pytest.raises(DataError):
+        read(path, accept=others)            # another check accepted: still refused
+    with pytest.warns(DataWarning) as caught:
+        read(path, accept=[check])
+    msgs = [str(w.message) for w in caught if issubclass(w.category, DataWarning)]
+    assert len(msgs) == 1 and fragment in msgs[0] and msgs[0].startswith(str(path)) and "\n" not in msgs[0]
+    assert f"accepted: {check} in data.accept" in msgs[0]
+
+
+@pytest.mark.parametrize("name", sorted(UNUSUAL))
+def test_unusual_data_warn_and_strict_refuses(tmp_path, name):
+    make, read, fragment = UNUSUAL[name]
     path = make(tmp_path)
     with pytest.warns(DataWarning) as caught:
         read(path)
@@ -394,6 +431,14 @@ def test_implausible_data_warn_and_strict_refuses(tmp_path, name):
 def test_plausible_data_give_no_warning(tmp_path, recwarn):
     read_track(write_track(segments(2), tmp_path / "t.h5"))
     read_accelerations(write_accelerations_h5([record("a"), record("b")], tmp_path / "a.h5"), strict=True)
+    assert not [w for w in recwarn if issubclass(w.category, DataWarning)]
+
+
+@pytest.mark.parametrize("spectrum", ["german-low", "german-high", "fra-1", "fra-6"])
+def test_every_published_track_spectrum_is_plausible(tmp_path, spectrum, recwarn):
+    """The worst US class (FRA 1) included: its long wavelengths make the raw rms 0.15 m, the D1 band's 8 mm."""
+    segs = synthetic_segments({"n_segments": 2, "length_m": 2000.0, "spectrum": spectrum, "seed": 1})
+    read_track(write_track(segs, tmp_path / "t.h5"), strict=True)
     assert not [w for w in recwarn if issubclass(w.category, DataWarning)]
 
 

@@ -115,3 +115,25 @@ def test_another_optimizer_tolerates_failed_points_and_counts_them_against_the_b
     assert in_search and all(p["phase"] in ("cma-es", "intervals") for p in failed)
     assert len(J) == 30 and sum(v is None for v in J) == len(in_search)
     assert r.n_simulator_calls == 30 - len(in_search)
+
+
+class ThreeChannelTrain(ExudynTrain):
+    """Says it has the train's ten channels, returns three of them."""
+
+    name = "three-channel-train"
+
+    def simulate(self, w, segments):
+        return [type(r)(r.channels[:3], r.fs, r.accelerations[:3], r.segment) for r in super().simulate(w, segments)]
+
+
+def test_a_plugin_returning_other_channels_than_it_lists_is_named(tmp_path):
+    """It was "record 'seg-001' has channels [...]" or a shape error further on, without the plugin's name."""
+    plugin = types.SimpleNamespace(suspid_register_simulators=hookimpl(lambda register: register(ThreeChannelTrain)))
+    registry.add_plugin(plugin, "three")
+    cfg = _config(tmp_path, "three-channel-train") | {"data": {"track": {"n_segments": 2, "length_m": 1000.0},
+                                                               "reference": {"n_segments": 4}}}
+    with pytest.raises(PluginBugError) as err:
+        suspid.identify(cfg)
+    msg = str(err.value)
+    assert "simulator plugin 'three-channel-train'" in msg and "returned 3 channels" in msg, msg
+    assert "its channels() lists 10" in msg and "\n" not in msg

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import importlib.util
 import json
+import os
+import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.io
 import yaml
 
 import suspid
@@ -119,20 +122,70 @@ def test_hdf5_output_validates_with_a_measured_config(recordings, tmp_path):
     assert r.track_path.name == "track.h5" and r.measurements_path.name == "accelerations.h5"
     cfg = yaml.safe_load((folder / "suspid.yaml").read_text())
     cfg["data"] = {"source": "measured", "track_file": str(r.track_path), "measurements": str(r.measurements_path)}
+    cfg["noise"] = {"reference": {"track_file": str(r.track_path), "measurements": str(r.measurements_path)}}
     assert suspid.validate(cfg).n_measured_segments == len(r.segments)
 
 
-def test_mm_per_s2_declared_as_m_per_s2_is_one_warning_line(recordings, tmp_path):
+def _zeroed(folder: Path, column: int) -> str:
+    lines = (folder / "recording.csv").read_text().splitlines()
+    body = [line for line in lines if line and not line.startswith("#")]
+    out = [line for line in lines if line.startswith("#")] + [body[0]]
+    for line in body[1:]:
+        cells = line.split(",")
+        cells[column] = "0"
+        out.append(",".join(cells))
+    (folder / "dead.csv").write_text("\n".join(out) + "\n")
+    return "dead.csv"
+
+
+# impossible values through ingest: (format, changes, words of the one-line DataError)
+INGEST_IMPOSSIBLE = {
+    # a MAT file has no units: only the amplitude can tell
+    "mat_data_in_mm_per_s2_declared_m_per_s2": (
+        "mat", {"recording.channels.carbody_front_vertical.unit": "m/s^2"},
+        ["recording.mat: channel 'carbody_front_vertical' vibrates with", "beyond a carbody of a train in service",
+         "(recorded channel 'ACC_Z_K1', declared unit 'm/s^2')", "add implausible_amplitude to quality.accept"]),
+    "declared_unit_contradicts_the_mdf_header": (
+        "mf4", {"recording.channels.carbody_front_vertical.unit": "m/s^2"},
+        ["recording.mf4: channel 'carbody_front_vertical' vibrates with",
+         "declared unit 'm/s^2', the file gives 'mm/s^2'"]),
+    "track_in_mm_declared_m": (
+        "csv", {"track.channels.vertical.unit": "m"},
+        ["track-record.csv: channel 'vertical' has irregularities of", "beyond any track open to traffic",
+         "(recorded channel 'LL', declared unit 'm')", "add implausible_amplitude to quality.accept"]),
+    "speed_in_kmh_declared_m_per_s": (
+        "csv", {"recording.speed.unit": "m/s"},
+        ["recording.csv: speed (declared unit 'm/s'), 99th percentile", "above any train's",
+         "add implausible_speed to quality.accept"]),
+    "all_zero_channel": (
+        "csv", {"recording.path": "dead.csv"},
+        ["dead.csv: channel 'bogie_front_lateral' is constant: a dead or disconnected sensor",
+         "add dead_channel to quality.accept"]),
+}
+
+
+@pytest.mark.parametrize("name", sorted(INGEST_IMPOSSIBLE))
+def test_impossible_values_stop_the_ingest_before_it_writes(recordings, tmp_path, name):
+    """Each was a warning line in the quality report and segments written; now one error, nothing written."""
     folder, _ = recordings
-    # a MAT file has no units: only the implausible RMS can tell
+    fmt, changes, words = INGEST_IMPOSSIBLE[name]
+    if name == "all_zero_channel":
+        _zeroed(folder, 4)     # ACC_Y_B1, mapped to bogie_front_lateral
+    with pytest.raises(DataError) as err:
+        _run(folder, _ingest_file(folder, fmt, **changes), tmp_path / name)
+    msg = str(err.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+    assert not (tmp_path / name).exists()
+
+
+def test_impossible_values_accepted_by_name_are_ingested_with_a_warning(recordings, tmp_path):
+    folder, _ = recordings
     data = _ingest_file(folder, "mat", **{"recording.channels.carbody_front_vertical.unit": "m/s^2"})
-    r = _run(folder, data, tmp_path / "wrong-unit")
-    lines = [w for w in r.warnings if "carbody_front_vertical" in w]
-    assert len(lines) == 1 and "RMS" in lines[0] and "declared unit 'm/s^2'" in lines[0]
-    # the MDF file states its units: the disagreement is a warning too, naming both
-    data = _ingest_file(folder, "mf4", **{"recording.channels.carbody_front_vertical.unit": "m/s^2"})
-    r = _run(folder, data, tmp_path / "wrong-unit-mf4")
-    assert any("the file gives the unit 'mm/s^2' but the config declares 'm/s^2'" in w for w in r.warnings)
+    data.setdefault("quality", {})["accept"] = ["implausible_amplitude"]
+    r = _run(folder, data, tmp_path / "accepted")
+    lines = [w for w in r.warnings if "vibrates with" in w]
+    assert len(lines) == 1 and "accepted: implausible_amplitude in quality.accept" in lines[0]
+    assert r.segments
 
 
 def test_unknown_unit_is_a_config_error(recordings):
@@ -155,7 +208,8 @@ def test_missing_channel_mapping_is_a_config_error(recordings, tmp_path):
 def test_channel_absent_from_the_file_is_a_data_error(recordings, tmp_path):
     folder, _ = recordings
     data = _ingest_file(folder, "mf4", **{"recording.channels.bogie_front_lateral.name": "ACC_Y_B9"})
-    with pytest.raises(DataError, match=r"recording.mf4: no channel 'ACC_Y_B9' \(mapped to bogie_front_lateral\)"):
+    with pytest.raises(DataError, match=r"recording.mf4: no channel 'ACC_Y_B9' \(mapped to bogie_front_lateral, "
+                                        r"key recording.channels.bogie_front_lateral.name\)"):
         _run(folder, data, tmp_path / "absent")
 
 
@@ -208,6 +262,91 @@ def test_cli_ingest_and_its_one_line_error(recordings, tmp_path):
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0 and p.stderr.startswith("error: ")
 
+
+
+def _truncated(folder: Path, name: str) -> str:
+    data = (folder / name).read_bytes()
+    (folder / f"truncated-{name}").write_bytes(data[: len(data) * 6 // 10])
+    return f"truncated-{name}"
+
+
+def _sparse_time(folder: Path, name: str) -> str:
+    lines = (folder / name).read_text().splitlines()
+    cells = lines[-1].split(",")
+    cells[0] = "3.0e7"          # the last time stamp a year later: a grid of billions of samples
+    lines[-1] = ",".join(cells)
+    (folder / f"sparse-{name}").write_text("\n".join(lines) + "\n")
+    return f"sparse-{name}"
+
+
+# damaged recordings and mapping typos through `suspid ingest`: (format, damage -> changes, words of the line)
+INGEST_FAULTS = {
+    "tdms_truncated": ("tdms", lambda f: {"recording.path": _truncated(f, "recording.tdms")},
+                       "recording.tdms: damaged or truncated TDMS file ("),
+    "mf4_truncated": ("mf4", lambda f: {"recording.path": _truncated(f, "recording.mf4")},
+                      "recording.mf4: damaged or unreadable MDF file (struct.error"),
+    "mat5_truncated": ("mat", lambda f: {"recording.path": _truncated(f, "recording.mat")},
+                       "recording.mat: damaged or truncated MATLAB file (the variable at byte"),
+    "mat73_truncated": ("mat73", lambda f: {"recording.path": _truncated(f, "recording-v73.mat")},
+                        "recording-v73.mat: damaged or unreadable MATLAB 7.3 (HDF5) file (OSError"),
+    "sparse_time_stamps": ("csv", lambda f: {"recording.path": _sparse_time(f, "recording.csv")},
+                           "recording.csv: channel 'ACC_Z_K1' spans 3e+07 s at 200 Hz"),
+    "channel_key_typo": ("csv", lambda f: {"recording.channels.carbody_front_verticle":
+                                           {"name": "ACC_Z_K1", "unit": "mm/s^2"},
+                                           "recording.channels.carbody_front_vertical": None},
+                         "key 'recording.channels.carbody_front_verticle': 'carbody_front_verticle' is not a "
+                         "channel of simulator 'exudyn-train' (did you mean carbody_front_vertical?)"),
+}
+
+INGEST_MANY = """
+import sys
+from suspid.cli import main
+for path in sys.argv[1:]:
+    print("@@", path, file=sys.stderr, flush=True)
+    try:
+        main(["ingest", path, "--quiet"])
+    except SystemExit as exc:
+        print("@@ exit", exc.code, file=sys.stderr, flush=True)
+import gc
+gc.collect()
+"""
+
+
+def test_damaged_recordings_and_typos_are_one_line_naming_the_file_or_key(recordings, tmp_path):
+    """Each was exit 1 ("a bug": a truncated TDMS), a line and then asammdf's "Exception ignored" traceback
+    (a truncated MDF4), h5py's words without the file (MAT 7.3), "out of memory" without the file (time
+    stamps far apart) or the missing channel instead of the misspelt key. One process runs them all, so
+    that a finalizer's traceback at its end shows too."""
+    folder, _ = recordings
+    paths = []
+    for name, (fmt, damage, _) in sorted(INGEST_FAULTS.items()):
+        data = _ingest_file(folder, fmt, **damage(folder))
+        data["output"]["dir"] = str(tmp_path / name)
+        paths.append(folder / f"ingest-fault-{name}.yaml")
+        paths[-1].write_text(yaml.safe_dump(data))
+    script = tmp_path / "many.py"
+    script.write_text(INGEST_MANY)
+    p = subprocess.run([sys.executable, str(script), *map(str, paths)], capture_output=True, text=True, timeout=600,
+                       env=dict(os.environ, SUSPID_DISABLE_PLUGIN_AUTOLOAD="1"))
+    assert p.returncode == 0 and "Traceback" not in p.stderr and "Exception ignored" not in p.stderr, p.stderr
+    blocks = p.stderr.split("@@ ")[1:]
+    for (name, (_, _, words)), path in zip(sorted(INGEST_FAULTS.items()), paths):
+        head, *lines = blocks.pop(0).strip().splitlines()
+        assert head == str(path) and blocks.pop(0).strip() == "exit 2", (name, lines)
+        assert len(lines) == 1 and lines[0].startswith("error: ") and words in lines[0], (name, lines)
+        assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("compress", [False, True])
+def test_a_whole_matlab_5_file_is_not_taken_for_a_cut_one(tmp_path, compress):
+    """(scipy lists the variables of a cut file up to the cut: the mapped channel after it was "absent")"""
+    from suspid.plugins.readers.mat import v5_cut
+
+    path = tmp_path / "r.mat"
+    scipy.io.savemat(path, {"a": np.arange(1001.0), "b": np.ones(7), "s": "text"}, do_compression=compress)
+    assert v5_cut(path) is None
+    path.write_bytes(path.read_bytes()[:-3])
+    assert "needs" in v5_cut(path)
 
 
 def test_a_lab_can_add_its_own_reader(recordings, tmp_path):

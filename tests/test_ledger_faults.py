@@ -103,6 +103,54 @@ def test_bad_ledger_refused_untouched_then_fresh_sets_it_aside(tmp_path, name):
     led.close()
 
 
+def _object_array(p: Path) -> None:
+    import io
+
+    buf = io.BytesIO()
+    np.save(buf, np.array([{"a": 1}, None], dtype=object), allow_pickle=True)   # a pickle: never unpickled
+    _sql(filled(p), "DELETE FROM artifacts")
+    conn = sqlite3.connect(p)
+    conn.execute("INSERT INTO artifacts VALUES ('y', ?, 0)", (buf.getvalue(),))
+    conn.commit()
+    conn.close()
+
+
+# rows SQLite reads but suspid cannot decode (edited by hand, written by other code): (damage, read, fragment)
+DAMAGED_ROWS: dict[str, tuple[Callable[[Path], None], Callable[[Ledger], object], str]] = {
+    "J_edited_to_NaN_text": (lambda p: _sql(filled(p), "UPDATE evaluations SET J = 'NaN' WHERE key = 'k3'"),
+                             lambda led: list(led.evaluations()), "evaluation k3, column J: 'NaN' is not a number"),
+    "J_edited_to_null": (lambda p: _sql(filled(p), "UPDATE evaluations SET J = NULL WHERE key = 'k3'"),
+                         lambda led: led.get("k3"), "evaluation k3, column J: None is not a number"),
+    "w_not_json": (lambda p: _sql(filled(p), "UPDATE evaluations SET w = '{\"x\": nan' WHERE key = 'k5'"),
+                   lambda led: led.get("k5"), "evaluation k5, column w: JSONDecodeError"),
+    "w_not_a_mapping": (lambda p: _sql(filled(p), "UPDATE evaluations SET w = '[1, 2]' WHERE key = 'k5'"),
+                        lambda led: list(led.evaluations()), "column w: not a mapping of names to numbers"),
+    "psi_not_json": (lambda p: _sql(filled(p), "UPDATE evaluations SET psi = 'NaN,' WHERE key = 'k1'"),
+                     lambda led: led.get("k1"), "evaluation k1, column psi"),
+    "iteration_record_J_nan": (lambda p: (filled(p), _sql(p, "INSERT INTO iterations VALUES "
+                                                             "('ego', 0, '{\"J\": nan}')")),
+                               lambda led: led.iterations("ego"), "iteration 0 of ego: JSONDecodeError"),
+    "pickled_object_array": (_object_array, lambda led: led.get_array("y"), "array y: ValueError"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(DAMAGED_ROWS))
+def test_a_damaged_row_is_a_ledger_error_naming_the_file(tmp_path, name):
+    """A row edited to something suspid cannot decode: one LedgerError naming the file, the row and the remedy
+    (it was a JSONDecodeError or a ValueError, reported as a bug); nothing written, --fresh starts over."""
+    damage, read, fragment = DAMAGED_ROWS[name]
+    path = tmp_path / "ledger.sqlite"
+    damage(path)
+    before = path.read_bytes()
+    led = Ledger(path)
+    with pytest.raises(LedgerError) as err:
+        read(led)
+    assert_one_line(err.value, str(path), "the run ledger is damaged", fragment, "move it away or run with --fresh")
+    led.close()
+    assert path.read_bytes() == before
+    assert Ledger.fresh(path).count() == 0
+
+
 def test_fresh_clears_a_sound_ledger_in_place(tmp_path):
     path = filled(tmp_path / "ledger.sqlite")
     led = Ledger.fresh(path)

@@ -207,3 +207,53 @@ def test_one_reference_speed_changes_nothing_but_records_it(tmp_path):
     assert one.speed_coverage([200 / 3.6]) == [{"speed_kmh": 200.0, "mean": "pooled", "reference_segments": 30,
                                                 "covered": False}]
     assert json.loads(str(np.load(plain.save(tmp_path / "plain.npz"))["meta"]))["format_version"] == 1
+
+
+def _edited(tmp_path, meta=None, **arrays):
+    """A saved model with its header entries ``meta`` (None: removed) and arrays replaced."""
+    good = NoiseModel().fit(draw(20, 9)).save(tmp_path / "good.npz")
+    with np.load(good) as data:
+        content = dict(data)
+    header = json.loads(str(content["meta"]))
+    for key, value in (meta or {}).items():
+        node, *path = key.split(".")
+        target = header if not path else header[node]
+        name = path[-1] if path else node
+        if value is None:
+            del target[name]
+        else:
+            target[name] = value
+    path = tmp_path / "edited.npz"
+    np.savez(path, **{**content, "meta": np.array(json.dumps(header))})
+    with np.load(path) as data:
+        content = dict(data)
+    for name, edit in arrays.items():
+        content[name] = edit(content[name])
+    np.savez(path, **content)
+    return path
+
+
+# a damaged noise model file: (edit, words of the one-line DataError that names the file)
+DAMAGED_NOISE_MODELS = {
+    "header_without_shrinkage": (dict(meta={"shrinkage": None}), "damaged header (KeyError: 'shrinkage')"),
+    "shrinkage_is_text": (dict(meta={"shrinkage": "auto?"}), "damaged header (ValueError"),
+    "shrinkage_is_a_list": (dict(meta={"shrinkage": [0.1]}), "damaged header (TypeError"),
+    "n_samples_is_null": (dict(meta={"n_samples": "many"}), "damaged header (ValueError"),
+    "channels_is_a_number": (dict(meta={"channels": 7}), "damaged header (TypeError"),
+    "n_components_zero": (dict(meta={"options.n_components": 0}), "damaged header at 'options.n_components'"),
+    "options_not_a_mapping": (dict(meta={"options": [1, 2]}), "damaged header at 'options'"),
+    "negative_residual_variance": (dict(residual_variance=lambda a: -a), "negative variance"),
+    "negative_eigenvalues": (dict(eigenvalues=lambda a: -a), "negative variance"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(DAMAGED_NOISE_MODELS))
+def test_a_damaged_noise_model_is_a_data_error_naming_the_file(tmp_path, name):
+    """Each was a KeyError, TypeError or ValueError (exit 1, "a bug"), a ConfigError naming a key of no config,
+    or NaN in Y_mod later on (negative variances)."""
+    edit, words = DAMAGED_NOISE_MODELS[name]
+    path = _edited(tmp_path, **edit)
+    with pytest.raises(DataError) as err:
+        NoiseModel.load(path)
+    msg = str(err.value)
+    assert msg.startswith(f"noise model file {path} ") and words in msg and "\n" not in msg, msg

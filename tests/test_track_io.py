@@ -46,12 +46,12 @@ def test_track_csv_round_trip_constant_and_variable_speed(tmp_path, segments):
 def test_track_csv_columns_in_any_order_and_name_from_file(tmp_path):
     (tmp_path / "my-seg.csv").write_text(
         "# a comment\n# speed_mps: 50\ngauge_m,distance_m,vertical_m,cross_level_m,lateral_m\n"
-        "0.0,0.0,0.001,0.0,0.002\n0.1,0.5,0.002,0.0,0.003\n0.2,1.0,0.003,0.0,0.004\n")
+        "0.0,0.0,0.001,0.0,0.002\n0.001,0.5,0.002,0.0,0.003\n0.002,1.0,0.003,0.0,0.004\n")   # gauge: mm, as tracks have
     seg = read_track_csv(tmp_path / "my-seg.csv")
     assert seg.name == "my-seg" and seg.speed == 50.0
     assert np.allclose(seg.irregularities[0], [0.001, 0.002, 0.003])   # vertical
     assert np.allclose(seg.irregularities[1], [0.002, 0.003, 0.004])   # lateral
-    assert np.allclose(seg.irregularities[3], [0.0, 0.1, 0.2])         # gauge
+    assert np.allclose(seg.irregularities[3], [0.0, 0.001, 0.002])     # gauge
 
 
 def test_track_h5_round_trip_keeps_order(tmp_path, segments):

@@ -83,18 +83,17 @@ the same name would replace the first).
 Records of one data set must share one sampling rate (relative 0.5 %,
 :data:`FS_TOLERANCE`): a rate a little off shifts every spectrum in frequency.
 
-Plausibility (:func:`check_plausibility`, run by every reader). Values beyond
-:data:`ABSURD` (1e6 in SI units) cannot come from a sensor: a damaged file
-(flipped bits) is an error. Values that are possible but implausible give a
-:class:`suspid.errors.DataWarning` (one line ``warning: ...`` in the command
-line), or an error with ``strict=True``:
-
-- an acceleration channel with an rms above :data:`ACC_RMS_MAX` (50 m/s^2),
-  far above what an accelerometer on a train records: mm/s^2 instead of m/s^2?
-- an acceleration channel with an rms below :data:`ACC_RMS_MIN` (1e-5 m/s^2)
-  or exactly constant: a dead or disconnected sensor;
-- a track channel with an rms above :data:`TRACK_RMS_MAX` (0.05 m): mm instead of m?
-- a speed above :data:`SPEED_MAX` (160 m/s): km/h instead of m/s?
+Plausibility (:func:`check_plausibility`, run by every reader, the policy of
+:mod:`suspid.data.plausibility`). Values beyond :data:`ABSURD` (1e6 in SI
+units) cannot come from a sensor: a damaged file (flipped bits) is an error.
+Values no train in service can give are an error naming the file, the channel
+and what was expected, unless the check is named in ``accept``
+(``data.accept`` of a config): an acceleration channel vibrating beyond its
+kind's limit (mm/s^2 read as m/s^2), a constant or dead channel, a track
+channel beyond any track open to traffic in the D1 band (mm read as m), a
+speed above the rail speed record (km/h read as m/s). Values that are
+possible but unusual give a :class:`suspid.errors.DataWarning` (one line
+``warning: ...`` in the command line), or an error with ``strict=True``.
 """
 from __future__ import annotations
 
@@ -104,29 +103,20 @@ import io
 import math
 import os
 import shutil
-import warnings
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Collection, Iterable, Sequence
 
 import numpy as np
 
-from suspid.errors import DataError, DataWarning
+from suspid.data.plausibility import (ABSURD, Doubt, acceleration_doubts, d1_rms, judge, speed_doubts, track_doubts,
+                                      vibration_rms)
+from suspid.errors import DataError
 from suspid.infra.files import atomic_open, write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
 CSV_TRACK_COLUMNS = ("distance_m", "vertical_m", "lateral_m", "cross_level_m", "gauge_m")
 """Required columns of a track CSV file (channels in the order of IRREGULARITY_CHANNELS)."""
 
-ABSURD = 1e6
-"""Largest magnitude of an irregularity (m) or acceleration (m/s^2) that can come from a sensor."""
-ACC_RMS_MAX = 50.0
-"""Largest plausible rms of an acceleration channel on a train, m/s^2."""
-ACC_RMS_MIN = 1e-5
-"""Smallest plausible rms of a working accelerometer on a running train, m/s^2."""
-TRACK_RMS_MAX = 0.05
-"""Largest plausible rms of a track irregularity channel, m."""
-SPEED_MAX = 160.0
-"""Largest plausible train speed, m/s (576 km/h)."""
 FS_TOLERANCE = 0.005
 """Relative tolerance on the sampling rates of the records of one data set."""
 
@@ -208,66 +198,50 @@ def _absurd(where: Path | str, label: str, channel: str, values: np.ndarray, uni
                            f"beyond any sensor (|value| > {ABSURD:g}): a damaged file?")
 
 
-def _doubts_response(r: Response, where: Path | str) -> list[str]:
+def _doubts_response(r: Response, where: Path | str) -> list[Doubt]:
     label = f"segment '{r.segment}'"
     a = np.asarray(r.accelerations, dtype=float)
     doubts = []
     for name, values in zip(r.channels, a):
         _absurd(where, label, name, values, "m/s^2")
-        rms = float(np.sqrt(np.mean(values ** 2)))
-        if np.ptp(values) == 0:
-            doubts.append(f"{label}: channel '{name}' is constant ({values[0]:g} m/s^2): "
-                          f"a dead or disconnected sensor?")
-        elif rms < ACC_RMS_MIN:
-            doubts.append(f"{label}: channel '{name}' has an rms of {rms:.3g} m/s^2, below what a working "
-                          f"accelerometer on a running train records ({ACC_RMS_MIN:g} m/s^2): a dead sensor?")
-        elif rms > ACC_RMS_MAX:
-            doubts.append(f"{label}: channel '{name}' has an rms of {rms:.3g} m/s^2, far above what an "
-                          f"accelerometer on a train records ({ACC_RMS_MAX:g} m/s^2): values in mm/s^2 "
-                          f"instead of m/s^2?")
+        doubts += [Doubt(f"{label}: {d.message}", d.check)
+                   for d in acceleration_doubts(name, vibration_rms(values), bool(np.ptp(values) == 0))]
     return doubts
 
 
-def _doubts_segment(seg: TrackSegment, where: Path | str) -> list[str]:
+def _doubts_segment(seg: TrackSegment, where: Path | str) -> list[Doubt]:
     label = f"segment '{seg.name}'"
     irr = np.asarray(seg.irregularities, dtype=float)
-    doubts = []
+    x = np.asarray(seg.distance, dtype=float)
     for name, values in zip(IRREGULARITY_CHANNELS, irr):
         _absurd(where, label, name, values, "m")
-    for name, values in zip(IRREGULARITY_CHANNELS, irr):
-        rms = float(np.sqrt(np.mean(values ** 2)))
-        if rms > TRACK_RMS_MAX:
-            doubts.append(f"{label}: channel '{name}' has irregularities of {rms:.3g} m rms, far above a "
-                          f"track in service ({TRACK_RMS_MAX:g} m): values in mm instead of m?")
-            break
-    v = float(np.max(np.asarray(seg.speed, dtype=float)))
-    if v > SPEED_MAX:
-        doubts.append(f"{label}: speed {v:g} m/s ({v * 3.6:g} km/h) is above any train's "
-                      f"({SPEED_MAX:g} m/s): km/h instead of m/s?")
+    found = [d for name, values in zip(IRREGULARITY_CHANNELS, irr)
+             for d in track_doubts(name, d1_rms(values, float(x[1] - x[0])))]
+    found = ([d for d in found if d.check] or found)[:1]     # one channel says it: the unit of the file
+    doubts = [Doubt(f"{label}: {d.message}", d.check) for d in found]
+    doubts += [Doubt(f"{label}: {d.message}", d.check)
+               for d in speed_doubts(float(np.max(np.asarray(seg.speed, dtype=float))))]
     return doubts
 
 
-def check_plausibility(item: TrackSegment | Response, where: Path | str, *, strict: bool = False) -> list[str]:
+def check_plausibility(item: TrackSegment | Response, where: Path | str, *, strict: bool = False,
+                       accept: Collection[str] = ()) -> list[str]:
     """Check that a validated segment or record holds values a sensor on a train can give.
 
-    Called by every reader; call it yourself on data made in memory.
+    Called by every reader; call it yourself on data made in memory. The policy and its limits are
+    :mod:`suspid.data.plausibility`'s.
 
     :param item: a track segment (irregularities in m, speed in m/s) or a record (m/s^2).
     :param where: the file (or a label) the messages name.
-    :param strict: implausible values (mm/s^2 or mm instead of SI units, a dead
-        channel, a speed in km/h) raise DataError instead of a warning.
+    :param strict: unusual values raise DataError instead of a warning.
+    :param accept: checks whose impossible values are used anyway, with a warning (``data.accept``).
     :returns: the messages of the warnings issued (each sent once as a
         :class:`~suspid.errors.DataWarning`).
-    :raises DataError: a value beyond :data:`ABSURD` (a damaged file), or with
-        ``strict``, an implausible value; one line naming ``where``.
+    :raises DataError: a value beyond :data:`ABSURD` (a damaged file), an impossible value whose check
+        is not accepted, or with ``strict`` an unusual one; one line naming ``where``.
     """
     doubts = _doubts_response(item, where) if isinstance(item, Response) else _doubts_segment(item, where)
-    messages = [f"{where}: {d}" for d in doubts]
-    if strict and messages:
-        raise DataError(messages[0] + " (refused in strict mode)")
-    for m in messages:
-        warnings.warn(m, DataWarning, stacklevel=2)
-    return messages
+    return judge(doubts, where, accept=accept, strict=strict)
 
 
 def check_unique_segments(items: Iterable[tuple[Path | str, str]], what: str = "segment") -> None:
@@ -367,10 +341,12 @@ def _is_float(s: str) -> bool:
         return False
 
 
-def read_track_csv(path: str | Path, *, strict: bool = False) -> TrackSegment:
+def read_track_csv(path: str | Path, *, strict: bool = False,
+                   accept: Collection[str] = ()) -> TrackSegment:
     """Read one track segment from a CSV file (layout and checks in the module docstring).
 
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     meta, header, values = _read_csv(path)
@@ -396,7 +372,7 @@ def read_track_csv(path: str | Path, *, strict: bool = False) -> TrackSegment:
     seg = TrackSegment(meta.get("name", path.stem), col["distance_m"].copy(), irr, speed,
                        meta={"file": str(path)})
     check_segment(seg, path)
-    check_plausibility(seg, path, strict=strict)
+    check_plausibility(seg, path, strict=strict, accept=accept)
     return seg
 
 
@@ -422,12 +398,14 @@ def write_track_csv(segment: TrackSegment, path: str | Path) -> Path:
 
 
 def read_accelerations_csv(path: str | Path, channels: Sequence[str] | None = None, *,
-                           strict: bool = False) -> Response:
+                           strict: bool = False,
+                           accept: Collection[str] = ()) -> Response:
     """Read one record of accelerations from a CSV file (layout and checks in the module docstring).
 
     :param channels: expected channels; the record is reordered to them and a
         missing one raises DataError.
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     meta, header, values = _read_csv(path)
@@ -462,7 +440,7 @@ def read_accelerations_csv(path: str | Path, channels: Sequence[str] | None = No
         raise _fail(path, "no sampling rate: add a '# fs_hz: <Hz>' line or a time_s column")
     a = np.array([values[:, header.index(n)] for n in names])
     r = check_response(Response(tuple(names), float(fs), a, meta.get("segment", path.stem)), path, channels)
-    check_plausibility(r, path, strict=strict)
+    check_plausibility(r, path, strict=strict, accept=accept)
     return r
 
 
@@ -722,10 +700,12 @@ def write_track_h5(segments: Sequence[TrackSegment], path: str | Path) -> Path:
     return _write_h5(path, fill)
 
 
-def read_track_h5(path: str | Path, *, strict: bool = False) -> list[TrackSegment]:
+def read_track_h5(path: str | Path, *, strict: bool = False,
+                  accept: Collection[str] = ()) -> list[TrackSegment]:
     """Read track segments from HDF5 (layout and checks in the module docstring).
 
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     out = []
@@ -747,7 +727,7 @@ def read_track_h5(path: str | Path, *, strict: bool = False) -> list[TrackSegmen
     if not out:
         raise _fail(path, "no segments")
     for seg in out:
-        check_plausibility(seg, path, strict=strict)
+        check_plausibility(seg, path, strict=strict, accept=accept)
     return out
 
 
@@ -796,11 +776,13 @@ def write_accelerations_h5(responses: Sequence[Response], path: str | Path, mode
 
 
 def read_accelerations_h5(path: str | Path, channels: Sequence[str] | None = None, *,
-                          strict: bool = False) -> list[Response]:
+                          strict: bool = False,
+                          accept: Collection[str] = ()) -> list[Response]:
     """Read records of accelerations from HDF5 (layout and checks in the module docstring).
 
     :param channels: expected channels; records are reordered to them and a missing one raises.
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     out = []
@@ -820,7 +802,7 @@ def read_accelerations_h5(path: str | Path, channels: Sequence[str] | None = Non
     if not out:
         raise _fail(path, "no records")
     for r in out:
-        check_plausibility(r, path, strict=strict)
+        check_plausibility(r, path, strict=strict, accept=accept)
     check_same_rate([(path, r) for r in out])
     return out
 
@@ -848,49 +830,55 @@ def _is_h5(path: Path) -> bool:
     return path.suffix.lower() in (".h5", ".hdf5")
 
 
-def read_track(path: str | Path, *, strict: bool = False) -> list[TrackSegment]:
+def read_track(path: str | Path, *, strict: bool = False,
+               accept: Collection[str] = ()) -> list[TrackSegment]:
     """Track segments from an HDF5 file (``.h5``/``.hdf5``), a CSV file, or a folder of CSV files
     (sorted by file name); a segment name given twice raises DataError naming both files.
 
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     if _is_dir(path):
-        found = [(p, read_track_csv(p, strict=strict)) for p in _csv_files(path, "track")]
+        found = [(p, read_track_csv(p, strict=strict, accept=accept)) for p in _csv_files(path, "track")]
         check_unique_segments(((p, s.name) for p, s in found), "track segment")
         return [s for _, s in found]
     if _is_h5(path):
-        return read_track_h5(path, strict=strict)
-    return [read_track_csv(path, strict=strict)]
+        return read_track_h5(path, strict=strict, accept=accept)
+    return [read_track_csv(path, strict=strict, accept=accept)]
 
 
 def read_accelerations_records(path: str | Path, channels: Sequence[str] | None = None, *,
-                               strict: bool = False) -> list[tuple[Path, Response]]:
+                               strict: bool = False,
+                               accept: Collection[str] = ()) -> list[tuple[Path, Response]]:
     """Records with the file each came from: an HDF5 file, a CSV file or a folder of CSV files.
 
     Checks the set as a whole: a segment given twice and sampling rates that
     differ by more than :data:`FS_TOLERANCE` raise DataError naming both files.
 
     :param channels: expected channels; records are reordered to them and a missing one raises.
-    :param strict: implausible values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param strict: unusual values raise DataError instead of a warning (:func:`check_plausibility`).
+    :param accept: checks whose impossible values are used anyway (``data.accept``; :func:`check_plausibility`).
     """
     path = Path(path)
     if _is_dir(path):
-        records = [(p, read_accelerations_csv(p, channels, strict=strict)) for p in _csv_files(path, "acceleration")]
+        records = [(p, read_accelerations_csv(p, channels, strict=strict, accept=accept))
+                   for p in _csv_files(path, "acceleration")]
     elif _is_h5(path):
-        records = [(path, r) for r in read_accelerations_h5(path, channels, strict=strict)]
+        records = [(path, r) for r in read_accelerations_h5(path, channels, strict=strict, accept=accept)]
     else:
-        records = [(path, read_accelerations_csv(path, channels, strict=strict))]
+        records = [(path, read_accelerations_csv(path, channels, strict=strict, accept=accept))]
     check_unique_segments(((p, r.segment) for p, r in records), "record of segment")
     check_same_rate(records)
     return records
 
 
 def read_accelerations(path: str | Path, channels: Sequence[str] | None = None, *,
-                       strict: bool = False) -> list[Response]:
+                       strict: bool = False,
+                       accept: Collection[str] = ()) -> list[Response]:
     """Records from an HDF5 file, a CSV file or a folder of CSV files (sorted by file name);
     checked as in :func:`read_accelerations_records`."""
-    return [r for _, r in read_accelerations_records(path, channels, strict=strict)]
+    return [r for _, r in read_accelerations_records(path, channels, strict=strict, accept=accept)]
 
 
 def write_track(segments: Iterable[TrackSegment], path: str | Path) -> Path:

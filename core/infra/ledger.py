@@ -377,10 +377,27 @@ class Ledger:
         sql = "SELECT COUNT(*) FROM evaluations" + (" WHERE status = ?" if status else "")
         return self._read(sql, (status,) if status else ())[0][0]
 
-    @staticmethod
-    def _row(row: tuple) -> Evaluation:
+    def _damaged_row(self, where: str, exc: BaseException | str) -> LedgerError:
+        """The one error for a row that SQLite reads but suspid cannot decode (edited or written by other code)."""
+        reason = exc if isinstance(exc, str) else f"{type(exc).__name__}: {_reason(exc)}"
+        return LedgerError(f"{self.path}: the run ledger is damaged ({where}: {reason[:160]}); {_REMEDY}")
+
+    def _json(self, text: Any, where: str) -> Any:
+        """A JSON column decoded; anything else (not text, not JSON) raises :meth:`_damaged_row`."""
+        try:
+            return json.loads(text)
+        except (TypeError, ValueError) as exc:   # JSONDecodeError is a ValueError
+            raise self._damaged_row(where, exc) from None
+
+    def _row(self, row: tuple) -> Evaluation:
         key, w, J, psi, status, error, wall, finished, worker = row
-        return Evaluation(key=key, w=json.loads(w), J=J, psi=json.loads(psi) if psi else None,
+        where = f"evaluation {str(key)[:16]}"
+        w = self._json(w, f"{where}, column w")
+        if not isinstance(w, dict) or not all(isinstance(v, (int, float)) for v in w.values()):
+            raise self._damaged_row(f"{where}, column w", "not a mapping of names to numbers")
+        if status == "ok" and not (isinstance(J, (int, float)) and not np.isnan(J)):   # SQLite keeps NaN as NULL
+            raise self._damaged_row(f"{where}, column J", f"{J!r} is not a number")
+        return Evaluation(key=key, w=w, J=J, psi=self._json(psi, f"{where}, column psi") if psi else None,
                           status=status, error=error, wall_time_s=wall, finished_at=finished, worker=worker)
 
     # -- optimiser iterations ----------------------------------------------------
@@ -390,13 +407,13 @@ class Ledger:
                     (run, int(iteration), json.dumps(canonical(record))))
 
     def iterations(self, run: str) -> list[dict[str, Any]]:
-        rows = self._read("SELECT record FROM iterations WHERE run = ? ORDER BY iteration", (run,))
-        return [json.loads(r[0]) for r in rows]
+        rows = self._read("SELECT iteration, record FROM iterations WHERE run = ? ORDER BY iteration", (run,))
+        return [self._json(r, f"iteration {i} of {run}") for i, r in rows]
 
     def all_iterations(self) -> list[tuple[str, int, dict[str, Any]]]:
         """Every recorded iteration as ``(run, iteration, record)``, ordered by run name, then iteration."""
         rows = self._read("SELECT run, iteration, record FROM iterations ORDER BY run, iteration")
-        return [(run, int(i), json.loads(record)) for run, i, record in rows]
+        return [(run, int(i), self._json(record, f"iteration {i} of {run}")) for run, i, record in rows]
 
     # -- artifacts (arrays, small files) -------------------------------------------
     def put_array(self, key: str, array: np.ndarray) -> None:
@@ -411,7 +428,12 @@ class Ledger:
         from io import BytesIO
 
         rows = self._read("SELECT value FROM artifacts WHERE key = ?", (key,))
-        return np.load(BytesIO(rows[0][0]), allow_pickle=False) if rows else None
+        if not rows:
+            return None
+        try:   # an object array (pickled) is refused, never unpickled
+            return np.load(BytesIO(rows[0][0]), allow_pickle=False)
+        except (TypeError, ValueError, OSError, EOFError) as exc:
+            raise self._damaged_row(f"array {key[:24]}", exc) from None
 
     def clear(self, log: Callable[[str], None] | None = None) -> None:
         """Forget every result (``--fresh``).

@@ -68,7 +68,7 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from suspid.infra.files import atomic_open
 from suspid.method.floor import NoiseFloor, estimate_floor, spec_floor
 from suspid.options import parse_options
-from suspid.errors import DataError
+from suspid.errors import ConfigError, DataError
 
 FORMAT = "suspid-noise-model"
 FORMAT_VERSION = 3
@@ -445,6 +445,19 @@ class NoiseModel:
         if missing:
             raise DataError(f"noise model file {path} is not a suspid noise model (missing {', '.join(missing)})")
         try:
+            return cls._from_content(content, path)
+        except DataError:
+            raise
+        except (ConfigError, KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+            # a header or an array edited or written by other code: whatever the decoding meets
+            what = exc.detail if isinstance(exc, ConfigError) else f"{type(exc).__name__}: {exc}"
+            where = f" at '{exc.key}'" if isinstance(exc, ConfigError) and exc.key else ""
+            raise DataError(f"noise model file {path} has a damaged header{where} ({what})") from None
+
+    @classmethod
+    def _from_content(cls, content: Mapping[str, np.ndarray], path: Path) -> "NoiseModel":
+        """The model from the arrays of its file (:meth:`load`); any decoding error is the caller's to name."""
+        try:
             meta = json.loads(str(content["meta"]))
         except json.JSONDecodeError:
             raise DataError(f"noise model file {path} has a corrupt header") from None
@@ -453,14 +466,16 @@ class NoiseModel:
         if meta.get("format_version") not in range(1, FORMAT_VERSION + 1):
             raise DataError(f"noise model file {path} has format version {meta.get('format_version')}; "
                             f"this suspid reads versions 1 to {FORMAT_VERSION}: identify the noise model again")
-        model = cls(**(meta.get("options") or {}))
+        options = parse_options(NoiseOptions, meta.get("options") or {}, "options").model_dump(
+            exclude_unset=True)   # checked as a config's noise: section is (n_components >= 1, ...)
+        model = cls(**options)
         for name in cls._ARRAYS:
             setattr(model, name + "_", np.asarray(content[name], dtype=float))
         model.shrinkage_ = float(meta["shrinkage"])
         model.n_samples_ = int(meta["n_samples"])
         freqs = content["freqs"]
         model.freqs_ = np.asarray(freqs, dtype=float) if freqs.size else None
-        model.channels_ = tuple(meta["channels"]) if meta.get("channels") is not None else None
+        model.channels_ = tuple(str(c) for c in meta["channels"]) if meta.get("channels") is not None else None
         model.floor_ = None
         if "floor_power" in content and "floor_gain_db" in content:
             model.floor_ = NoiseFloor(np.asarray(content["floor_power"], dtype=float),
@@ -482,6 +497,7 @@ class NoiseModel:
               and (self.channels_ is None or len(self.channels_) == grid[0])
               and 0.0 <= self.shrinkage_ <= 1.0
               and all(np.all(np.isfinite(getattr(self, n + "_"))) for n in self._ARRAYS)
+              and all(np.all(getattr(self, n + "_") >= 0) for n in ("eigenvalues", "variance", "residual_variance"))
               and (self.floor_ is None or (self.floor_.power.shape == grid and self.floor_.gain_db.shape == grid
                                            and np.all(self.floor_.power >= 0)
                                            and np.all(np.isfinite(self.floor_.power))
@@ -491,7 +507,8 @@ class NoiseModel:
                                                  and np.all(self.speeds_ > 0) and np.all(self.speed_counts_ >= 2)
                                                  and np.all(np.isfinite(self.speed_means_)))))
         if not ok:
-            raise DataError(f"noise model file {path} is inconsistent (array shapes or values do not match)")
+            raise DataError(f"noise model file {path} is inconsistent (array shapes or values do not match, "
+                            f"or a negative variance)")
 
 
 def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions | Mapping[str, Any] | None = None,

@@ -86,7 +86,7 @@ from suspid.errors import ConfigError
 from suspid.infra.files import atomic_open, pyplot, save_figure, write_json, write_text
 from suspid.infra.lock import open_run_dir
 from suspid.infra.seeds import seed_for
-from suspid.sections import MonitorOptions, Scenario
+from suspid.sections import W_REF_MEASURED, MonitorOptions, Scenario
 from suspid.workflows.identify import IdentificationResult, run
 from suspid.workflows.problem import build_problem
 from suspid.workflows.report import markdown_table
@@ -152,7 +152,7 @@ def monitor_options(config: Config) -> MonitorOptions:
         _check_increasing([c.date for c in opts.campaigns], where, "monitor.campaigns.{}.date")
         for i, c in enumerate(opts.campaigns):
             if "w_ref" in c.data and c.data.get("source", config.data.source) == "measured":
-                raise where.error("w_ref belongs to numerical experiments, not to measured data",
+                raise where.error(W_REF_MEASURED,
                                  f"monitor.campaigns.{i}.data.w_ref")
     else:
         s = opts.scenario

@@ -20,7 +20,7 @@ import hashlib
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Collection, Sequence
 
 import numpy as np
 
@@ -38,7 +38,7 @@ from suspid.infra.seeds import seed_for
 from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
 from suspid.method.noise import NoiseModel, fit_noise_model, modelled_spectra
 from suspid.method.objective import reference_weights
-from suspid.method.spectra import compute_spectra
+from suspid.method.spectra import SpectraOptions, compute_spectra, grid_lines
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
 
@@ -156,20 +156,25 @@ DURATION_TOLERANCE = 0.01
 
 
 def read_measurements(measurements: Path, track_file: Path | None, channels: Sequence[str], *,
-                      strict: bool = False) -> tuple[list[TrackSegment], list[Response]]:
+                      strict: bool = False, accept: Collection[str] = (), spectra: SpectraOptions | None = None,
+                      date: str = "measurement") -> tuple[list[TrackSegment], list[Response]]:
     """Measured accelerations and the track geometry measured with them, paired by segment name.
 
-    :param strict: implausible values (units, dead channels) are errors, not warnings.
+    :param strict: unusual values are errors, not warnings.
+    :param accept: checks of impossible values to let pass (``data.accept``, :mod:`suspid.data.plausibility`).
+    :param spectra: the frequency grid every record must fit (below its Nyquist frequency, long enough
+        for a DFT line in every cell): checked here, where the file and the date are known.
+    :param date: ``measurement`` or ``reference``, for the messages.
     :raises DataError: naming the file, when a segment has no track or is given twice, the
-        channels differ, or a record's duration does not match its segment.
+        channels differ, a record's duration does not match its segment or it does not fit the grid.
     """
     if track_file is None:
         raise DataError(f"{measurements}: measured accelerations need the track measured with them "
                         f"(data.track_file)")
-    records = read_accelerations_records(measurements, channels, strict=strict)  # each error names its file
+    records = read_accelerations_records(measurements, channels, strict=strict, accept=accept)  # errors name files
     if not records:
         raise DataError(f"{measurements}: no acceleration records found")
-    by_name = {s.name: s for s in read_track(track_file, strict=strict)}
+    by_name = {s.name: s for s in read_track(track_file, strict=strict, accept=accept)}
     segments = []
     for f, r in records:
         seg = by_name.get(r.segment)
@@ -180,8 +185,46 @@ def read_measurements(measurements: Path, track_file: Path | None, channels: Seq
         if abs(r.duration - expected) > max(DURATION_TOLERANCE * expected, 2.0 / r.fs):
             raise DataError(f"{f}: record '{r.segment}' lasts {r.duration:.2f} s but its track "
                             f"segment takes {expected:.2f} s at the recorded speed")
+        if spectra is not None:
+            grid_lines(r.accelerations.shape[1], r.fs, spectra, f"{f}: the {date} date's record '{r.segment}'")
         segments.append(seg)
     return segments, [r for _, r in records]
+
+
+NO_NOISE_MODEL = ("measured data need the noise model of the reference date: noise.reference (the reference "
+                  "date's measured data) or noise.path (a noise model file)")
+
+
+def measured_data(config: Config, channels: Sequence[str], date: str = "measurement"
+                  ) -> tuple[list[TrackSegment], list[Response]]:
+    """:func:`read_measurements` of a date of a measured-data config, checked as the config says
+    (``data.strict``, ``data.accept``, the ``spectra`` grid): ``data.measurements`` or ``noise.reference``."""
+    source = config.data if date == "measurement" else config.noise.reference
+    return read_measurements(source.measurements, source.track_file, channels, strict=config.data.strict,
+                             accept=config.data.accept, spectra=config.spectra, date=date)
+
+
+def check_noise_source(config: Config) -> None:
+    """The run has a noise model B: a file (``noise.path``), or reference-date data to identify it from.
+
+    Measured data need ``noise.path`` or ``noise.reference``; a numerical experiment identifies B on its own
+    reference date, whose segments (``data.reference.n_segments``, default ``data.track.n_segments``) must be
+    at least 2: B's covariance is taken over segments (eq. 3). A ``monitor:`` config gets ``noise.path`` from
+    its own reference date (:mod:`suspid.workflows.monitor` checks that).
+
+    :raises ConfigError: naming the key to set.
+    """
+    if config.noise.path is not None:
+        return
+    if config.data.source == "measured":
+        if config.noise.reference is None and config.monitor is None:
+            raise config.error(NO_NOISE_MODEL, "noise")
+        return
+    n_ref = config.data.reference.n_segments or config.data.track.n_segments
+    if n_ref < 2:
+        key = "data.reference.n_segments" if config.data.reference.n_segments else "data.track.n_segments"
+        raise config.error(f"the noise model of the reference date needs at least 2 segments (its covariance "
+                           f"is taken over segments, eq. 3), got {n_ref}; or give noise.path", key)
 
 
 def validate_data(config: Config) -> int:
@@ -190,19 +233,18 @@ def validate_data(config: Config) -> int:
     :returns: the number of measured segments (0 for a numerical experiment).
     :raises DataError: one line naming the file and what is wrong.
     """
+    check_noise_source(config)
     if config.data.source != "measured":
         return 0
     simulator = build_simulator(config)
     if config.data.measurements is None:
         raise config.error("measured data need data.measurements", "data.measurements")
-    segments, responses = read_measurements(config.data.measurements, config.data.track_file,
-                                            simulator.channels(), strict=config.data.strict)
+    segments, responses = measured_data(config, simulator.channels())
     resolve_corrections(config.data.corrections, simulator.channels(), error=config.error)
     _, freqs = compute_spectra(responses, config.spectra)
     if config.noise.reference is not None:
         ref = config.noise.reference
-        ref_segments, ref_responses = read_measurements(ref.measurements, ref.track_file, simulator.channels(),
-                                                         strict=config.data.strict)
+        ref_segments, ref_responses = measured_data(config, simulator.channels(), "reference")
         _, ref_freqs = compute_spectra(ref_responses, config.spectra)
         if len(ref_segments) < 2:
             raise config.error(f"{ref.measurements}: the noise model needs at least 2 reference-date segments, "
@@ -228,8 +270,7 @@ def measured_reference(config: Config, simulator: Simulator, ledger: Ledger, log
     :returns: ``(segments, y_mes0, y_sim0, freqs)``, spectra ``(v0, n_channels, n_freqs)`` dB.
     """
     ref = config.noise.reference
-    segments, responses = read_measurements(ref.measurements, ref.track_file, channels=simulator.channels(),
-                                            strict=config.data.strict)
+    segments, responses = measured_data(config, simulator.channels(), "reference")
     y_mes0, freqs = compute_spectra(responses, config.spectra)
     key = stable_hash("measured-reference", simulator.identity(), segments_digest(segments),
                       config.spectra.model_dump())
@@ -328,8 +369,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         y_mes = modelled_spectra(y_sim_ref, b_ref, noise_model.floor_)
     else:
         w_ref = None
-        segments, responses = read_measurements(config.data.measurements, config.data.track_file,
-                                                channels=channels, strict=config.data.strict)
+        segments, responses = measured_data(config, channels)
         responses = untilt(responses, config.data.corrections, channels, error=config.error)
         y_mes, freqs = compute_spectra(responses, spectra_options)
         if config.noise.reference is not None:
@@ -347,8 +387,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           freqs=freqs, channels=channels,
                                           speeds=segment_speeds(reference_segments))
         else:
-            raise config.error("measured data need the noise model of the reference date: noise.reference "
-                               "(the reference date's measured data) or noise.path (a noise model file)", "noise")
+            raise config.error(NO_NOISE_MODEL, "noise")
     noise_model.check_grid(freqs, channels)
     b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), segment_speeds(segments))
 

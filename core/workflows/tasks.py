@@ -38,6 +38,16 @@ def simulate_spectra(simulator: Simulator, w: dict[str, float], segments: Sequen
     except Exception as exc:  # noqa: BLE001 - not one of suspid's errors: a bug of the plugin
         raise PluginBugError(f"{registry.describe('simulator', simulator.name)} failed at w = {dict(w)}: "
                              f"{type(exc).__name__}: {exc}") from exc
+    expected = list(simulator.channels())
+    if len(responses) != len(segments) or any(list(r.channels) != expected
+                                              or np.shape(r.accelerations)[:1] != (len(expected),) for r in responses):
+        bad = next((r for r in responses if list(r.channels) != expected
+                    or np.shape(r.accelerations)[:1] != (len(expected),)), None)
+        what = (f"{len(responses)} records for {len(segments)} segments" if bad is None else
+                f"{len(bad.channels)} channels ({', '.join(bad.channels)}) with accelerations of shape "
+                f"{np.shape(bad.accelerations)} for segment '{bad.segment}'")
+        raise PluginBugError(f"{registry.describe('simulator', simulator.name)} returned {what}; its channels() "
+                             f"lists {len(expected)}: {', '.join(expected)} (a bug in the plugin)")
     for r in responses:
         if not np.all(np.isfinite(np.asarray(r.accelerations, dtype=float))):
             raise SimulatorError(f"simulator '{simulator.name}' returned non-finite accelerations (NaN or inf) "

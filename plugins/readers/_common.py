@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import gc
 import importlib
+import logging
+import sys
+import traceback
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from suspid.errors import DataError
+from suspid.errors import DataError, SuspidError
 
 
 def optional_library(module: str, package: str, path: Path) -> Any:
@@ -41,3 +46,67 @@ def as_float(values: Any, path: Path, channel: str) -> np.ndarray:
     if not np.issubdtype(a.dtype, np.number):
         raise DataError(f"{path}: channel '{channel}' is not numeric ({a.dtype})")
     return a.astype(np.float64, copy=False)
+
+
+class _Silenced(logging.Filter):
+    """Keeps a library's log records from the console and remembers its warnings."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.warnings: list[str] = []
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            self.warnings.append(record.getMessage())
+        return False
+
+
+def _forget(exc: BaseException) -> None:
+    """Drop the frames of ``exc``'s traceback now, with the finalizers they run kept quiet.
+
+    An object the library was building when it failed (asammdf's ``MDF4`` on a truncated file)
+    lives on in those frames, and its ``__del__`` fails on the missing parts: Python would print
+    that as an "Exception ignored in ..." traceback after the one-line error.
+    """
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        traceback.clear_frames(exc.__traceback__)   # the locals of the library's frames, `self` among them
+        exc.__traceback__ = None
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+
+
+@contextmanager
+def library_errors(path: Path, what: str, logger: str | None = None) -> Iterator[None]:
+    """Inside, whatever a format's library raises on a damaged file is one DataError naming the file.
+
+    A truncated file or overwritten bytes fail anywhere inside the library, with any exception type
+    (ValueError, KeyError, OSError, struct.error, ...); each becomes ``<path>: damaged or unreadable
+    <what> file (<type>: <reason>)``. suspid's own errors pass through. Warnings the library logs
+    under ``logger`` (npTDMS reads a truncated file on, saying it "has less data than expected")
+    are refused the same way: a recording is used whole, or not at all.
+    """
+    silenced = _Silenced()
+    loggers = [logging.getLogger(n) for n in list(logging.root.manager.loggerDict)
+               if logger and (n == logger or n.startswith(logger + "."))]
+    for log in loggers:
+        log.addFilter(silenced)
+    try:
+        yield
+    except SuspidError:
+        raise
+    except MemoryError:
+        raise DataError(f"{path}: out of memory while reading this {what} file") from None
+    except Exception as exc:  # noqa: BLE001 - the library's failure on this file, whatever its type
+        kind = type(exc).__name__ if type(exc).__module__ == "builtins" else \
+            f"{type(exc).__module__.split('.')[0]}.{type(exc).__name__}"      # struct.error, not just error
+        reason = f"{kind}: {str(exc).splitlines()[0] if str(exc) else ''}".rstrip(": ")
+        _forget(exc)
+        raise DataError(f"{path}: damaged or unreadable {what} file ({reason[:200]})") from None
+    finally:
+        for log in loggers:
+            log.removeFilter(silenced)
+    if silenced.warnings:
+        raise DataError(f"{path}: damaged or truncated {what} file ({silenced.warnings[0][:200]})")

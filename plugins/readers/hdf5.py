@@ -20,7 +20,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, unknown_channel
+from ._common import as_float, check_exists, library_errors, unknown_channel
 
 
 class Hdf5Options(Section):
@@ -66,14 +66,14 @@ class Hdf5Reader(Reader):
     def _file(self) -> h5py.File:
         if self._f is None:
             check_exists(self.path)
-            try:
+            with library_errors(self.path, "HDF5"):
                 self._f = h5py.File(self.path, "r")
-            except OSError as exc:
-                raise DataError(f"{self.path}: not a readable HDF5 file ({str(exc).splitlines()[0]})") from None
         return self._f
 
     def channels(self) -> list[str]:
-        return [c for c in datasets(self._file()) if c != self.opts.index]
+        f = self._file()
+        with library_errors(self.path, "HDF5"):
+            return [c for c in datasets(f) if c != self.opts.index]
 
     def _dataset(self, channel: str):
         f = self._file()
@@ -84,7 +84,8 @@ class Hdf5Reader(Reader):
 
     def read(self, channel: str) -> Signal:
         d = self._dataset(channel)
-        values = as_float(d[()], self.path, channel)
+        with library_errors(self.path, "HDF5"):
+            values = as_float(d[()], self.path, channel)
         unit = _text(d.attrs.get("unit", d.attrs.get("units", "")))
         if self.opts.index:
             return Signal(channel, values, unit, index=as_float(self._dataset(self.opts.index)[()], self.path,

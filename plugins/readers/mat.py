@@ -8,6 +8,7 @@ declares them. The abscissa is a variable (``index: t``) or a ``step``.
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 from typing import ClassVar
 
@@ -20,7 +21,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, unknown_channel
+from ._common import as_float, check_exists, library_errors, unknown_channel
 from .hdf5 import datasets
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -32,6 +33,36 @@ class MatOptions(Section):
     index: str | None = Field(default=None, description="variable of the abscissa (time in s, or distance in m)")
     step: PositiveFloat | None = Field(default=None, description="uniform sampling step when there is no "
                                        "index variable")
+
+
+def v5_cut(path: Path) -> str | None:
+    """Where a MATLAB version 5 file is cut short, or None when its elements fill it exactly.
+
+    The file is a 128-byte header and then elements, each an 8-byte tag (type, byte count) and its data
+    (padded to 8 bytes, except a compressed one). scipy lists the variables of a truncated file up to
+    the cut without a word; a mapped channel would then be reported as absent.
+    """
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(128)
+        if len(head) < 128:
+            return f"{size} bytes, shorter than the 128-byte MATLAB header"
+        order = "<" if head[126:128] == b"IM" else ">"
+        offset = 128
+        while offset < size:
+            fh.seek(offset)
+            tag = fh.read(8)
+            if len(tag) < 8:
+                return f"the element at byte {offset} is cut"
+            kind, n = struct.unpack(order + "II", tag)
+            if kind >> 16:      # a small element: its data are in the tag
+                offset += 8
+                continue
+            end = offset + 8 + (n if kind == 15 else (n + 7) // 8 * 8)   # 15: miCOMPRESSED, not padded
+            if end > size:
+                return f"the variable at byte {offset} needs {end} bytes, the file has {size}"
+            offset = end
+    return None
 
 
 def is_v73(path: Path) -> bool:
@@ -58,13 +89,15 @@ class MatReader(Reader):
         if self._names is None:
             check_exists(self.path)
             if is_v73(self.path):
-                self._h5 = h5py.File(self.path, "r")
-                self._names = [n for n in datasets(self._h5) if not n.startswith("#")]
+                with library_errors(self.path, "MATLAB 7.3 (HDF5)"):
+                    self._h5 = h5py.File(self.path, "r")
+                    self._names = [n for n in datasets(self._h5) if not n.startswith("#")]
             else:
-                try:
+                with library_errors(self.path, "MATLAB"):   # scipy raises several types for a file that is not MAT
                     info = scipy.io.whosmat(str(self.path))
-                except Exception as exc:  # scipy raises several types for a file that is not MAT
-                    raise DataError(f"{self.path}: not a readable MATLAB file ({exc})") from None
+                    cut = v5_cut(self.path)
+                if cut:
+                    raise DataError(f"{self.path}: damaged or truncated MATLAB file ({cut})")
                 self._names = [name for name, shape, cls in info
                                if cls in ("double", "single", "int8", "int16", "int32", "int64", "uint8",
                                           "uint16", "uint32", "uint64") and len(shape) == 2 and min(shape) == 1]
@@ -77,9 +110,10 @@ class MatReader(Reader):
         names = self._open()
         if name not in names:
             raise unknown_channel(self.path, name, [n for n in names if n != self.opts.index])
-        if self._h5 is not None:
-            return as_float(self._h5[name][()], self.path, name)
-        return as_float(scipy.io.loadmat(str(self.path), variable_names=[name])[name], self.path, name)
+        with library_errors(self.path, "MATLAB"):
+            if self._h5 is not None:
+                return as_float(self._h5[name][()], self.path, name)
+            return as_float(scipy.io.loadmat(str(self.path), variable_names=[name])[name], self.path, name)
 
     def read(self, channel: str) -> Signal:
         values = self._vector(channel)

@@ -25,7 +25,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, optional_library, unknown_channel
+from ._common import as_float, check_exists, library_errors, optional_library, unknown_channel
 
 
 class Mdf4Options(Section):
@@ -52,18 +52,20 @@ class Mdf4Reader(Reader):
             check_exists(self.path)
             asammdf = optional_library("asammdf", "asammdf", self.path)
             try:
-                self._stream = open(self.path, "rb")
-                self._mdf = asammdf.MDF(self._stream)   # a stream, not a path: no memory map of the file
-            except Exception as exc:  # asammdf raises many types for a file that is not MDF
+                with library_errors(self.path, "MDF"):   # asammdf raises many types for a damaged file
+                    self._stream = open(self.path, "rb")
+                    self._mdf = asammdf.MDF(self._stream)   # a stream, not a path: no memory map of the file
+            except DataError:
                 self.close()
-                raise DataError(f"{self.path}: not a readable MDF file ({str(exc).splitlines()[0]})") from None
+                raise
         return self._mdf
 
     def channels(self) -> list[str]:
         mdf = self._file()
-        masters = {mdf.groups[i].channels[mdf.masters_db[i]].name for i in mdf.masters_db} \
-            if hasattr(mdf, "masters_db") else set()
-        return [n for n in mdf.channels_db if n not in masters]
+        with library_errors(self.path, "MDF"):
+            masters = {mdf.groups[i].channels[mdf.masters_db[i]].name for i in mdf.masters_db} \
+                if hasattr(mdf, "masters_db") else set()
+            return [n for n in mdf.channels_db if n not in masters]
 
     def read(self, channel: str) -> Signal:
         mdf = self._file()
@@ -73,13 +75,15 @@ class Mdf4Reader(Reader):
         n = int(mdf.groups[group].channel_group.cycles_nr)
         step = self.opts.chunk_records
         values, times, unit = np.empty(n), np.empty(n), ""
-        for start in range(0, max(n, 1), step):
-            sig = mdf.get(channel, group=group, index=index, record_offset=start, record_count=min(step, n - start))
-            m = len(sig.samples)
-            values[start:start + m] = as_float(sig.samples, self.path, channel)
-            times[start:start + m] = sig.timestamps
-            unit = sig.unit if isinstance(sig.unit, str) else str(sig.unit or "")
-            del sig
+        with library_errors(self.path, "MDF"):
+            for start in range(0, max(n, 1), step):
+                sig = mdf.get(channel, group=group, index=index, record_offset=start,
+                              record_count=min(step, n - start))
+                m = len(sig.samples)
+                values[start:start + m] = as_float(sig.samples, self.path, channel)
+                times[start:start + m] = sig.timestamps
+                unit = sig.unit if isinstance(sig.unit, str) else str(sig.unit or "")
+                del sig
         return Signal(channel, values, unit, index=times)
 
     def close(self) -> None:

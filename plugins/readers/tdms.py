@@ -18,7 +18,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, optional_library, unknown_channel
+from ._common import as_float, check_exists, library_errors, optional_library, unknown_channel
 
 
 class TdmsOptions(Section):
@@ -45,15 +45,15 @@ class TdmsReader(Reader):
         if self._f is None:
             check_exists(self.path)
             nptdms = optional_library("nptdms", "npTDMS", self.path)
-            try:
+            with library_errors(self.path, "TDMS", "nptdms"):   # npTDMS raises several types for a file that is not TDMS
                 self._f = nptdms.TdmsFile.open(str(self.path))
-            except Exception as exc:  # npTDMS raises several types for a file that is not TDMS
-                raise DataError(f"{self.path}: not a readable TDMS file ({str(exc).splitlines()[0]})") from None
         return self._f
 
     def channels(self) -> list[str]:
-        return [f"{g.name}/{c.name}" for g in self._file().groups() for c in g.channels()
-                if f"{g.name}/{c.name}" != self.opts.index]
+        f = self._file()
+        with library_errors(self.path, "TDMS", "nptdms"):
+            return [f"{g.name}/{c.name}" for g in f.groups() for c in g.channels()
+                    if f"{g.name}/{c.name}" != self.opts.index]
 
     def _channel(self, name: str) -> Any:
         f = self._file()
@@ -65,12 +65,13 @@ class TdmsReader(Reader):
 
     def read(self, channel: str) -> Signal:
         ch = self._channel(channel)
-        values = as_float(ch[:], self.path, channel)
-        unit = str(ch.properties.get("unit_string", ""))
-        if self.opts.index:
-            return Signal(channel, values, unit, index=as_float(self._channel(self.opts.index)[:], self.path,
-                                                                self.opts.index))
-        step = ch.properties.get("wf_increment", self.opts.step)
+        with library_errors(self.path, "TDMS", "nptdms"):
+            values = as_float(ch[:], self.path, channel)
+            unit = str(ch.properties.get("unit_string", ""))
+            if self.opts.index:
+                return Signal(channel, values, unit, index=as_float(self._channel(self.opts.index)[:], self.path,
+                                                                    self.opts.index))
+            step = ch.properties.get("wf_increment", self.opts.step)
         if step is None:
             raise DataError(f"{self.path}: channel '{channel}' has no wf_increment property; give recording "
                             f"option 'index' (a channel) or 'step'")

@@ -14,6 +14,7 @@ is a warning.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -104,6 +105,8 @@ def abscissa(sig: Signal, path: Path) -> np.ndarray | None:
     if sig.index is None:
         if sig.step is None or not sig.step > 0:
             raise DataError(f"{path}: channel '{sig.name}' has neither an index nor a positive step")
+        if sig.values.size < 2:
+            raise DataError(f"{path}: channel '{sig.name}' has {sig.values.size} samples, at least 2 are needed")
         return None
     idx = np.asarray(sig.index, dtype=np.float64)
     if idx.shape != sig.values.shape:
@@ -201,6 +204,35 @@ def onto_grid(sig: Signal, idx: np.ndarray | None, grid: Grid, gap_factor: float
     return out, True
 
 
+def physical_memory() -> int | None:
+    """Bytes of physical memory of this machine (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def grid_arrays(path: Path, channel: str, grid: Grid, n_channels: int) -> np.ndarray:
+    """The ``(n_channels, grid.n)`` array of the recording on its grid, when it can fit in memory.
+
+    A time channel whose stamps lie far apart (a stamp of a later day, a damaged one) makes a grid of
+    billions of samples: that is an error naming the file and the span, not an "out of memory" later.
+    The whole ingest holds about ``n_channels + 3`` rows of the grid (the speed, the distance, a copy).
+    """
+    need = 8.0 * grid.n * (n_channels + 3)
+    total = physical_memory()
+    problem = total is not None and need > total
+    if not problem:
+        try:
+            return np.empty((n_channels, grid.n))
+        except MemoryError:
+            problem = True
+    raise DataError(f"{path}: channel '{channel}' spans {grid.n / grid.fs:.6g} s at {grid.fs:g} Hz, {grid.n} "
+                    f"samples per channel ({need / 2 ** 30:.3g} GiB in all), more than this machine's memory"
+                    f"{f' ({total / 2 ** 30:.3g} GiB)' if total else ''}: are its time stamps in seconds, "
+                    f"without a jump (a sparse or damaged time channel)?")
+
+
 def _unit_warning(where: str, file_unit: str, declared: str, table: dict[str, float]) -> str | None:
     fu = canonical_unit(file_unit) if file_unit else ""
     if fu and fu != declared:
@@ -222,7 +254,9 @@ def read_recording(opts: IngestOptions, sim_channels: Sequence[str]) -> Recordin
         for c, name in zip([*sim_channels, "speed" if rec.speed else "distance"], [*wanted, motion]):
             if name not in available:
                 shown = ", ".join(sorted(available)[:40])
-                raise DataError(f"{rec.path}: no channel '{name}' (mapped to {c}); channels in the file: {shown}")
+                key = f"recording.{c}.name" if c in ("speed", "distance") else f"recording.channels.{c}.name"
+                raise DataError(f"{rec.path}: no channel '{name}' (mapped to {c}, key {key}); channels in the "
+                                f"file: {shown}")
         reader.select([*wanted, motion])
         info: dict[str, ChannelInfo] = {}
         acc = None
@@ -236,7 +270,7 @@ def read_recording(opts: IngestOptions, sim_channels: Sequence[str]) -> Recordin
                 fs = rec.fs_hz or 1.0 / step
                 end = float(idx[-1]) if idx is not None else start + (sig.values.size - 1) * step
                 grid = Grid(start, float(fs), int(np.floor((end - start) * fs + 1e-9)) + 1)
-                acc = np.empty((len(sim_channels), grid.n))
+                acc = grid_arrays(rec.path, name, grid, len(sim_channels))
             _, resampled = onto_grid(sig, idx, grid, q.gap_factor, out=acc[row])
             acc[row] *= m.factor
             info[c] = ChannelInfo(name, sig.unit, m.unit, m.factor, 1.0 / step, jitter, int(gaps.size), resampled)
@@ -329,7 +363,8 @@ def read_track_record(section: TrackRecordSection, quantities: Sequence[str]) ->
         available = set(reader.channels())
         for q, name in names.items():
             if name not in available:
-                raise DataError(f"{section.path}: no channel '{name}' (mapped to track {q}); channels in the "
+                raise DataError(f"{section.path}: no channel '{name}' (mapped to track {q}, key "
+                                f"track.channels.{q}.name); channels in the "
                                 f"file: {', '.join(sorted(available)[:40])}")
         reader.select(list(names.values()))
         out = None

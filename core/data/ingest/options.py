@@ -31,6 +31,7 @@ from typing import Any, Literal
 
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt, field_validator, model_validator
 
+from suspid.data.plausibility import ACCELERATION_LIMITS, Check, kind_of  # noqa: F401 - kind_of for the ingest modules
 from suspid.interfaces import IRREGULARITY_CHANNELS
 from suspid.options import ConfigPath, Section
 
@@ -201,8 +202,12 @@ class QualitySection(Section):
     gap_factor: PositiveFloat = Field(default=1.5, description="a time step longer than this many nominal "
                                       "steps is a dropout")
     rms_range: dict[str, tuple[NonNegativeFloat, PositiveFloat]] = Field(
-        default_factory=lambda: {"carbody": (0.003, 2.0), "bogie": (0.02, 20.0), "axlebox": (0.3, 500.0)},
-        description="plausible RMS in m/s^2 while moving, by channel kind (a word of the channel name)")
+        default_factory=lambda: {k: lim[:2] for k, lim in ACCELERATION_LIMITS.items() if k is not None},
+        description="usual RMS in m/s^2 while moving, by channel kind (a word of the channel name): outside "
+        "it is a warning (beyond the physical limits of suspid.data.plausibility, an error)")
+    accept: list[Check] = Field(default_factory=list, description="checks of physically impossible data to let "
+                                "pass with a warning: implausible_amplitude, dead_channel, implausible_speed "
+                                "(as data.accept of a config; suspid.data.plausibility)")
     exclude: list[Literal["dropouts", "clipping", "flat", "spikes"]] = Field(
         default_factory=lambda: ["dropouts", "clipping", "flat", "spikes"],
         description="what excludes a stretch from the segments (the rest is only reported)")
@@ -233,8 +238,4 @@ class IngestOptions(Section):
         return self.output.dir if self.output.dir is not None else base / "ingested" / self.recording.path.stem
 
 
-def kind_of(channel: str, kinds) -> str | None:
-    """The kind of a simulator channel (``carbody``, ``bogie``, ``axlebox``): a word of its name."""
-    words = channel.replace("-", "_").split("_")
-    return next((k for k in kinds if k in words), None)
 

@@ -18,7 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .load import Recording
+from suspid.data.plausibility import acceleration_doubts, d1_rms, judge, speed_doubts, track_doubts
+from suspid.interfaces import IRREGULARITY_CHANNELS
+
+from .load import Recording, TrackRecord
 from .options import IngestOptions, kind_of
 
 
@@ -124,7 +127,11 @@ def check_channel(a: np.ndarray, moving: np.ndarray, fs: float, opts: IngestOpti
 
 def check_recording(rec: Recording, opts: IngestOptions, moving: np.ndarray
                     ) -> tuple[dict[str, ChannelQuality], list[str]]:
-    """Every channel's checks, and one warning line per problem found."""
+    """Every channel's checks, and one warning line per problem found.
+
+    :raises DataError: a channel or the speed beyond physics (:mod:`suspid.data.plausibility`), unless
+        ``quality.accept`` names the check.
+    """
     out, warnings = {}, []
     kinds = list(opts.quality.rms_range)
     for row, c in enumerate(rec.channels):
@@ -149,10 +156,17 @@ def check_recording(rec: Recording, opts: IngestOptions, moving: np.ndarray
                                 f"range [{lo:g}, {hi:g}] m/s^2 of a {kind_of(c, kinds)} channel: is the declared "
                                 f"unit '{m.unit}' right?")
         info = rec.info[c]
+        if np.isfinite(cq.rms_moving):   # beyond physics: an error unless quality.accept names the check
+            stated = f", the file gives '{info.file_unit}'" if info.file_unit else ""
+            found = acceleration_doubts(c, cq.rms_moving, cq.rms_moving == 0.0,
+                                        f" (recorded channel '{m.name}', declared unit '{m.unit}'{stated})")
+            warnings += judge([d for d in found if d.check], rec.path, accept=opts.quality.accept,
+                              accept_key="quality.accept", emit=False)
         if info.jitter > 1e-3:
             warnings.append(f"{name}: sampling jitter {100 * info.jitter:.2g} % of the time step")
         if info.n_gaps:
             warnings.append(f"{name}: {info.n_gaps} gaps in the time stamps")
+    warnings += check_speed(rec, moving, opts)
     return out, warnings
 
 
@@ -169,3 +183,28 @@ def excluded_mask(quality: dict[str, ChannelQuality], opts: IngestOptions, fs: f
                 from_runs(r, n, out=m)
             out[reason] = dilate(m, k)
     return out
+
+
+def check_track_record(track: TrackRecord, opts: IngestOptions) -> list[str]:
+    """The track record's channels against the limits of :mod:`suspid.data.plausibility` (D1-band rms, m).
+
+    :returns: warnings for the unusual (and the accepted impossible) channels.
+    :raises DataError: a channel beyond any track open to traffic, unless ``quality.accept`` names the check.
+    """
+    doubts = []
+    for q, row in zip(IRREGULARITY_CHANNELS, track.irregularities):
+        if q in track.present:
+            unit = opts.track.channels[q]
+            doubts += track_doubts(q, d1_rms(row, track.dx), f" (recorded channel '{unit.name}', declared unit "
+                                                             f"'{unit.unit}')")
+    return judge(doubts, track.path, accept=opts.quality.accept, accept_key="quality.accept", emit=False)
+
+
+def check_speed(rec: Recording, moving: np.ndarray, opts: IngestOptions) -> list[str]:
+    """The train's speed while moving (its 99th percentile: one glitch is no speed) against the limits."""
+    v = rec.speed[moving & np.isfinite(rec.speed)]
+    if v.size == 0:
+        return []
+    unit = (opts.recording.speed or opts.recording.distance).unit
+    doubts = speed_doubts(float(np.percentile(v, 99)), f"speed (declared unit '{unit}'), 99th percentile")
+    return judge(doubts, rec.path, accept=opts.quality.accept, accept_key="quality.accept", emit=False)

@@ -10,8 +10,10 @@ output folder is touched only once the inputs have been read and checked.
 
 from __future__ import annotations
 
+import difflib
 import os
 import tempfile
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -22,7 +24,8 @@ import numpy as np
 import suspid
 from suspid.data.files import (check_response, read_accelerations, read_track, write_accelerations_csv,
                                write_accelerations_h5, write_track_csv, write_track_h5)
-from suspid.errors import ConfigError, DataError
+from suspid.data.plausibility import CHECKS
+from suspid.errors import ConfigError, DataError, DataWarning
 from suspid.infra.files import write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackSegment
 
@@ -30,7 +33,7 @@ from . import report as _report
 from .align import Alignment, align
 from .load import Recording, TrackRecord, read_recording, read_track_record
 from .options import IngestOptions, kind_of
-from .quality import check_recording, excluded_mask
+from .quality import check_recording, check_track_record, excluded_mask
 from .segment import Excluded, Window, cut
 
 Log = Callable[[str], None]
@@ -71,14 +74,16 @@ def check_mapping(opts: IngestOptions, sim_channels: Sequence[str], simulator: s
     """Every simulator channel is mapped, and only those."""
     mapped = opts.recording.channels
     missing = [c for c in sim_channels if c not in mapped]
+    extra = [c for c in mapped if c not in sim_channels]
+    if extra:   # first: a misspelt key is also a missing channel, and the key is what to correct
+        close = difflib.get_close_matches(extra[0], missing, n=1)
+        raise ConfigError(f"'{extra[0]}' is not a channel of simulator '{simulator}'"
+                          f"{f' (did you mean {close[0]}?)' if close else ''}; its channels: "
+                          f"{', '.join(sim_channels)}", key=f"recording.channels.{extra[0]}")
     if missing:
         raise ConfigError(f"no mapping for simulator channel(s) {', '.join(missing)} (simulator '{simulator}' "
                           f"has channels {', '.join(sim_channels)}); map each to a recorded channel, or "
                           f"configure the simulator's sensors to the recorded ones", key="recording.channels")
-    extra = [c for c in mapped if c not in sim_channels]
-    if extra:
-        raise ConfigError(f"'{extra[0]}' is not a channel of simulator '{simulator}'; its channels: "
-                          f"{', '.join(sim_channels)}", key=f"recording.channels.{extra[0]}")
 
 
 def alignment_channel(opts: IngestOptions, channels: Sequence[str]) -> str | None:
@@ -182,16 +187,22 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
 def check_written(track_path: Path, acc_path: Path, segs: list[TrackSegment], resps: list[Response],
                   channels: Sequence[str]) -> None:
     """Read back what `suspid validate` and `suspid run` will read: every track segment, and the first
-    record of accelerations (HDF5: the segment order), without holding all the records twice."""
+    record of accelerations (HDF5: the segment order), without holding all the records twice. The layout
+    is checked, not the plausibility: the quality checks judged that on the recording (``quality.accept``)."""
     names = [s.name for s in segs]
     if acc_path.is_dir():
-        first = read_accelerations(acc_path / f"{names[0]}.csv", channels)[0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DataWarning)
+            first = read_accelerations(acc_path / f"{names[0]}.csv", channels, accept=CHECKS)[0]
         order = sorted(p.stem for p in acc_path.glob("*.csv"))
     else:
         with h5py.File(acc_path, "r") as f:
             order = [o.decode() if isinstance(o, bytes) else str(o) for o in f["segments"].attrs["order"]]
         first = read_accelerations_h5_first(acc_path, names[0], channels)
-    if ([s.name for s in read_track(track_path)] != names or sorted(order) != sorted(names)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        track_names = [s.name for s in read_track(track_path, accept=CHECKS)]
+    if (track_names != names or sorted(order) != sorted(names)
             or first.accelerations.shape != resps[0].accelerations.shape):
         raise DataError(f"{acc_path}: the segments written could not be read back")
 
@@ -226,7 +237,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
     bad_by = excluded_mask(quality, opts, g.fs, g.n)
     log(f"reading the track record {opts.track.path}")
     track, twarn = read_track_record(opts.track, IRREGULARITY_CHANNELS)
-    warnings += twarn
+    warnings += twarn + check_track_record(track, opts)
     ach = alignment_channel(opts, channels)
     usable = moving & ~np.logical_or.reduce([np.zeros(g.n, bool), *bad_by.values()])
     log("aligning the track record")
