@@ -129,7 +129,7 @@ def test_gauss_newton_finds_the_maximum_of_a_closed_form_model_in_a_few_steps():
     assert model.n_jacobians <= res.n_evaluations - res.n_initial + 1
 
 
-@pytest.mark.long
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["conventional-hs", "tgv-articulated"])
 def test_every_parameter_of_the_presets_matches_central_differences(train, preset):
     """The acceptance of the analytic Jacobian: every parameter exudyn-train differentiates, both presets the
