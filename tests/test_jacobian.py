@@ -129,7 +129,7 @@ def test_gauss_newton_finds_the_maximum_of_a_closed_form_model_in_a_few_steps():
     assert model.n_jacobians <= res.n_evaluations - res.n_initial + 1
 
 
-@pytest.mark.long
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["conventional-hs", "tgv-articulated"])
 def test_every_parameter_of_the_presets_matches_central_differences(train, preset):
     """The acceptance of the analytic Jacobian: every parameter exudyn-train differentiates, both presets the
@@ -154,3 +154,10 @@ def test_linearised_shift_is_the_refit_of_a_linear_model():
     rhs = (data - B @ (theta_true + dtheta)).reshape(-1) * s
     w_fit = np.linalg.lstsq(A.reshape(-1, 2) * s[:, None], rhs, rcond=None)[0]
     np.testing.assert_allclose(w_fit - w_true, linearised_shift(A, B, var) @ dtheta, atol=1e-12)
+
+
+def test_an_undeclared_parameter_is_a_one_line_error(train, segments):
+    from suspid.errors import SuspidError
+
+    with pytest.raises(SuspidError, match="'no_such' not declared|no_such.* not declared"):
+        spectra_jacobian(train(solver="frequency"), {}, ["k_sec_z", "no_such"], segments, SPECTRA)

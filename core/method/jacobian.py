@@ -156,18 +156,20 @@ def spectra_jacobian(simulator: Simulator, w: Mapping[str, float], names: Sequen
         ``"forward"``: finite differences for every parameter.
     :param rel_step: relative step of the finite differences.
     :raises SimulatorError: a simulation failed (the first failure's error).
-    :raises ValueError: an unknown method or a parameter the simulator does not declare.
+    :raises SuspidError: an unknown method or a parameter the simulator does not declare (one line).
     """
     from suspid.workflows.tasks import SpectraTask, run_one, run_tasks
 
     if method not in ("auto", "central", "forward") or fallback not in ("central", "forward"):
-        raise ValueError(f"unknown finite-difference method {method!r} / {fallback!r}")
+        raise SuspidError(f"unknown differentiation method {method!r} / {fallback!r}: expected method auto, central "
+                          f"or forward and fallback central or forward")
     t0 = time.perf_counter()
     names = list(names)
     declared = {p.name: p.nominal for p in simulator.parameters()}
     unknown = [n for n in names if n not in declared]
     if unknown:
-        raise ValueError(f"parameter(s) {', '.join(unknown)} not declared by simulator '{simulator.name}'")
+        raise SuspidError(f"parameter(s) {', '.join(unknown)} not declared by simulator '{simulator.name}' "
+                          f"(declared: {', '.join(declared)})")
     point = {n: float(w[n]) if n in w else float(declared[n]) for n in names}
     full = {**{k: float(v) for k, v in w.items()}, **point}
     opt = parse_options(SpectraOptions, spectra, "spectra")
