@@ -226,7 +226,8 @@ def _print_result(result: dict, run_dir: Path) -> None:
                       f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
                       "yes" if result["identifiable"][n] else "[red]no[/red]")
     console.print(table)
-    console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}")
+    kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
+    console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
