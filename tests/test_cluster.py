@@ -303,7 +303,7 @@ def not_dask():
                socketserver.ThreadingTCPServer(("127.0.0.1", 0), _StatusLine)]
     for s in servers:
         s.daemon_threads = True
-        threading.Thread(target=s.serve_forever, daemon=True).start()
+        threading.Thread(target=s.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
     yield {kind: f"tcp://127.0.0.1:{s.server_address[1]}" for kind, s in zip(("silent", "status"), servers)}
     for s in servers:
         s.shutdown()
