@@ -2,7 +2,8 @@
 
 User mistakes (a :class:`~suspid.errors.SuspidError`) print one line on stderr
 and exit with code 2; ``--debug`` shows the traceback instead. Ctrl-C exits
-with code 130 and keeps what is already in the run ledger.
+with code 130 and keeps what is already in the run ledger (``ingest``, which
+has none, says that the output folder keeps the previous ingest).
 """
 
 from __future__ import annotations
@@ -193,6 +194,10 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
            out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: the file's output.dir)."),
            quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
     """Cut a long recording (mf4, mat, tdms, csv, hdf5) into segments: units, track alignment, quality report."""
+    global _interrupted_note
+    where = str(out) if out is not None else "the output folder"
+    _interrupted_note = (f"ingest keeps no partial work (it has no ledger): {where} still holds the segments "
+                         f"and reports of the previous ingest, if any; run the same command to ingest again")
     r = api.ingest(ingest_file, set_ or [], out_dir=out, log=_log(quiet))
     for w in r.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -221,7 +226,8 @@ def _print_result(result: dict, run_dir: Path) -> None:
                       f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
                       "yes" if result["identifiable"][n] else "[red]no[/red]")
     console.print(table)
-    console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}")
+    kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
+    console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -282,6 +288,10 @@ def _click_exceptions() -> dict[str, tuple[type, ...]]:
 _CLICK = _click_exceptions()
 
 
+_interrupted_note: str | None = None
+"""What an interrupted command keeps, set by a command without a ledger (``ingest``); else :func:`_kept`."""
+
+
 def _kept() -> str:
     """What an interrupted command leaves: the finished simulations in the ledgers it opened."""
     from suspid.infra.ledger import count_finished
@@ -296,7 +306,9 @@ def _kept() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point; returns (and exits with) the exit code."""
+    global _interrupted_note
     argv = list(sys.argv[1:] if argv is None else argv)
+    _interrupted_note = None
     debug = "--debug" in argv
     warnings.showwarning = _show_warning
     interrupted = False
@@ -318,7 +330,8 @@ def main(argv: list[str] | None = None) -> int:
         message, code = _one_line(exc)
         print(f"error: {message}", file=sys.stderr)
     if interrupted:
-        print(f"interrupted: {_kept()}; run the same command to resume", file=sys.stderr)
+        note = _interrupted_note or f"{_kept()}; run the same command to resume"
+        print(f"interrupted: {note}", file=sys.stderr)
     sys.exit(code)
 
 

@@ -9,9 +9,11 @@ output.
 
 from __future__ import annotations
 
+import http.server
 import json
 import os
 import signal
+import socketserver
 import sqlite3
 import subprocess
 import threading
@@ -283,3 +285,58 @@ def test_validate_reaches_the_scheduler(tmp_path):
         suspid.validate(config)
     config["executor"]["options"] = {"n_workers": 2}  # a LocalCluster: nothing to reach, nothing started
     assert suspid.validate(config).config.executor.plugin == "dask"
+
+
+# -- a wrong address: not a dask scheduler, or not an address ------------------------------------
+class _StatusLine(socketserver.BaseRequestHandler):
+    """A service that answers every connection with an HTTP status line (what dask read as a length)."""
+
+    def handle(self):
+        self.request.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
+
+
+@pytest.fixture
+def not_dask():
+    """Two services on loopback that are not dask schedulers: an HTTP server (silent until it gets a
+    request line) and one that answers with an HTTP status line at once; their ``tcp://`` addresses."""
+    servers = [http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler),
+               socketserver.ThreadingTCPServer(("127.0.0.1", 0), _StatusLine)]
+    for s in servers:
+        s.daemon_threads = True
+        threading.Thread(target=s.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+    yield {kind: f"tcp://127.0.0.1:{s.server_address[1]}" for kind, s in zip(("silent", "status"), servers)}
+    for s in servers:
+        s.shutdown()
+        s.server_close()
+
+
+@pytest.mark.parametrize("command", ["validate", "run"])
+@pytest.mark.parametrize("service, words", [
+    ("silent", "is not a dask scheduler: it accepted the connection but sent no dask handshake within timeout_s=2"),
+    ("status", "is not a dask scheduler: it answered 'HTTP/1.1 400 Bad Request', not the dask protocol"),
+    ("sched:notaport", "'sched:notaport' (from executor.options.address) is not a dask scheduler address"),
+    ("tcp://127.0.0.1", "'tcp://127.0.0.1' (from executor.options.address) is not a dask scheduler address"),
+], ids=["http-server", "status-line", "port-not-a-number", "no-port"])
+def test_an_address_that_is_not_a_dask_scheduler_is_one_line_exit_2_within_the_timeout(
+        tmp_path, capsys, not_dask, command, service, words):
+    """``suspid validate`` and ``suspid run`` (the command line, in this process): one line naming the
+    address and the key, exit 2, within timeout_s (2 s) and not "out of memory" or "a bug in the plugin";
+    nothing written in the run directory."""
+    from suspid.cli import main
+
+    address = not_dask.get(service, service)
+    config = _config(tmp_path, "run", plugin="dask", options={"address": address, "timeout_s": 2})
+    config["simulator"]["plugin"] = "exudyn-train"
+    path = tmp_path / "wrong-address.yaml"
+    path.write_text(yaml.safe_dump(config))
+    t0 = time.monotonic()
+    with pytest.raises(SystemExit) as exited:
+        main([command, str(path), "--quiet"] if command == "run" else [command, str(path)])
+    elapsed = time.monotonic() - t0
+    err = capsys.readouterr().err
+    assert exited.value.code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: key 'executor.options.address': "), err
+    assert address in lines[0] and words in lines[0], lines[0]
+    assert elapsed < 2 + 5, elapsed   # the timeout, and a margin for a loaded machine
+    assert not (tmp_path / "run" / "result.json").exists()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -24,7 +25,7 @@ from suspid import registry
 from suspid.data.files import read_accelerations, read_track
 from suspid.errors import ConfigError, DataError
 
-from conftest import ROOT, run_cli
+from conftest import ROOT, interruptible, run_cli
 
 pytest.importorskip("asammdf")
 pytest.importorskip("nptdms")
@@ -347,6 +348,76 @@ def test_a_whole_matlab_5_file_is_not_taken_for_a_cut_one(tmp_path, compress):
     assert v5_cut(path) is None
     path.write_bytes(path.read_bytes()[:-3])
     assert "needs" in v5_cut(path)
+def _limit_file_size(limit: int):
+    """``preexec_fn``: files limited to ``limit`` bytes (a write beyond fails with EFBIG, as on a full disk)."""
+    def preexec():
+        import resource
+
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+    return preexec
+
+
+def _snapshot(out: Path) -> dict[str, bytes]:
+    """Every file under ``out`` (relative path -> content)."""
+    return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+
+
+def _consistent(out: Path) -> list[str]:
+    """The segments ingest.json lists, checked to be exactly those the written files hold."""
+    rep = json.loads((out / "ingest.json").read_text())
+    names = [s["name"] for s in rep["segments"]]
+    track, acc = Path(rep["output"]["track_file"]), Path(rep["output"]["measurements"])
+    assert track.parent == out and acc.parent == out
+    assert [s.name for s in read_track(track)] == names
+    assert sorted(r.segment for r in read_accelerations(acc)) == sorted(names)
+    assert all(f"| {n} |" in (out / "ingest.md").read_text() for n in names)
+    assert not [p for p in out.iterdir() if p.name.startswith(".ingest-")]   # no staging folder left
+    return names
+
+
+def test_a_failing_or_interrupted_re_ingest_keeps_the_previous_segments_and_reports(recordings, tmp_path):
+    """Re-ingest into a folder that holds an ingest, with files limited to 100 kB (a segment file is larger):
+    one line, exit 2, and every file of the previous ingest (CSV, then HDF5) is still there, byte for byte,
+    with ingest.json listing what the files hold. A re-ingest that succeeds replaces the whole set. Ctrl-C
+    during a re-ingest says what is kept, and keeps it."""
+    folder, _ = recordings
+    data, out = _ingest_file(folder, "mat"), tmp_path / "out"
+    path = folder / "ingest-reingest.yaml"
+    path.write_text(yaml.safe_dump(data))
+    suspid.ingest(path, out_dir=out)
+    for fmt, prefix in (("csv", "first"), ("hdf5", "second")):
+        before = _snapshot(out)
+        names = _consistent(out)
+        p = subprocess.run([sys.executable, "-m", "suspid", "ingest", str(path), "--out", str(out), "--quiet",
+                            "--set", f"segments.prefix=again-{fmt}"], capture_output=True, text=True,
+                           preexec_fn=_limit_file_size(100_000), timeout=300)
+        assert p.returncode == 2, (p.stdout, p.stderr)
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0] == (f"error: {out}: cannot write the ingest: file too large (disk full or a "
+                                                f"file-size limit?); the previous segments and reports in it, if any, "
+                                                f"are kept"), p.stderr
+        assert _snapshot(out) == before and _consistent(out) == names
+        # a re-ingest that succeeds (in the other format): the new set only, the previous one gone
+        suspid.ingest(path, [f"output.format={'hdf5' if fmt == 'csv' else 'csv'}", f"segments.prefix={prefix}",
+                             "quality.figures=false"], out_dir=out)
+        assert all(n.startswith(f"{prefix}-") for n in _consistent(out))
+        assert {"track", "accelerations"}.isdisjoint(p.name for p in out.iterdir()) == (fmt == "csv")
+        assert {"track.h5", "accelerations.h5"}.isdisjoint(p.name for p in out.iterdir()) == (fmt == "hdf5")
+        assert not list(out.glob("*.png"))   # the first ingest's figures went with its set
+    # Ctrl-C while re-ingesting: exit 130, a line that says what is kept (no "run ledger": ingest has none)
+    before, names = _snapshot(out), _consistent(out)
+    proc = subprocess.Popen([sys.executable, "-m", "suspid", "ingest", str(path), "--out", str(out),
+                             "--set", "segments.prefix=interrupted"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, preexec_fn=interruptible)
+    first = proc.stdout.readline()   # "reading <recording>": the ingest has started its work
+    proc.send_signal(signal.SIGINT)
+    rest, err = proc.communicate(timeout=120)
+    assert first.startswith("reading ") and proc.returncode == 130, (first, rest, err)
+    assert err.strip() == (f"interrupted: ingest keeps no partial work (it has no ledger): {out} still holds the "
+                           f"segments and reports of the previous ingest, if any; run the same command to ingest "
+                           f"again"), err
+    assert _snapshot(out) == before and _consistent(out) == names
 
 
 def test_a_lab_can_add_its_own_reader(recordings, tmp_path):

@@ -415,6 +415,38 @@ class Ledger:
         rows = self._read("SELECT run, iteration, record FROM iterations ORDER BY run, iteration")
         return [(run, int(i), self._json(record, f"iteration {i} of {run}")) for run, i, record in rows]
 
+    HISTORY_PREFIX = "history/"
+    """Iteration rows of a run that is not the current one are kept under ``history/<run id>/<loop>``."""
+
+    def select_run(self, run_id: str, previous: str | None = None) -> None:
+        """Make ``run_id``'s optimiser records the current ones, keeping every other run's.
+
+        The iteration rows (``evaluations``, ``design``, ``ego``, ...) of the run
+        directory's current run (the meta key ``run_id``, else ``previous``: the
+        run that wrote a ledger older than this key) move under
+        ``history/<its id>/``, and ``run_id``'s own rows, from an earlier run of
+        that config, move back; one transaction. Evaluations (the content-keyed
+        cache of J) are shared by every run and not touched.
+        """
+        current = self.get_meta("run_id") or previous
+        if current == run_id:
+            if self.get_meta("run_id") != run_id:
+                self.set_meta("run_id", run_id)
+            return
+        prefix, n = self.HISTORY_PREFIX, len(self.HISTORY_PREFIX)
+        statements: list[tuple[str, tuple]] = []
+        if current is not None:
+            statements.append(("UPDATE iterations SET run = ? || run WHERE substr(run, 1, ?) != ?",
+                               (f"{prefix}{current}/", n, prefix)))
+        else:   # rows of an unknown earlier run: kept apart all the same
+            statements.append(("UPDATE iterations SET run = ? || run WHERE substr(run, 1, ?) != ?",
+                               (f"{prefix}earlier/", n, prefix)))
+        mine = f"{prefix}{run_id}/"
+        statements += [("UPDATE iterations SET run = substr(run, ?) WHERE substr(run, 1, ?) = ?",
+                        (len(mine) + 1, len(mine), mine)),
+                       ("INSERT OR REPLACE INTO meta VALUES (?, ?)", ("run_id", run_id))]
+        self._transaction(statements)
+
     # -- artifacts (arrays, small files) -------------------------------------------
     def put_array(self, key: str, array: np.ndarray) -> None:
         """Store an array (e.g. reference-date spectra) under ``key``."""

@@ -33,6 +33,7 @@ import yaml
 from suspid import registry
 from suspid.config import Config, optimizer_budget
 from suspid.errors import SimulatorError
+from suspid.infra import history
 from suspid.infra.files import write_json, write_text
 from suspid.infra.ledger import Ledger
 from suspid.infra.seeds import seed_for
@@ -76,7 +77,8 @@ class IdentificationResult:
     :ivar J_max: J(w_opt).
     :ivar n_initial, n_iterations, n_simulator_calls: m0, EGO iterations, evaluations of J.
     :ivar stop_reason, refine_stop_reason: why the EGO loop (and the refinement) stopped.
-    :ivar run_dir: the run directory (``result.json``, ``report.md``, ``ledger.sqlite``, ``noise_model.npz``).
+    :ivar run_dir: the run directory (``result.json``, ``report.md``, ``ledger.sqlite``, ``noise_model.npz``):
+        they are the latest finished run's; this run's own are in ``history/<run_id>/`` (``result["run_id"]``).
     """
 
     parameters: list[str]
@@ -142,10 +144,14 @@ class IdentificationResult:
         return max(errors) if errors else None
 
 
+def resolved_config(config: Config) -> dict[str, Any]:
+    """The resolved config as data: what ``config.yaml`` holds, and what the run id is the digest of."""
+    return config.model_dump(mode="json", exclude={"source_file"})
+
+
 def write_config(config: Config, run_dir: Path) -> None:
-    """The resolved config, ``config.yaml`` in the run directory (atomically)."""
-    write_text(run_dir / "config.yaml", yaml.safe_dump(config.model_dump(mode="json", exclude={"source_file"}),
-                                                       sort_keys=False))
+    """The resolved config, ``config.yaml`` in the run's folder (atomically)."""
+    write_text(run_dir / "config.yaml", yaml.safe_dump(resolved_config(config), sort_keys=False))
 
 
 def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> dict[str, Any]:
@@ -165,6 +171,11 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
         force: bool = False) -> IdentificationResult:
     """The whole identification (see the module docstring); writes result.json and report.md.
 
+    The run writes its outputs into ``<run dir>/history/<run id>/`` (the run id is the digest of the
+    resolved config) and, once finished, puts them at the top of the run directory
+    (:mod:`suspid.infra.history`): another run of a config of the same name (another seed, ...) in the
+    same directory keeps its own results; the same config again resumes.
+
     A simulation that fails (a :class:`~suspid.errors.SimulatorError`) at a point
     of the design, of EGO or of the refinement does not end the run: the failure
     is kept in the ledger with its message, the point is infeasible for the
@@ -181,13 +192,19 @@ def run(config: Config, *, fresh: bool = False, progress: bool = False,
     :raises RunDirError: the run directory is in use by another process, or holds another config's run.
     """
     run_dir = config.run_dir()
+    run_id = history.run_id_of(resolved_config(config))
     # the executor first: an unreachable cluster, or workers that cannot run suspid, stop the run before anything
     with registry.get("executor", config.executor.plugin)(**config.executor.options) as executor, \
             open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, fresh=fresh,
                          force=force, log=log) as ledger:
         log(executor.describe())
-        write_config(config, run_dir)
-        return _run(config, run_dir, ledger, executor, progress=progress, log=log, retry_failed=retry_failed)
+        own_dir = history.begin(run_dir, run_id, ledger)   # this run writes only there (suspid.infra.history)
+        write_config(config, own_dir)
+        out = _run(config, own_dir, run_id, ledger, executor, progress=progress, log=log,
+                   retry_failed=retry_failed)
+        history.publish(run_dir, run_id)
+        out.run_dir = run_dir
+        return out
 
 
 def optimizer_for(config: Config, problem: Problem):
@@ -204,9 +221,12 @@ def optimizer_for(config: Config, problem: Problem):
                surrogate=surrogate_for(config), **options)
 
 
-def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, progress: bool,
+def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: Executor, *, progress: bool,
          log: Callable[[str], None], retry_failed: bool) -> IdentificationResult:
-    """:func:`run` inside its locked run directory; every simulation runs on ``executor`` (entered)."""
+    """:func:`run` inside its locked run directory; every simulation runs on ``executor`` (entered).
+
+    ``run_dir`` is the run's own folder (``history/<run id>/``), where its outputs go.
+    """
     t_start = time.perf_counter()
     n_before = ledger.count()
     problem = build_problem(config, ledger, log, executor)
@@ -222,6 +242,7 @@ def _run(config: Config, run_dir: Path, ledger: Ledger, executor: Executor, *, p
     with single_blas_thread():
         result = analyse(problem, ledger, ego, config, failed, retry_failed, executor)
     result.update({
+        "run_id": run_id,
         "n_initial": int(ego.n_initial), "n_iterations": int(ego.n_iterations),
         "n_simulator_calls": int(ego.n_evaluations),
         "n_simulator_calls_this_session": int(ledger.count() - n_before),

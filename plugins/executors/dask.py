@@ -53,6 +53,8 @@ import contextlib
 import hashlib
 import logging
 import os
+import socket
+import struct
 import threading
 import time
 import uuid
@@ -318,6 +320,7 @@ class DaskExecutor(Executor):
             raise ConfigError("allowed_failures applies to a LocalCluster only; for the scheduler at "
                               f"{address} (from {source}) set distributed.scheduler.allowed-failures "
                               "in that scheduler's dask config", key="executor.options.allowed_failures")
+        probe_scheduler(address, source, opts.timeout_s, key)
         try:
             self.client_ = distributed.Client(address, timeout=opts.timeout_s)
         except (OSError, TimeoutError) as exc:
@@ -527,6 +530,98 @@ class DaskExecutor(Executor):
                     yield pending.pop(h), outcome
         finally:
             self._cancel(list(pending))
+
+
+HANDSHAKE_MAX_BYTES = 1 << 20
+"""A dask handshake is a few hundred bytes; a first frame longer than this is another protocol."""
+
+
+def parse_scheduler_address(address: str, source: str, key: str | None) -> tuple[str, str, int]:
+    """``(scheme, host, port)`` of a scheduler address (``tcp://host:port``, ``host:port``, ``tls://...``);
+    ``(scheme, location, 0)`` for the schemes without a TCP port (``inproc://``, ``ucx://``, ``ws://``).
+
+    :raises ConfigError: the address is malformed (no port, a port that is not a number or out of
+        1-65535, a scheme dask has no comm for), naming it and where it came from.
+    """
+    from distributed.comm import registry as comm_registry
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    expected = "expected tcp://host:port (the scheduler's port, 8786 by default)"
+    try:
+        scheme, location = parse_address(address)
+        comm_registry.get_backend(scheme)
+        if scheme not in ("tcp", "tls"):
+            return scheme, location, 0
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"'{address}' (from {source}) is not a dask scheduler address ({exc}); {expected}",
+                          key=key) from None
+    if not 0 < int(port) < 65536:
+        raise ConfigError(f"'{address}' (from {source}): port {port} is out of 1-65535; {expected}", key=key)
+    return scheme, host, int(port)
+
+
+def probe_scheduler(address: str, source: str, timeout_s: float, key: str | None) -> None:
+    """Check that a TCP scheduler address speaks dask before :class:`distributed.Client` connects to it.
+
+    A dask scheduler sends its handshake (one frame: an 8-byte little-endian length, then at most a
+    few kilobytes) as soon as a connection is accepted. ``distributed`` reads that frame without a
+    time limit and allocates whatever length the first 8 bytes say, so a service of another kind
+    (an HTTP server, the scheduler's dashboard port) would make the client wait for ever, or fail
+    with a ``MemoryError`` when the service answers with text (``HTTP/1.1 ...`` read as a length).
+    Here the first frame is read on a plain socket, within ``timeout_s`` in all, and its length
+    checked. Other schemes (``tls://``: encrypted before any frame) are only parsed.
+
+    :raises ConfigError: the address is malformed, nothing listens there, or what listens is not a
+        dask scheduler; one line naming the address and where it came from.
+    """
+    scheme, host, port = parse_scheduler_address(address, source, key)
+    if scheme != "tcp":
+        return
+    deadline = time.monotonic() + timeout_s
+    not_dask = f"the service at {address} (from {source}) is not a dask scheduler"
+    try:
+        sock = socket.create_connection((host, port), timeout=timeout_s)
+    except OSError as exc:
+        raise ConfigError(f"cannot connect to the dask scheduler at {address} (from {source}) "
+                          f"within timeout_s={timeout_s:g}: {exc.strerror or exc}", key=key) from None
+    with sock:
+        def receive(n: int) -> bytes:
+            data = b""
+            while len(data) < n:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError
+                sock.settimeout(left)
+                chunk = sock.recv(n - len(data))
+                if not chunk:
+                    raise ConnectionResetError
+                data += chunk
+            return data
+
+        try:
+            head = receive(8)
+        except TimeoutError:
+            raise ConfigError(f"{not_dask}: it accepted the connection but sent no dask handshake within "
+                              f"timeout_s={timeout_s:g} (the scheduler's port, 8786 by default, not its "
+                              f"dashboard's?)", key=key) from None
+        except OSError as exc:
+            raise ConfigError(f"{not_dask}: it closed the connection without a dask handshake "
+                              f"({exc.strerror or type(exc).__name__})", key=key) from None
+        (length,) = struct.unpack("<Q", head)
+        if not 0 < length <= HANDSHAKE_MAX_BYTES:
+            try:
+                sock.settimeout(0.2)
+                head += sock.recv(64)
+            except OSError:
+                pass
+            first = head.split(b"\n")[0].decode("ascii", "replace").strip()
+            raise ConfigError(f"{not_dask}: it answered {first[:60]!r}, not the dask protocol", key=key)
+        try:
+            receive(length)
+        except OSError:   # TimeoutError included
+            raise ConfigError(f"{not_dask}: its first message did not arrive whole within "
+                              f"timeout_s={timeout_s:g}", key=key) from None
 
 
 @contextlib.contextmanager

@@ -5,18 +5,25 @@ Steps: read the mapped channels onto one time grid in SI units
 align the track record (:mod:`~suspid.data.ingest.align`), cut segments at
 quasi-constant speed (:mod:`~suspid.data.ingest.segment`), write the segments with
 their provenance and the quality report (:mod:`~suspid.data.ingest.report`). The
-output folder is touched only once the inputs have been read and checked.
+output folder is touched only once the inputs have been read and checked, and
+then the whole new set (segments, reports, figures) is written in a folder
+beside the previous one and swapped in only once it is complete and read back
+(:func:`staged_output`): an ingest that fails or is interrupted leaves the
+previous one as it was.
 """
 
 from __future__ import annotations
 
+import contextlib
 import difflib
+import errno
 import os
+import shutil
 import tempfile
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import h5py
 import numpy as np
@@ -148,7 +155,10 @@ def _with_provenance(tmp: Path, final: Path, prov: dict[str, Any]) -> None:
 
 def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], resps: list[Response],
                    provs: list[dict[str, Any]]) -> tuple[Path, Path]:
-    """Write track and accelerations in the documented layout, with provenance; returns both paths."""
+    """Write track and accelerations in the documented layout, with provenance; returns both paths.
+
+    ``out`` is the staging folder of :func:`staged_output`, not the output folder itself.
+    """
     out.mkdir(parents=True, exist_ok=True)
     if opts.output.format == "hdf5":
         paths = (out / "track.h5", out / "accelerations.h5")
@@ -172,8 +182,6 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
     track_dir, acc_dir = out / "track", out / "accelerations"
     for d in (track_dir, acc_dir):
         d.mkdir(exist_ok=True)
-        for old in d.glob("*.csv"):   # segments of an earlier ingest of the same folder
-            old.unlink()
     for s, r, prov in zip(segs, resps, provs):
         tmp = track_dir / f".{s.name}.csv.tmp"
         write_track_csv(s, tmp)
@@ -182,6 +190,85 @@ def write_segments(opts: IngestOptions, out: Path, segs: list[TrackSegment], res
         write_accelerations_csv(r, tmp)
         _with_provenance(tmp, acc_dir / f"{s.name}.csv", prov)
     return track_dir, acc_dir
+
+
+OUTPUT_NAMES = ("track", "accelerations", "track.h5", "accelerations.h5", "ingest.json", "ingest.md",
+                "speed.png", "alignment.png", "spectrogram_*.png")
+"""What an ingest writes in its output folder (patterns): the set one ingest replaces by the next."""
+
+STAGE_PREFIX, OLD_PREFIX = ".ingest-new-", ".ingest-old-"
+_NO_ROOM = {getattr(errno, name) for name in ("ENOSPC", "EFBIG", "EDQUOT") if hasattr(errno, name)}
+
+
+def _outputs(folder: Path) -> list[Path]:
+    """The entries of ``folder`` that an ingest wrote (:data:`OUTPUT_NAMES`)."""
+    return sorted({p for pattern in OUTPUT_NAMES for p in folder.glob(pattern)})
+
+
+def swap_in(stage: Path, out: Path) -> None:
+    """Replace the ingest outputs of ``out`` by those written in ``stage``, as one set.
+
+    Everything was written and read back in ``stage`` (a folder inside ``out``,
+    so on the same file system); the swap is renames only, which need no room
+    on the disk: the previous set is moved into a ``.ingest-old-*`` folder, the
+    new one moved in, then the previous one deleted. A rename that fails puts
+    the previous set back, so ``out`` holds either the previous set or the new
+    one, never a mix.
+    """
+    old = Path(tempfile.mkdtemp(prefix=OLD_PREFIX, dir=out))
+    moved: list[tuple[Path, Path]] = []
+    try:
+        for p in _outputs(out):
+            os.replace(p, old / p.name)
+            moved.append((old / p.name, p))
+        for p in sorted(stage.iterdir()):
+            os.replace(p, out / p.name)
+            moved.append((out / p.name, p))
+    except BaseException:
+        for now, before in reversed(moved):
+            with contextlib.suppress(OSError):
+                os.replace(now, before)
+        with contextlib.suppress(OSError):
+            old.rmdir()
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+    for left in [*out.glob(f"{STAGE_PREFIX}*"), *out.glob(f"{OLD_PREFIX}*")]:   # of an ingest killed earlier
+        if left != stage:
+            shutil.rmtree(left, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def staged_output(out: Path) -> Iterator[Path]:
+    """A new folder inside ``out`` to write a whole ingest in; swapped in (:func:`swap_in`) when the block ends
+    without an error, deleted in every case, so that a failing or interrupted ingest leaves the previous
+    segments and reports of ``out`` as they were. Warnings and errors raised in the block (the read-back's
+    checks) name the files where they end up, in ``out``.
+
+    :raises DataError: a write failed (a full disk, a file-size limit, permissions): one line naming ``out``.
+    """
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        stage = Path(tempfile.mkdtemp(prefix=STAGE_PREFIX, dir=out))
+    except OSError as exc:
+        raise DataError(f"{out}: cannot create the output folder ({exc.strerror or exc})") from None
+    try:
+        with warnings.catch_warnings(record=True) as caught:   # the read-back's: re-issued naming `out`
+            yield stage
+        for w in caught:
+            warnings.warn_explicit(str(w.message).replace(str(stage), str(out)), w.category, w.filename, w.lineno)
+        swap_in(stage, out)
+    except (OSError, DataError) as exc:
+        cause = exc if isinstance(exc, OSError) else exc.__cause__   # suspid's writers name the staged file
+        if not isinstance(cause, OSError):
+            if isinstance(exc, DataError) and str(stage) in str(exc):
+                raise type(exc)(str(exc).replace(str(stage), str(out))) from None
+            raise
+        reason = (cause.strerror or str(cause)).lower() + (" (disk full or a file-size limit?)"
+                                                           if cause.errno in _NO_ROOM else "")
+        raise DataError(f"{out}: cannot write the ingest: {reason}; the previous segments and reports in it, "
+                        f"if any, are kept") from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def check_written(track_path: Path, acc_path: Path, segs: list[TrackSegment], resps: list[Response],
@@ -286,11 +373,14 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         warnings.append(f"speed: above 540 km/h somewhere: is the declared unit "
                         f"'{(opts.recording.speed or opts.recording.distance).unit}' right?")
     log(f"writing {len(segs)} segments to {out}")
-    track_path, acc_path = write_segments(opts, out, segs, resps, provs)
-    check_written(track_path, acc_path, segs, resps, channels)
-    rep = _report.build(opts, rec, quality, al, kept, segs, provs, excluded, warnings, track_path, acc_path, out)
-    figures = _report.figures(opts, rec, al, kept, excluded, out) if opts.quality.figures else []
-    rep["figures"] = [str(p.name) for p in figures]
-    _report.write(rep, out)
+    with staged_output(out) as stage:    # the previous outputs of `out` are replaced only by a complete set
+        staged_track, staged_acc = write_segments(opts, stage, segs, resps, provs)
+        check_written(staged_track, staged_acc, segs, resps, channels)
+        track_path, acc_path = out / staged_track.name, out / staged_acc.name
+        rep = _report.build(opts, rec, quality, al, kept, segs, provs, excluded, warnings, track_path, acc_path,
+                            out)
+        figures = _report.figures(opts, rec, al, kept, excluded, stage) if opts.quality.figures else []
+        rep["figures"] = [str(p.name) for p in figures]
+        _report.write(rep, stage)
     return IngestResult(out, track_path, acc_path, al.offset_m, al.peak_ratio, [s.name for s in segs],
                         warnings, rep)
