@@ -498,3 +498,26 @@ def test_a_failed_write_keeps_the_previous_file(tmp_path, name):
     assert line.startswith(f"DataError {path}: cannot write the file (") and "\n" not in line, line
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([name, "big.py"])   # no temporary file left
+
+
+def test_the_most_specific_channel_kind_sets_the_limit():
+    """An axlebox of a bogie is judged as an axlebox (it was 'bogie': 250 m/s^2 rms refused as mm/s^2);
+    numbered and short names find their kind too."""
+    from suspid.data.plausibility import acceleration_doubts, kind_of
+
+    assert kind_of("bogie_front_axlebox_vertical") == "axlebox"
+    assert kind_of("car1_z") == "carbody" and kind_of("bogie_rear_lateral") == "bogie" and kind_of("x_y") is None
+    assert not [d for d in acceleration_doubts("bogie_front_axlebox_vertical", 250.0, False) if d.check]
+    assert [d.check for d in acceleration_doubts("car1_z", 200.0, False)] == ["implausible_amplitude"]
+
+
+def test_a_line_gradient_is_no_d1_irregularity():
+    """A 0.5 % gradient over 1 km under 2 mm of irregularity: the D1 rms is that of the irregularity (the
+    untreated gradient's wrap-around put it at 0.17 m, refused as track in mm)."""
+    from suspid.data.plausibility import d1_rms
+
+    rng = np.random.default_rng(0)
+    step, n = 0.25, 4000
+    x = 0.002 * rng.standard_normal(n)
+    flat, sloped = d1_rms(x, step), d1_rms(x + 0.005 * step * np.arange(n), step)
+    assert 0.0005 < flat < 0.002 and abs(sloped - flat) < 1e-3 * flat

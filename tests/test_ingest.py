@@ -348,6 +348,18 @@ def test_a_whole_matlab_5_file_is_not_taken_for_a_cut_one(tmp_path, compress):
     assert v5_cut(path) is None
     path.write_bytes(path.read_bytes()[:-3])
     assert "needs" in v5_cut(path)
+
+
+def test_a_matlab_4_file_is_read_not_taken_for_a_cut_version_5_one(tmp_path):
+    """(a version 4 file has no 128-byte header: read as version 5 it was "damaged or truncated")"""
+    from suspid.plugins.readers.mat import v5_cut
+
+    path = tmp_path / "r4.mat"
+    scipy.io.savemat(path, {"a": np.arange(1001.0)}, format="4")
+    assert v5_cut(path) is None
+    assert np.array_equal(scipy.io.loadmat(path)["a"].ravel(), np.arange(1001.0))
+
+
 def _limit_file_size(limit: int):
     """``preexec_fn``: files limited to ``limit`` bytes (a write beyond fails with EFBIG, as on a full disk)."""
     def preexec():

@@ -78,7 +78,7 @@ PLUGIN_OPTIONS = [  # every built-in plugin's options: (section, plugin)
     ("objective", "wasserstein"), ("surrogate", "gpy-kriging"), ("surrogate", "sklearn-gp"),
     ("executor", "serial"), ("executor", "processes"), ("executor", "dask"), ("simulator", "exudyn-train"),
     ("optimizer", "ego"), ("optimizer", "random"), ("optimizer", "lhs-only"), ("optimizer", "nelder-mead"),
-    ("optimizer", "cma-es"), ("optimizer", "skopt-gp"),
+    ("optimizer", "cma-es"), ("optimizer", "skopt-gp"), ("optimizer", "gauss-newton"),
 ]
 
 LINE = re.compile(r"^error: (?P<file>\S+\.yaml):(?P<line>\d+), key '(?P<key>[^']+)': (?P<what>.+)$")

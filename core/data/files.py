@@ -108,8 +108,8 @@ from typing import Any, Collection, Iterable, Sequence
 
 import numpy as np
 
-from suspid.data.plausibility import (ABSURD, Doubt, acceleration_doubts, d1_rms, judge, speed_doubts, track_doubts,
-                                      vibration_rms)
+from suspid.data.plausibility import (ABSURD, Doubt, acceleration_doubts, d1_rms, judge, speed_doubts, speed_statistic,
+                                      track_doubts, vibration_rms)
 from suspid.errors import DataError
 from suspid.infra.files import atomic_open, write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
@@ -220,7 +220,7 @@ def _doubts_segment(seg: TrackSegment, where: Path | str) -> list[Doubt]:
     found = ([d for d in found if d.check] or found)[:1]     # one channel says it: the unit of the file
     doubts = [Doubt(f"{label}: {d.message}", d.check) for d in found]
     doubts += [Doubt(f"{label}: {d.message}", d.check)
-               for d in speed_doubts(float(np.max(np.asarray(seg.speed, dtype=float))))]
+               for d in speed_doubts(speed_statistic(seg.speed))]
     return doubts
 
 

@@ -59,12 +59,14 @@ The limits, from public figures:
 
 from __future__ import annotations
 
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Collection, Literal, Sequence
 
 import numpy as np
+from scipy import signal
 
 from suspid.errors import DataError, DataWarning
 
@@ -95,10 +97,20 @@ SPEED_LIMIT = 160.0
 """Train speed above which no train has run, m/s (576 km/h)."""
 
 
-def kind_of(channel: str, kinds: Collection[str] = ("carbody", "bogie", "axlebox")) -> str | None:
-    """The kind of a channel (``carbody``, ``bogie``, ``axlebox``): a word of its name, else None."""
-    words = channel.replace("-", "_").lower().split("_")
-    return next((k for k in kinds if k in words), None)
+KIND_WORDS = {"axlebox": ("axlebox", "axle", "wheelset", "ws"), "bogie": ("bogie", "frame"),
+              "carbody": ("carbody", "car", "body")}
+"""Words of a channel's name that give its kind, the most specific kind first (an axlebox of a bogie is an
+axlebox: it sits below the primary suspension)."""
+
+
+def kind_of(channel: str, kinds: Collection[str] = ("axlebox", "bogie", "carbody")) -> str | None:
+    """The kind of a channel (``carbody``, ``bogie``, ``axlebox``): a word of its name, else None.
+
+    The most specific kind wins: ``bogie_front_axlebox_vertical`` is an axlebox channel.
+    """
+    words = set(re.sub(r"\d+", "", channel.replace("-", "_").lower()).split("_"))   # car1 -> car
+    specific = sorted(kinds, key=lambda k: list(KIND_WORDS).index(k) if k in KIND_WORDS else len(KIND_WORDS))
+    return next((k for k in specific if words & set(KIND_WORDS.get(k, (k,)))), None)
 
 
 @dataclass(frozen=True)
@@ -151,7 +163,9 @@ def d1_rms(values: np.ndarray, step_m: float) -> float:
         return float("nan")
     if not good.all():
         x = np.interp(np.arange(x.size), np.flatnonzero(good), x[good])
-    x = x - x.mean()
+    i = np.arange(x.size, dtype=float)
+    x = x - np.polyval(np.polyfit(i, x, 1), i)    # the line's gradient or a drift is no irregularity
+    x = x * signal.windows.tukey(x.size, 0.1)       # no jump where the FFT wraps the record around
     k = np.fft.rfftfreq(x.size, step_m)
     band = (k >= 1.0 / TRACK_D1_BAND_M[1]) & (k <= 1.0 / TRACK_D1_BAND_M[0])
     if not band.any():
@@ -159,6 +173,14 @@ def d1_rms(values: np.ndarray, step_m: float) -> float:
     spectrum = np.fft.rfft(x)
     spectrum[~band] = 0.0
     return float(np.sqrt(np.mean(np.fft.irfft(spectrum, x.size) ** 2)))
+
+
+def speed_statistic(speed: np.ndarray) -> float:
+    """The speed judged against the limits, m/s: the 99th percentile of the finite samples (one glitch of the
+    odometry is no speed), the same in ingest and in the readers of validate and run."""
+    v = np.asarray(speed, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    return float(np.percentile(v, 99)) if v.size else float("nan")
 
 
 def track_doubts(channel: str, rms_d1: float, unit_hint: str = "") -> list[Doubt]:

@@ -176,20 +176,25 @@ def spectra_jacobian(simulator: Simulator, w: Mapping[str, float], names: Sequen
     analytic: list[str] = []
     if method == "auto" and isinstance(simulator, DifferentiableSimulator):
         analytic = [n for n in simulator.differentiable(names) if n in names]
-    rest = [n for n in names if n not in analytic]
     scheme = fallback if method == "auto" else method
-    methods = {n: ("analytic" if n in analytic else scheme) for n in names}
-
     y = None
     jac: dict[str, np.ndarray] = {}
     freqs = None
     n_analytic = 0
     if analytic:
         task = JacobianTask(type(simulator), dict(simulator.options), list(segments), opt, tuple(analytic))
-        y, dy, freqs = run_one(executor, task, full)
-        n_analytic = 1
-        for k, n in enumerate(analytic):
-            jac[n] = dy[..., k]
+        try:
+            y, dy, freqs = run_one(executor, task, full)
+        except SimulatorError:
+            # the analytic route can fail where a plain solve does not (e.g. ill-conditioned modes, which the
+            # plain solve bridges by a direct solve): every name is then differenced instead of ending the run
+            analytic = []
+        else:
+            n_analytic = 1
+            for k, n in enumerate(analytic):
+                jac[n] = dy[..., k]
+    rest = [n for n in names if n not in analytic]
+    methods = {n: ("analytic" if n in analytic else scheme) for n in names}
     jobs: list[dict[str, float]] = []
     h = _steps(point, rest, rel_step)
     for n, step in zip(rest, h):

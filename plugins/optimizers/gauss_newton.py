@@ -29,10 +29,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 from scipy.optimize import minimize
 
-from suspid.errors import SuspidError
+from suspid.errors import ConfigError, SuspidError
 from suspid.optimize.budgeted import BudgetedOptimizer
 from suspid.optimize.design import DesignOptions, from_unit, make_design
 from suspid.options import Section
@@ -54,6 +54,12 @@ class GaussNewtonOptions(Section):
                         "random points of the region)")
     max_iter: int = Field(default=20, ge=1, description="iterations of the subproblem's L-BFGS-B search per start")
 
+    @model_validator(mode="after")
+    def _radii(self) -> "GaussNewtonOptions":
+        if self.radius > self.max_radius:
+            raise ValueError(f"radius ({self.radius:g}) must not exceed max_radius ({self.max_radius:g})")
+        return self
+
 
 class GaussNewton(BudgetedOptimizer):
     """Trust region on the linearised spectra (see the module docstring)."""
@@ -69,6 +75,10 @@ class GaussNewton(BudgetedOptimizer):
         self._design = make_design(design.model_copy(update={"n_initial": max(k, 2)}), self.q_)[:k]
         self.n_initial = len(self._design)
         self.radius_ = self.opts_.radius
+        if self.opts_.linearise == "log" and np.any(self.bounds_[:, 0] <= 0):
+            bad = int(np.flatnonzero(self.bounds_[:, 0] <= 0)[0])
+            raise ConfigError(f"optimizer.options.linearise: 'log' needs positive lower bounds, parameter {bad} "
+                              f"has {self.bounds_[bad, 0]:g}: use linearise: linear")
         self.centre_: np.ndarray | None = None     # u of the centre
         self.J_c = -math.inf
         self._model: tuple[np.ndarray, np.ndarray] | None = None   # (y_c, dy/dz) at the centre

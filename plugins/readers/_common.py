@@ -7,13 +7,14 @@ import importlib
 import logging
 import sys
 import traceback
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-from suspid.errors import DataError, SuspidError
+from suspid.errors import DataError, DataWarning, SuspidError
 
 
 def optional_library(module: str, package: str, path: Path) -> Any:
@@ -46,6 +47,12 @@ def as_float(values: Any, path: Path, channel: str) -> np.ndarray:
     if not np.issubdtype(a.dtype, np.number):
         raise DataError(f"{path}: channel '{channel}' is not numeric ({a.dtype})")
     return a.astype(np.float64, copy=False)
+
+
+DAMAGE_MESSAGES = ("less data than expected", "metadata is incomplete", "cropping data", "not a multiple of")
+"""Words (lower case) of a library's logged warnings that mean the file is cut short or damaged (npTDMS's
+truncation messages); its other warnings (a property string not in UTF-8, a scaling it does not support)
+are passed on as :class:`~suspid.errors.DataWarning`."""
 
 
 class _Silenced(logging.Filter):
@@ -85,8 +92,9 @@ def library_errors(path: Path, what: str, logger: str | None = None) -> Iterator
     A truncated file or overwritten bytes fail anywhere inside the library, with any exception type
     (ValueError, KeyError, OSError, struct.error, ...); each becomes ``<path>: damaged or unreadable
     <what> file (<type>: <reason>)``. suspid's own errors pass through. Warnings the library logs
-    under ``logger`` (npTDMS reads a truncated file on, saying it "has less data than expected")
-    are refused the same way: a recording is used whole, or not at all.
+    under ``logger`` that mean a cut file (:data:`DAMAGE_MESSAGES`: npTDMS reads a truncated file on,
+    saying it "has less data than expected") are refused the same way: a recording is used whole, or
+    not at all; its other warnings become :class:`~suspid.errors.DataWarning`.
     """
     silenced = _Silenced()
     loggers = [logging.getLogger(n) for n in list(logging.root.manager.loggerDict)
@@ -108,5 +116,8 @@ def library_errors(path: Path, what: str, logger: str | None = None) -> Iterator
     finally:
         for log in loggers:
             log.removeFilter(silenced)
-    if silenced.warnings:
-        raise DataError(f"{path}: damaged or truncated {what} file ({silenced.warnings[0][:200]})")
+    damage = [w for w in silenced.warnings if any(m in w.lower() for m in DAMAGE_MESSAGES)]
+    if damage:
+        raise DataError(f"{path}: damaged or truncated {what} file ({damage[0][:200]})")
+    for other in silenced.warnings:      # e.g. a property string not in UTF-8, an unsupported scaling
+        warnings.warn(f"{path}: {other[:200]}", DataWarning, stacklevel=3)

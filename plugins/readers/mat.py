@@ -47,6 +47,8 @@ def v5_cut(path: Path) -> str | None:
         head = fh.read(128)
         if len(head) < 128:
             return f"{size} bytes, shorter than the 128-byte MATLAB header"
+        if head[126:128] not in (b"IM", b"MI"):   # not version 5 (a version 4 file has no such header)
+            return None
         order = "<" if head[126:128] == b"IM" else ">"
         offset = 128
         while offset < size:

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from suspid.data.plausibility import acceleration_doubts, d1_rms, judge, speed_doubts, track_doubts
+from suspid.data.plausibility import (acceleration_doubts, d1_rms, judge, speed_doubts, speed_statistic,
+                                      track_doubts)
 from suspid.interfaces import IRREGULARITY_CHANNELS
 
 from .load import Recording, TrackRecord
@@ -206,5 +207,5 @@ def check_speed(rec: Recording, moving: np.ndarray, opts: IngestOptions) -> list
     if v.size == 0:
         return []
     unit = (opts.recording.speed or opts.recording.distance).unit
-    doubts = speed_doubts(float(np.percentile(v, 99)), f"speed (declared unit '{unit}'), 99th percentile")
+    doubts = speed_doubts(speed_statistic(v), f"speed (declared unit '{unit}'), 99th percentile")
     return judge(doubts, rec.path, accept=opts.quality.accept, accept_key="quality.accept", emit=False)

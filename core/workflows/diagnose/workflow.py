@@ -230,13 +230,13 @@ def _coupling(config: Config, problem, log: Callable[[str], None]) -> tuple[list
     if config.data.source != "measured" or config.data.measurements is None:
         return None, []
     _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels,
-                                   accept=config.data.accept)
+                                   accept=config.data.accept, strict=config.data.strict)
     records = untilt(records, config.data.corrections, problem.channels, error=config.error)
     opts = config.diagnose
     reference = None
     if opts.coupling_reference is not None:
         _, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track, problem.channels,
-                                         accept=config.data.accept)
+                                         accept=config.data.accept, strict=config.data.strict)
     # every frequency of the records up to their Nyquist frequency: the coupling is a property of the sensor,
     # and the bins above the spectra band (where the vertical often dominates a bogie's lateral) weigh most
     rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, math.inf), opts.alpha,
