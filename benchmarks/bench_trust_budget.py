@@ -58,6 +58,16 @@ def flags(problem, trust: dict, sd: np.ndarray, identifiable: np.ndarray, n_sigm
     return dict(trust["trustworthy"])
 
 
+CHECKS = {"self-check": "self-check", "data groups": "disagree", "model parameters": "rests on",
+          "too uncertain": "too uncertain", "adequacy bands": "inadequate"}
+"""Each check's flag, from the start of its reason (the same words in both methods)."""
+
+
+def check_flags(reasons: dict[str, list[str]], names: list[str]) -> dict[str, dict[str, bool]]:
+    """check -> name -> flagged by that check."""
+    return {check: {n: any(word in r for r in reasons.get(n, [])) for n in names} for check, word in CHECKS.items()}
+
+
 def check_costs(report: dict) -> dict[str, int]:
     """Simulations each check took (either method's report)."""
     if report.get("method") == "linearised":
@@ -87,6 +97,7 @@ def compare(cfg_path: Path) -> dict:
     me = opts.model_error
     out = {"identification": int(res["n_simulator_calls"]), "identifiable": res["identifiable"],
            "linearised": {"flags": res["trustworthy"], "costs": check_costs(res["model_error"]),
+                          "checks": check_flags(res["untrustworthy_reasons"], names),
                           "wall_s": res["model_error"]["budget"]["wall_time_s"]}}
     for label, options in (("full", me.model_copy(update={"method": "full"})),
                            ("calibrated", me.model_copy(update={"calibration": me.calibration.model_copy(
@@ -95,7 +106,8 @@ def compare(cfg_path: Path) -> dict:
         trust = model_error(problem, ledger, u_opt, opts.step, options, False, sd, None)
         wall = time.perf_counter() - t0
         out[label] = {"flags": flags(problem, trust, sd, identifiable, opts.n_sigmas, me.max_half_width),
-                      "costs": check_costs(trust["report"]), "wall_s": round(wall, 1)}
+                      "costs": check_costs(trust["report"]), "wall_s": round(wall, 1),
+                      "checks": check_flags(trust["reasons"], names)}
         if label == "calibrated":
             out[label]["calibration"] = {n: (e["status"], e["value"], e["interval"])
                                          for n, e in trust["report"]["calibration"]["parameters"].items()}
@@ -160,6 +172,13 @@ def main(argv: list[str] | None = None) -> None:
     if total:
         print(f"\nsame flags, linearised vs full: {agree}/{total} ({100 * agree / total:.0f} %); "
               f"calibrated linearised vs full: {agree_c}/{total} ({100 * agree_c / total:.0f} %)")
+        for check in CHECKS:
+            same = [r["linearised"]["checks"][check][n] == r["full"]["checks"][check][n]
+                    for r in rows for n in r["full"]["flags"]]
+            n_full = sum(r["full"]["checks"][check][n] for r in rows for n in r["full"]["flags"])
+            n_lin = sum(r["linearised"]["checks"][check][n] for r in rows for n in r["full"]["flags"])
+            print(f"  check '{check}': same verdict {sum(same)}/{len(same)}; flagged by full {n_full}, "
+                  f"by linearised {n_lin}")
         for key in ("full", "linearised", "calibrated"):
             sims = [sum(r[key]["costs"].values()) for r in rows]
             ident = [r["identification"] for r in rows]

@@ -46,6 +46,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy.optimize import brentq
 
+from suspid.errors import ClusterError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor, TrackSegment
@@ -375,10 +376,18 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
 
     # the two Jacobians, shared by every check
     jac0 = jac_opt = None
-    if have_ref:
-        jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), names, theta, executor)
-        budget["jacobian_reference_w0"] = jac0.n_simulations
-    jac_opt = date_jacobian(problem, ledger, problem.segments, w_opt, names, theta, executor)
+    try:
+        if have_ref:
+            jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), names, theta, executor)
+            budget["jacobian_reference_w0"] = jac0.n_simulations
+        jac_opt = date_jacobian(problem, ledger, problem.segments, w_opt, names, theta, executor)
+    except ClusterError:
+        raise
+    except SuspidError as exc:   # e.g. an unstable vehicle at a finite-difference step: no linearised check
+        why = f"not run: the spectra's Jacobian failed ({exc})"
+        report.update({"self_check": {"status": why}, "nuisance": {"status": why}, "calibration": {"status": why},
+                       "budget": budget})
+        return {**trust, "reasons": reasons, "report": report}
     budget["jacobian_measurement_w_opt"] = jac_opt.n_simulations
     budget["methods"] = jac_opt.methods
 
