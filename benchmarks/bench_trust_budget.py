@@ -95,9 +95,13 @@ def compare(cfg_path: Path) -> dict:
     sd = np.sqrt(np.clip(np.diag(np.array(res["interval_method"]["covariance_normalized"])), 0, None))
     identifiable = np.array([res["identifiable"][n] for n in names])
     me = opts.model_error
+    truth = json.loads((cfg_path.parent / "measurement" / "truth.json").read_text())["parameters"]
+    u_true = problem.to_unit(np.array([truth[n] for n in names]))
     out = {"identification": int(res["n_simulator_calls"]), "identifiable": res["identifiable"],
            "linearised": {"flags": res["trustworthy"], "costs": check_costs(res["model_error"]),
                           "checks": check_flags(res["untrustworthy_reasons"], names),
+                          "covered": {n: bool(res["interval"][n][0] <= truth[n] <= res["interval"][n][1])
+                                      for n in names},
                           "wall_s": res["model_error"]["budget"]["wall_time_s"]}}
     for label, options in (("full", me.model_copy(update={"method": "full"})),
                            ("calibrated", me.model_copy(update={"calibration": me.calibration.model_copy(
@@ -105,13 +109,15 @@ def compare(cfg_path: Path) -> dict:
         t0 = time.perf_counter()
         trust = model_error(problem, ledger, u_opt, opts.step, options, False, sd, None)
         wall = time.perf_counter() - t0
-        out[label] = {"flags": flags(problem, trust, sd, identifiable, opts.n_sigmas, me.max_half_width),
+        half = (bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas) if trust["bias_bound"] is not None
+                else opts.n_sigmas * sd)
+        out[label] = {"covered": {n: bool(abs(u_opt[k] - u_true[k]) <= half[k]) for k, n in enumerate(names)},
+                      "flags": flags(problem, trust, sd, identifiable, opts.n_sigmas, me.max_half_width),
                       "costs": check_costs(trust["report"]), "wall_s": round(wall, 1),
                       "checks": check_flags(trust["reasons"], names)}
         if label == "calibrated":
             out[label]["calibration"] = {n: (e["status"], e["value"], e["interval"])
                                          for n, e in trust["report"]["calibration"]["parameters"].items()}
-    truth = json.loads((cfg_path.parent / "measurement" / "truth.json").read_text())["parameters"]
     out["errors"] = {n: 100 * (res["w_opt"][n] - truth[n]) / (res["bounds"][n][1] - res["bounds"][n][0])
                      for n in names}
     return out
@@ -160,15 +166,22 @@ def main(argv: list[str] | None = None) -> None:
             agree += f_lin == f_full
             agree_c += f_cal == f_full
             total += 1
-            mark = lambda f: "trusted" if f else "flagged"  # noqa: E731
-            print(f"| {r['case']} | {n} | {r['errors'][n]:+.1f} | {r['identifiable'][n]} | {mark(f_full)} | "
-                  f"{mark(f_lin)} | {mark(f_cal)} |")
+            mark = lambda key: ("trusted" if r[key]["flags"][n] else "flagged") + ("" if r[key]["covered"][n] else "*")  # noqa: E731,B023
+            print(f"| {r['case']} | {n} | {r['errors'][n]:+.1f} | {r['identifiable'][n]} | {mark('full')} | "
+                  f"{mark('linearised')} | {mark('calibrated')} |")
+    print("(* the truth outside the interval)")
     print("\n| case | identification | full checks | linearised checks | calibrated linearised |")
     print("|---|---|---|---|---|")
     for r in rows:
         cost = {k: sum(r[k]["costs"].values()) for k in ("full", "linearised", "calibrated")}
         print(f"| {r['case']} | {r['identification']} | {cost['full']} ({r['full']['wall_s']} s) | "
               f"{cost['linearised']} ({r['linearised']['wall_s']} s) | {cost['calibrated']} ({r['calibrated']['wall_s']} s) |")
+    for key in ("full", "linearised", "calibrated"):
+        rep = [(r, n) for r in rows for n in r["full"]["flags"] if r[key]["flags"][n] and r["identifiable"][n]]
+        cov = sum(r[key]["covered"][n] for r, n in rep)
+        within = sum(abs(r["errors"][n]) <= 5.0 for r, n in rep)
+        print(f"{key}: reported (identifiable and trusted) {len(rep)}/{total}, interval holds the truth {cov}/"
+              f"{len(rep)}, within 5 % {within}/{len(rep)}")
     if total:
         print(f"\nsame flags, linearised vs full: {agree}/{total} ({100 * agree / total:.0f} %); "
               f"calibrated linearised vs full: {agree_c}/{total} ({100 * agree_c / total:.0f} %)")
