@@ -147,7 +147,7 @@ def test_linearised_checks_within_budget(tmp_path):
         assert ok == (name not in trust["reasons"])
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_linearised_run_calibrates_the_mounts_and_corrects_w_opt(dates):
     """tests/test_nuisance.py's known answer by the linearised method: both dates from a car whose yaw dampers'
     series stiffness is 5 MN/m, the model assuming 10 MN/m. The reference date calibrates the mounts near
