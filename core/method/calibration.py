@@ -29,15 +29,27 @@ there, J does not see it).
 (the Kennedy-O'Hagan discrepancy: gains smooth over frequency, effects it does
 not have) is correlated over neighbouring frequencies, so the textbook
 covariance (XᵀWX)⁻¹ would be far too narrow. The covariance is the
-cluster-robust sandwich A⁻¹ (Σ_c X_cᵀ W e_c e_cᵀ W X_c) A⁻¹ with A = XᵀWX and
-clusters c the (channel, octave band) blocks: inside a block the residuals may
-be correlated in any way, between blocks they are taken as independent.
+cluster-robust sandwich P⁻¹ (M / κ² + Λ) P⁻¹, M = Σ_c X_cᵀ W e_c e_cᵀ W X_c with
+clusters c the (channel, octave band) blocks (inside a block the residuals may
+be correlated in any way, between blocks they are taken as independent), and
+P = XᵀWX / κ + Λ. Λ is a prior on t, a Gaussian of the spread of a uniform
+law over the assumed range (precision 12 per unit of t), which keeps a
+parameter the data do not see at its nominal value with its range's spread;
+κ ≥ 1 is the discrepancy's variance inflation, measured once as the mean
+ratio of the data-only sandwich's variances to the white ones: without it the
+weights W would let the 8 × n_freqs cells outweigh the prior as if they were
+independent, with it the estimate weighs data and prior as the sandwich does.
+The discrepancy can still be confounded with θ: a gain curve correlated over
+more than an octave that resembles ∂y/∂θ biases θ beyond its interval
+(``benchmarks/RESULTS.md``).
 
 **Pinned or not**: a parameter whose standard deviation exceeds
-``max_sd_fraction`` of its assumed range, or whose estimate leaves that range,
-is not pinned down by the reference date (weak Fisher information, or a
-reference date that asks for a value the model's other errors explain): it
-keeps its nominal value and its assumed range, and says so.
+``max_sd_fraction`` of its assumed range, or whose estimate reaches a bound of
+that range, is not pinned down by the reference date (weak Fisher information,
+or a reference date that asks for a value the model's other errors explain):
+it is reported with its nominal value and its assumed range, and says so. The
+checks still use the whole posterior (its mean and its correlations) for
+every parameter.
 
 **Propagation** (:func:`implicit_shifts`): by the implicit-function theorem,
 the maximiser of J(u, t) moves by du/dt = −H_uu⁻¹ H_ut, H the Hessian of J in
