@@ -460,22 +460,32 @@ def check_parameters(config: Config, simulator) -> None:
 
 
 def check_nuisance(config: Config, simulator) -> None:
-    """``identifiability.model_error.nuisance.parameters``: the simulator's, not identified, low < high in its domain."""
+    """``identifiability.model_error.nuisance.parameters`` and ``.calibration.parameters``: the simulator's, not
+    identified, low < high in its domain (a calibration range may be null: the simulator's bounds)."""
     known = {p.name: p for p in simulator.parameters()}
     identified = set(config.parameters) or set(simulator.default_parameters())
-    for name, (low, high) in config.identifiability.model_error.nuisance.parameters.items():
-        key = f"identifiability.model_error.nuisance.parameters.{name}"
-        line = config._lines.get(tuple(key.split(".")))
-        if name not in known:
-            raise ConfigError(f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
-                              f"known: {', '.join(sorted(known))}", file=config.file, key=key, line=line)
-        if name in identified:
-            raise ConfigError(f"'{name}' is identified: a nuisance parameter is one the run does not identify",
-                              file=config.file, key=key, line=line)
-        domain = known[name].domain
-        if not (domain[0] < low < high < domain[1]):
-            raise ConfigError(f"expected low < high inside the physical domain ({domain[0]:g}, {domain[1]:g}) "
-                              f"{known[name].unit}, got [{low:g}, {high:g}]", file=config.file, key=key, line=line)
+    me = config.identifiability.model_error
+    for section, given in (("nuisance", me.nuisance.parameters), ("calibration", me.calibration.parameters)):
+        for name, ends in given.items():
+            key = f"identifiability.model_error.{section}.parameters.{name}"
+            line = config._lines.get(tuple(key.split(".")))
+            if name not in known:
+                raise ConfigError(f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
+                                  f"known: {', '.join(sorted(known))}", file=config.file, key=key, line=line)
+            if name in identified:
+                raise ConfigError(f"'{name}' is identified: a {section} parameter is one the run does not identify",
+                                  file=config.file, key=key, line=line)
+            if ends is not None:
+                _check_range(name, ends, known[name], key, line, config)
+
+
+def _check_range(name: str, ends: tuple[float, float], parameter, key: str, line: int | None, config: Config) -> None:
+    """low < high inside ``parameter``'s physical domain."""
+    low, high = ends
+    domain = parameter.domain
+    if not (domain[0] < low < high < domain[1]):
+        raise ConfigError(f"expected low < high inside the physical domain ({domain[0]:g}, {domain[1]:g}) "
+                          f"{parameter.unit}, got [{low:g}, {high:g}]", file=config.file, key=key, line=line)
 
 
 def identified_bounds(config: Config, simulator) -> dict[str, tuple[float, float]]:

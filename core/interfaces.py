@@ -137,6 +137,14 @@ class Simulator(ABC):
         """Names identified when the config's ``parameters:`` section is empty."""
         return [p.name for p in self.parameters()]
 
+    def calibratable(self) -> list[str]:
+        """Model parameters, among :meth:`parameters`, that are uncertain but not meant to be identified
+        (a damper mount's series stiffness, a creep-coefficient scale, the equivalent conicity): the
+        reference date, where w = w0 is known, estimates them (:mod:`suspid.method.calibration`) over their
+        declared bounds. Default: none.
+        """
+        return []
+
     @abstractmethod
     def channels(self) -> list[str]:
         """Names of the output channels, in the order of ``Response.accelerations``."""

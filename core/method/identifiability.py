@@ -45,6 +45,7 @@ from pydantic import Field
 from scipy.optimize import brentq
 from scipy.stats import norm
 
+from suspid.method.calibration import CalibrationOptions
 from suspid.method.sensitivity import surrogate_sensitivity
 from suspid.options import Section
 
@@ -104,6 +105,11 @@ class ModelErrorOptions(Section):
         "model-error bias together leave less precise is not reported as a finding")
     widen: bool = Field(default=True, description="make the intervals bias-aware: widen them by the model-error "
                         "checks' bound on the bias (self-check bias, half the groups' spread, nuisance shifts)")
+    method: Literal["full", "linearised"] = Field(
+        default="full", description="full: the checks re-identify w by simulation (self-check splits, data groups, "
+        "nuisance ends); linearised: the model parameters calibrated at the reference date and every check on the "
+        "spectra linearised at w0 and w_opt (one Jacobian per date, suspid.workflows.linearised)")
+    calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)
     nuisance: NuisanceOptions = Field(default_factory=NuisanceOptions)

@@ -24,6 +24,7 @@ run: simulations at nearby points) gives each group's estimate.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import minimize
@@ -80,13 +81,17 @@ class GroupEstimates:
 
 def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_group_share: float,
                     max_evaluations: int, initial_step: float, ledger: Ledger | None = None,
-                    executor: Executor | None = None) -> GroupEstimates:
+                    executor: Executor | None = None,
+                    spectra_at: Callable[[np.ndarray], np.ndarray] | None = None) -> GroupEstimates:
     """Re-identify the free parameters of every group from ``u_opt`` (see the module docstring).
 
     Each simulation runs on ``executor`` (entered; in this process without one).
 
     With a ``ledger`` the estimates are cached there (keyed by the run's data, w_opt and the
     options), so that a resumed run does not simulate them again.
+
+    :param spectra_at: the measurement date's spectra ``(v, n_channels, n_freqs)`` dB at a point of [0, 1]^q
+        instead of simulations (the spectra linearised at w_opt, :mod:`suspid.workflows.linearised`).
     """
     groups = data_groups(problem.channels, problem.freqs)
     share = group_information(S, problem.noise_model.variance_, problem.weights, groups)
@@ -102,6 +107,8 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
 
     def y_at(u: np.ndarray) -> np.ndarray | None:
         nonlocal n_sims
+        if spectra_at is not None:
+            return spectra_at(u)
         k = np.round(u, 6).tobytes()
         if k not in spectra:
             try:

@@ -26,6 +26,7 @@ from suspid.workflows.problem import Problem
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.nuisance import nuisance_shifts
+from suspid.workflows.linearised import calibration_result, linearised_model_error
 from suspid.workflows.reference import self_check
 
 
@@ -190,6 +191,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         "trustworthy": trust["trustworthy"],
         "untrustworthy_reasons": trust["reasons"],
         "model_error": trust["report"],
+        "calibration": calibration_result(trust["report"]),
         "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
                             "bootstrap": opts.bootstrap,
                             "widened_by_model_error": bool(opts.model_error.widen and trust["bias_bound"] is not None),
@@ -334,6 +336,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         return {"trustworthy": {n: True for n in names}, "reasons": {}, "bias_bound": None,
                 "report": {"status": f"not run (identifiability.model_error.run: {options.run}, "
                                      f"data.source: {problem.config.data.source})"}}
+    if options.method == "linearised":  # the checks by linearisation, within budget (suspid.workflows.linearised)
+        return linearised_model_error(problem, ledger, u_opt, h, options, retry_failed, sd, executor, model_error)
     report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
     bound = None
     sc_opt = options.self_check

@@ -19,6 +19,7 @@ from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.problem import Problem
+from suspid.workflows.linearised import calibration_markdown
 from suspid.workflows.tasks import SpectraTask, run_one
 
 
@@ -278,6 +279,7 @@ Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviation
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
 bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths){widened}, clipped to the admissible box.
 {model_error_section(result)}
+{calibration_markdown(result)}
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
 
 ![figure 1](figure1_spectra.png)

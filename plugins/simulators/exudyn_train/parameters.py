@@ -299,6 +299,12 @@ DEFAULT_IDENTIFIED: tuple[str, ...] = (
 """The default q = 7 identified parameters, in the spirit of the paper (§3.3: the first two both
 set the carbody's vertical stiffness, the secondary one closest to the carbody sensors)."""
 
+CALIBRATABLE: tuple[str, ...] = ("k_sec_z_s", "k_yaw_s", "kalker_scale", "conicity")
+"""Model parameters that are uncertain but not identified (their values are assumptions or ranges in the
+tables above): the series stiffnesses of the secondary vertical and yaw dampers' mounts, the factor on
+Kalker's creep coefficients, the equivalent conicity. A reference date calibrates them
+(``identifiability.model_error.method: linearised``)."""
+
 BY_NAME: dict[str, VehicleParameter] = {p.name: p for p in PARAMETERS}
 
 

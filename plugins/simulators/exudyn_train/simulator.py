@@ -304,6 +304,12 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
     def default_parameters(self) -> list[str]:
         return list(P.DEFAULT_IDENTIFIED)
 
+    def calibratable(self) -> list[str]:
+        """The model parameters the vehicle tables give as assumptions or ranges (:data:`.parameters.CALIBRATABLE`):
+        the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity."""
+        names = {p.name for p in self.parameters()}
+        return [n for n in P.CALIBRATABLE if n in names]
+
     def sensors(self, values: Mapping[str, float] | None = None) -> list[Sensor]:
         """The sensors of the configured channels (defaults depend on the geometry ``values``)."""
         if self.opts.sensors is None:
