@@ -63,11 +63,13 @@ independent train (16 and 800 kN s/m) on a bound: the interval is centred on the
 GENERATORS = {
     "independent": {"vehicle": protocol.VEHICLE, "bounds": BOUNDS, "w_refs": W_REFS,
                     "generate": TR.generate_two_dates},
-    "independent2": {"vehicle": protocol2.VEHICLE, "bounds": protocol2.BOUNDS, "w_refs": protocol2.W_REFS,
+    "independent2": {"vehicle": protocol2.VEHICLE, "bounds": protocol2.BOUNDS,
+                     "w_refs": protocol2.W_REFS | protocol2.ELEMENT_CASES,
                      "generate": MS2.generate_two_dates},
 }
 """Per generator: suspid's car for its data, bounds overriding the preset's, the w_ref cases and the function
-writing both dates (the same interface)."""
+writing both dates (the same interface). independent2 adds issue 34's element cases (one degraded element group
+each, identified here per kind: the truth of a kind is the mean of its elements)."""
 GEN = GENERATORS["independent"]
 
 
@@ -130,7 +132,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--generator", choices=list(GENERATORS), default="independent",
                     help="the independent train that writes the data (tests/independent or tests/independent2)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 11])
-    ap.add_argument("--w-refs", nargs="+", default=["w0", "other", "quickstart"], choices=list(W_REFS))
+    ap.add_argument("--w-refs", nargs="+", default=["w0", "other", "quickstart"],
+                    choices=list(dict.fromkeys(n for g in GENERATORS.values() for n in g["w_refs"])))
     ap.add_argument("--objectives", nargs="+", default=["overlap", "likelihood"])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--segments", type=int, default=40, help="segments per date (40, as the quickstart: with 24 the sampling scatter alone moves k_sec_z by 3-5 %% of its interval)")

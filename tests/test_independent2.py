@@ -48,7 +48,8 @@ def _clamped(A: np.ndarray, keep: list[int]) -> np.ndarray:
     return A[np.ix_(rows, rows)]
 
 
-@pytest.mark.parametrize("dof, inertia, arm", [(VH.CAR + VH.Z, "m_car", None), (VH.CAR + VH.PITCH, "I_car_y", "a_bogie")])
+@pytest.mark.parametrize("dof, inertia, arm", [(VH.CAR + VH.Z, "m_car", None),
+                                               (VH.CAR + VH.PITCH, "I_car_y", "a_bogie")])
 def test_carbody_on_air_springs_has_the_closed_form_roots(dof, inertia, arm):
     """Bogies, wheelsets, bending held: the carbody's bounce (pitch) on four units, each the air spring k1
     in parallel with its reservoir branch (k2 in series with c_o) and the damper c on its bushes k_b, has the
@@ -191,7 +192,8 @@ def test_one_degraded_lateral_damper_changes_lateral_channels_not_vertical(eleme
 
 @pytest.mark.long
 def test_suspid_identifies_on_independent2_data(tmp_path):
-    """Smoke: the README's two-date protocol on this generator's files (16 segments, quickstart's w_ref)."""
+    """Smoke: the README's two-date protocol on this generator's files (16 segments, the quickstart's w_ref,
+    overlap): the vertical suspension within 12 % of its interval (40 segments: within 5.1 %, RESULTS.md)."""
     cfg = PR.prepare(tmp_path, seed=7, n_segments=16)
     proc = subprocess.run([sys.executable, "-m", "suspid", "run", str(cfg), "--quiet"], capture_output=True,
                           text=True)
@@ -200,4 +202,4 @@ def test_suspid_identifies_on_independent2_data(tmp_path):
     truth = json.loads((tmp_path / "measurement" / "truth.json").read_text())["parameters"]
     errors = {n: 100 * (res["w_opt"][n] - truth[n]) / (res["bounds"][n][1] - res["bounds"][n][0])
               for n in res["w_opt"]}
-    assert abs(errors["k_sec_z"]) < 10.0, errors
+    assert max(abs(errors[n]) for n in ("k_sec_z", "c_sec_z", "k_prim_z")) < 12.0, errors

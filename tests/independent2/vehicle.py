@@ -359,7 +359,8 @@ def build(w: Mapping[str, float] | None, speed: float, flexible: bool = True) ->
     # roll preloads (destabilising): carbody on the air springs, bogie frames under the carbody and on the primary
     K[CAR + ROLL, CAR + ROLL] -= p["m_car"] * g * (hc - p["h_sec"])
     for i in BOGIE:
-        K[i + ROLL, i + ROLL] -= p["m_car"] / 2 * g * (p["h_sec"] - hb) + (p["m_car"] / 2 + p["m_bogie"]) * g * (hb - p["r0"])
+        K[i + ROLL, i + ROLL] -= (p["m_car"] / 2 * g * (p["h_sec"] - hb)
+                                  + (p["m_car"] / 2 + p["m_bogie"]) * g * (hb - p["r0"]))
     # wheel-rail: gravitational stiffness (the cant and creep terms are in the right-hand side)
     wheel_load = (p["m_car"] / 8 + p["m_bogie"] / 4 + p["m_ws"] / 2) * g
     for i in WS:
