@@ -21,6 +21,7 @@ import pytest
 from scipy import signal
 from suspid.workflows.problem import read_measurements
 
+from independent2 import kernel as KN
 from independent2 import measure as MS
 from independent2 import protocol as PR
 from independent2 import vehicle as VH
@@ -39,6 +40,20 @@ def test_kind_values_apply_to_every_element_and_element_values_to_one():
     assert len(VH.ELEMENTS["k_sec_z"]) == 4 and len(VH.ELEMENTS["c_prim_z"]) == 8
     with pytest.raises(KeyError, match="c_yaw\\[bogie3"):
         VH.parameters({"c_yaw[bogie3,left]": 1.0})
+
+
+def test_damper_curves_and_creep_saturation_have_their_stated_values():
+    """Asymmetric damper with blow-off: rates (1 +- a) c up to v_blow, r times beyond; the stroke velocity law
+    inverts the force law; Shen-Hedrick-Elkins: continuous at u = 3 and never above the friction limit."""
+    c, a, vb, r = 20e3, 0.15, 0.15, 0.3
+    assert KN.damper_force(0.1, c, a, vb, r) == pytest.approx(1.15 * c * 0.1)
+    assert KN.damper_force(-0.1, c, a, vb, r) == pytest.approx(-0.85 * c * 0.1)
+    assert KN.damper_force(0.35, c, a, vb, r) == pytest.approx(1.15 * c * (0.15 + 0.3 * 0.2))
+    for v in np.linspace(-0.6, 0.6, 41):
+        assert KN.damper_velocity(KN.damper_force(v, c, a, vb, r), c, a, vb, r) == pytest.approx(v, abs=1e-12)
+    assert KN.she_factor(3.0 - 1e-12) == pytest.approx(KN.she_factor(3.0), rel=1e-9)
+    u = np.linspace(0.0, 10.0, 201)
+    assert np.all(u * np.array([KN.she_factor(x) for x in u]) <= 1.0 + 1e-12)
 
 
 def _clamped(A: np.ndarray, keep: list[int]) -> np.ndarray:

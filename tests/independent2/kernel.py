@@ -137,6 +137,9 @@ def rk4(q0, tracks, slopes, n_steps, dt, K, C, mass, J_m, k_m, c_m, asym_m, vbo_
     k_vel = np.zeros((4, n))
     k_zm = np.zeros((4, nm))
     k_za = np.zeros((4, na))
+    qs, qds = np.empty(n), np.empty(n)
+    zms, zas = np.empty(nm), np.empty(na)
+    w = (1.0, 2.0, 2.0, 1.0)
     for b in range(B):
         q = q0.copy()
         qd = np.zeros(n)
@@ -153,11 +156,15 @@ def rk4(q0, tracks, slopes, n_steps, dt, K, C, mass, J_m, k_m, c_m, asym_m, vbo_
                     u[h, j, 5] = tracks[b, j, 3, 2 * i + h]
             for st in range(4):
                 c = 0.0 if st == 0 else (dt / 2 if st < 3 else dt)
-                qs = q + c * k_vel[st - 1] if st else q.copy()
-                qds = qd + c * k_acc[st - 1] if st else qd.copy()
-                zms = zm + c * k_zm[st - 1] if st else zm.copy()
-                zas = za + c * k_za[st - 1] if st else za.copy()
-                k_vel[st] = qds
+                p = st - 1 if st > 0 else 0
+                for k in range(n):
+                    qs[k] = q[k] + c * k_vel[p, k]
+                    qds[k] = qd[k] + c * k_acc[p, k]
+                    k_vel[st, k] = qds[k]
+                for k in range(nm):
+                    zms[k] = zm[k] + c * k_zm[p, k]
+                for k in range(na):
+                    zas[k] = za[k] + c * k_za[p, k]
                 hh = 0 if st == 0 else (1 if st < 3 else 2)
                 rhs_one(qs, qds, zms, zas, u[hh], K, C, mass, J_m, k_m, c_m, asym_m, vbo_m, r_m, J_a, k_a, c_a,
                         J_p, k_pz, c_p, vbo_p, ws_p, side_p, sc, False, k_acc[st], k_zm[st], k_za[st])
@@ -167,8 +174,13 @@ def rk4(q0, tracks, slopes, n_steps, dt, K, C, mass, J_m, k_m, c_m, asym_m, vbo_
                         for k in range(n):
                             s += S[ch, k] * k_acc[0, k] + S_g[ch, k] * q[k]
                         out[b, ch, i] = s
-            q = q + dt / 6 * (k_vel[0] + 2 * k_vel[1] + 2 * k_vel[2] + k_vel[3])
-            qd = qd + dt / 6 * (k_acc[0] + 2 * k_acc[1] + 2 * k_acc[2] + k_acc[3])
-            zm = zm + dt / 6 * (k_zm[0] + 2 * k_zm[1] + 2 * k_zm[2] + k_zm[3])
-            za = za + dt / 6 * (k_za[0] + 2 * k_za[1] + 2 * k_za[2] + k_za[3])
+            for st in range(4):
+                f = dt / 6 * w[st]
+                for k in range(n):
+                    q[k] += f * k_vel[st, k]
+                    qd[k] += f * k_acc[st, k]
+                for k in range(nm):
+                    zm[k] += f * k_zm[st, k]
+                for k in range(na):
+                    za[k] += f * k_za[st, k]
     return out
