@@ -1,7 +1,7 @@
 """A second independent vehicle model, integrated in the time domain with nonlinear elements.
 
 Written apart from suspid's ``exudyn-train`` and from ``tests/independent``
-(numpy/scipy only; nothing imported from either): data that neither suspid's
+(numpy, scipy and numba; nothing imported from either): data that neither suspid's
 model nor the first independent generator made.
 
 Vehicle
@@ -23,10 +23,10 @@ and the orifice flow coordinate of every air spring (4).
 
 Modelling choices that differ from both other models
 ----------------------------------------------------
-1. **Time domain**, fixed-step classical Runge-Kutta (RK4) at 800 Hz, all
-   segments of a date integrated together as one vectorised batch, from rest
-   with a tapered run-in (track amplitude ramped over the first 100 m, then
-   400 m before the recorded segment).
+1. **Time domain**, fixed-step classical Runge-Kutta (RK4) at 800 Hz,
+   compiled with numba (:mod:`.kernel`), from rest with a tapered run-in
+   (track amplitude ramped over the first 100 m, then 400 m before the
+   recorded segment).
 2. **Every element its own parameter** (:data:`ELEMENTS`): each air spring,
    secondary vertical damper, lateral damper and yaw damper per bogie and
    side, each primary spring and damper per axlebox, each anti-roll bar per
