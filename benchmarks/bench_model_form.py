@@ -145,6 +145,10 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     global GEN
     GEN = GENERATORS[a.generator]
+    unknown = [w for w in a.w_refs if w not in GEN["w_refs"]]
+    if unknown:
+        ap.error(f"--w-refs {' '.join(unknown)}: not a case of --generator {a.generator} "
+                 f"(its cases: {', '.join(GEN['w_refs'])})")
     a.out.mkdir(parents=True, exist_ok=True)
     nuisance = {text.split("=")[0]: [float(v) for v in text.split("=")[1].split(":")] for text in a.nuisance}
     cfgs = []
