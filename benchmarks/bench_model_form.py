@@ -1,8 +1,10 @@
-"""Model-form error: the two-date protocol on the independent train, with suspid's trust flags.
+"""Model-form error: the two-date protocol on an independent train, with suspid's trust flags.
 
 For every seed and measurement-date suspension w_ref (the quickstart's damaged
-one, another one, and w0 itself) the independent train of ``tests/independent``
-writes a reference date at w0 and a measurement date at w_ref; a config with
+one, another one, and w0 itself) an independent train (``--generator``:
+``independent``, the frequency-domain linear model of ``tests/independent`` on
+the Manchester coach, or ``independent2``, the time-domain nonlinear model of
+``tests/independent2`` on the quickstart's conventional-hs car) writes a reference date at w0 and a measurement date at w_ref; a config with
 ``noise.reference`` is run by ``suspid run`` for each objective (in parallel
 subprocesses). Printed per run and component: the signed error in % of the
 admissible interval, identifiable / trustworthy, whether the reported
@@ -15,7 +17,8 @@ interval contains the truth; then the acceptance summary:
 
 Usage (from the repository root)::
 
-    python benchmarks/bench_model_form.py OUT_DIR [--seeds 7 8 11] [--w-refs quickstart other w0]
+    python benchmarks/bench_model_form.py OUT_DIR [--generator independent|independent2]
+        [--seeds 7 8 11] [--w-refs quickstart other w0]
         [--objectives overlap likelihood] [--jobs 2] [--segments 40] [--summary]
         [--nuisance k_yaw_s=5e6:20e6 kalker_scale=0.6:1.0] [--weights reference]
 
@@ -41,6 +44,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from independent import protocol  # noqa: E402
 from independent import train as TR  # noqa: E402
+from independent2 import measure as MS2  # noqa: E402
+from independent2 import protocol as protocol2  # noqa: E402
 
 W_REFS = {
     "quickstart": {"k_sec_z": 340.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.30e6, "c_sec_y": 11.0e3, "c_yaw": 560.0e3},
@@ -55,12 +60,26 @@ BOUNDS = {n: {"lower": 0.5 * protocol.VEHICLE[n], "upper": 1.5 * protocol.VEHICL
 independent train (16 and 800 kN s/m) on a bound: the interval is centred on them instead, as the preset's is."""
 
 
+GENERATORS = {
+    "independent": {"vehicle": protocol.VEHICLE, "bounds": BOUNDS, "w_refs": W_REFS,
+                    "generate": TR.generate_two_dates},
+    "independent2": {"vehicle": protocol2.VEHICLE, "bounds": protocol2.BOUNDS,
+                     "w_refs": protocol2.W_REFS | protocol2.ELEMENT_CASES,
+                     "generate": MS2.generate_two_dates},
+}
+"""Per generator: suspid's car for its data, bounds overriding the preset's, the w_ref cases and the function
+writing both dates (the same interface). independent2 adds issue 34's element cases (one degraded element group
+each, identified here per kind: the truth of a kind is the mean of its elements)."""
+GEN = GENERATORS["independent"]
+
+
 def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None,
                  weights: str | None = None) -> Path:
     name = objective + (f"-{weights}-weights" if weights else "")
     cfg = {"name": name, "seed": seed,
-           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0, "vehicle": protocol.VEHICLE}},
-           "parameters": {n: BOUNDS.get(n, {}) for n in W_REFS["quickstart"]},
+           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0,
+                                                               "vehicle": GEN["vehicle"]}},
+           "parameters": {n: GEN["bounds"].get(n, {}) for n in GEN["w_refs"]["quickstart"]},
            "data": {"source": "measured", "measurements": "measurement/accelerations",
                     "track_file": "measurement/track"},
            "noise": {"reference": {"measurements": "reference/accelerations", "track_file": "reference/track"}},
@@ -77,7 +96,7 @@ def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list
 def prepare(out: Path, seed: int, w_ref: str, segments: int) -> Path:
     case = out / f"seed{seed}-{w_ref}"
     if not (case / "measurement" / "truth.json").exists():
-        TR.generate_two_dates(case, {}, W_REFS[w_ref], seed=seed, n_segments=segments, speed_mps=300.0 / 3.6)
+        GEN["generate"](case, {}, GEN["w_refs"][w_ref], seed=seed, n_segments=segments, speed_mps=300.0 / 3.6)
     return case
 
 
@@ -110,8 +129,11 @@ def summarise(cfg: Path) -> dict:
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
+    ap.add_argument("--generator", choices=list(GENERATORS), default="independent",
+                    help="the independent train that writes the data (tests/independent or tests/independent2)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 11])
-    ap.add_argument("--w-refs", nargs="+", default=["w0", "other", "quickstart"], choices=list(W_REFS))
+    ap.add_argument("--w-refs", nargs="+", default=["w0", "other", "quickstart"],
+                    choices=list(dict.fromkeys(n for g in GENERATORS.values() for n in g["w_refs"])))
     ap.add_argument("--objectives", nargs="+", default=["overlap", "likelihood"])
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--segments", type=int, default=40, help="segments per date (40, as the quickstart: with 24 the sampling scatter alone moves k_sec_z by 3-5 %% of its interval)")
@@ -121,6 +143,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--weights", choices=["reference"], default=None,
                     help="objective.weights of the runs (their run directories get the suffix -reference-weights)")
     a = ap.parse_args(argv)
+    global GEN
+    GEN = GENERATORS[a.generator]
+    unknown = [w for w in a.w_refs if w not in GEN["w_refs"]]
+    if unknown:
+        ap.error(f"--w-refs {' '.join(unknown)}: not a case of --generator {a.generator} "
+                 f"(its cases: {', '.join(GEN['w_refs'])})")
     a.out.mkdir(parents=True, exist_ok=True)
     nuisance = {text.split("=")[0]: [float(v) for v in text.split("=")[1].split(":")] for text in a.nuisance}
     cfgs = []
@@ -131,7 +159,7 @@ def main(argv: list[str] | None = None) -> None:
     with ThreadPoolExecutor(a.jobs) as pool:
         for cfg, wall, err in ([] if a.summary else pool.map(run_one, cfgs)):
             print(f"{cfg.parent.name}/{cfg.stem}: {wall:.0f} s{' FAILED: ' + err if err else ''}", flush=True)
-    names = list(W_REFS["quickstart"])
+    names = list(GEN["w_refs"]["quickstart"])
     print("\n| case | objective | " + " | ".join(names) + " | in interval |")
     print("|---|---|" + "---|" * (len(names) + 1))
     all_rows = []
