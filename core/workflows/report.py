@@ -296,6 +296,8 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
                "self-check bias + half the spread of the data groups' estimates + the nuisance parameters' shifts; "
                "Armstrong and Kolesár's fixed-length interval, which keeps the level for any bias within the bound)"
                if result.get("interval_method", {}).get("widened_by_model_error") else "")
+    reference_date = (", and over the reference date's segments with B fitted again on each resample"
+                      if result.get("interval_method", {}).get("bootstrap_reference") else "")
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
@@ -306,11 +308,12 @@ J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 
 Components marked **no** (not identifiable, or not trustworthy under model error) are not findings:
 their value is not to be reported. *not assessed*: no model-error check that ran flags the component, but
-the checks that would judge it did not all run (see "Model error"); its interval covers the sampling
-spread only.
+the checks that would judge it did not all run (see "Model error"); its interval holds no bias those
+checks would have bounded.
 Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
-bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths){widened}, clipped to the admissible box.
+bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths{reference_date}){widened}, clipped to the
+admissible box.
 {model_error_section(result)}
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
 
