@@ -179,7 +179,7 @@ def test_run_with_a_specified_floor_reports_and_saves_it(tmp_path):
     # 24 segments: with the 16 of the pipeline test the statistical error of k_sec_z reaches 10 %
     cfg.write_text(cfg.read_text().replace("n_segments: 16", "n_segments: 24"))
     # the experiment's reference sensors: 0.005 m/s² rms white at 100 Hz, one-sided 2 σ² / fs
-    cfg.write_text(cfg.read_text() + "noise: {floor: spec, sensor_noise_density: 5.0e-7}\n")
+    cfg.write_text(cfg.read_text().replace("noise: {floor: auto}", "noise: {floor: spec, sensor_noise_density: 5.0e-7}"))
     out = run(load_config(cfg), progress=False, log=lambda s: None)
     r = out.result
     assert max(r["errors_percent"].values()) < 8.0, r["errors_percent"]
