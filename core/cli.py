@@ -23,6 +23,7 @@ from rich.table import Table
 import suspid
 from suspid import api, registry
 from suspid.errors import ConfigError, SuspidError
+from suspid.workflows.report import checks_lines, trust_word
 from suspid.workflows.simulate import format_modes, format_stability
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -215,17 +216,23 @@ def _print_result(result: dict, run_dir: Path) -> None:
     stop = result["stop_reason"]
     if result.get("refine_stop_reason"):
         stop += f", then {result['n_refine_iterations']} refinement steps: {result['refine_stop_reason']}"
+    if not console.is_terminal:
+        console.width = 200  # keep rows whole when piped
     table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
                         f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
-    for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable"):
+    for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable", "trustworthy"):
         table.add_column(col)
+    style = {"yes": "yes", "no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]"}
     for n in result["parameters"]:
         lo, hi = result["interval"][n]
         table.add_row(n, f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
                       f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
                       f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
-                      "yes" if result["identifiable"][n] else "[red]no[/red]")
+                      "yes" if result["identifiable"][n] else "[red]no[/red]",
+                      style[trust_word(result.get("trustworthy", {}).get(n))])
     console.print(table)
+    for line in checks_lines(result):
+        console.print(line.strip(), markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
     console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")
 

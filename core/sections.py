@@ -98,7 +98,8 @@ class DataSection(Section):
     track: TrackOptions = Field(default_factory=TrackOptions, description="synthetic track options (experiment)")
     w_ref: dict[str, float] = Field(default_factory=dict, description="known 'damaged' parameters (experiment)")
     reference: ReferenceOptions = Field(default_factory=ReferenceOptions,
-                                        description="how the reference-date measurements for the noise model are made")
+                                        description="the measurement process of both dates (experiment): fixed and "
+                                        "per-segment gains, sensor noise; the reference date's size and model")
     measurement: MeasurementOptions = Field(
         default_factory=MeasurementOptions, description="how the measurement-date 'measurements' are simulated "
         "(experiment), e.g. simulator_options with a hidden effect")

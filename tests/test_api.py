@@ -76,12 +76,15 @@ def test_overrides_as_mapping_or_strings_agree():
 
 @pytest.mark.slow
 def test_readme_api_line_on_the_quickstart(tmp_path, monkeypatch):
-    """``suspid.identify('configs/quickstart.yaml')`` within 5 % on every identifiable component."""
+    """``suspid.identify('configs/quickstart.yaml')`` within 5 % on every identifiable component, every interval
+    holding w_ref, and trust under model error not assessed (the checks do not run on the numerical experiment)."""
     shutil.copytree(ROOT / "configs", tmp_path / "configs")
     monkeypatch.chdir(tmp_path)
     r = suspid.identify("configs/quickstart.yaml")
     assert r.to_dict() == json.loads((r.run_dir / "result.json").read_text())
     assert r.max_error_percent is not None and r.max_error_percent < 5.0, r.errors_percent
+    assert all(r.intervals[n][0] <= r.w_ref[n] <= r.intervals[n][1] for n in r.parameters), (r.intervals, r.w_ref)
+    assert set(r.trust.values()) == {"not assessed"}
 
 
 def test_stability_command_gives_a_realistic_critical_speed(tmp_path, capsys):

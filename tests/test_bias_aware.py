@@ -89,3 +89,21 @@ def test_weights_given_as_an_array_are_still_weights():
 
     assert validate_weights(np.array([1.0, 1.0, 2.0]), ["a", "b", "c"]) == pytest.approx([0.25, 0.25, 0.5])
     assert validate_weights("reference", ["a", "b"]) == pytest.approx([0.5, 0.5])  # replaced from B later
+
+
+def test_trust_is_yes_only_when_every_required_check_ran_and_none_flags():
+    """Three states: a flag from a check that ran is a no; no flag is a yes only when the self-check, the
+    adequacy test and the data groups all ran, else not assessed with the checks that did not run."""
+    from suspid.workflows.analysis import trust_states
+
+    done = {"self_check": "done", "adequacy": "done", "groups": "done"}
+    t = trust_states(["a", "b"], [["groups disagree"], []], done)
+    assert t["trustworthy"] == {"a": False, "b": True} and t["not_assessed"] == {}
+    assert t["reasons"] == {"a": ["groups disagree"]}
+    partial = done | {"self_check": "not run: the reference date's data are not part of this run"}
+    t = trust_states(["a", "b"], [["groups disagree"], []], partial)
+    assert t["trustworthy"] == {"a": False, "b": None}
+    assert t["not_assessed"] == {"b": ["reference-date self-check not run: the reference date's data are not "
+                                       "part of this run"]}
+    t = trust_states(["a"], [[]], {"self_check": "done", "adequacy": "done"})   # the groups never reported
+    assert t["trustworthy"] == {"a": None} and "data groups" in t["not_assessed"]["a"][0]

@@ -200,7 +200,8 @@ def _config(tmp_path: Path, name: str, hidden: list, *, speed_kmh=300.0, fs=100.
                  "track": {"spectrum": "german-low", "n_segments": n_segments, "length_m": 600.0,
                            "speed_kmh": speed_kmh},
                  "reference": {"n_segments": n_reference, "model_error_scatter_db": 0.5},
-                 "measurement": {"simulator_options": {"effects": hidden}}},
+                 # eq. 10 (noise paths of B): the naming of hidden effects is tested, not the measurement process
+                 "measurement": {"errors": "noise-model", "simulator_options": {"effects": hidden}}},
         "spectra": {"f_min_hz": 0.4, "f_max_hz": f_max, "n_freqs": n_freqs},
         "diagnose": {"at": at, "reidentify": reidentify, "n_bootstrap": 100},
     }

@@ -30,7 +30,7 @@ def _experiment(tmp_path: Path, hidden: list, n_segments: int = 16) -> Path:
                  "track": {"spectrum": "german-low", "n_segments": n_segments, "length_m": 600.0, "speed_kmh": 300.0},
                  "w_ref": {"k_sec_z": 340.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.30e6},
                  "reference": {"n_segments": 24, "model_error_scatter_db": 0.5},
-                 "measurement": {"simulator_options": {"effects": hidden}}},
+                 "measurement": {"errors": "noise-model", "simulator_options": {"effects": hidden}}},  # eq. 10
         "spectra": {"f_min_hz": 0.4, "f_max_hz": 30.0, "n_freqs": 120},
         "diagnose": {"n_bootstrap": 0},
     }

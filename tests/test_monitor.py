@@ -24,6 +24,7 @@ parameters:
 data:
   source: experiment
   track: {spectrum: german-low, n_segments: 24, length_m: 800.0, speed_kmh: 300.0}
+  measurement: {errors: noise-model}   # eq. 10: the monitoring logic is tested, not the measurement process
 spectra: {f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 100}
 design: {n_initial: 8}
 ego: {max_iter: 10}

@@ -179,7 +179,7 @@ def test_run_with_a_specified_floor_reports_and_saves_it(tmp_path):
     # 24 segments: with the 16 of the pipeline test the statistical error of k_sec_z reaches 10 %
     cfg.write_text(cfg.read_text().replace("n_segments: 16", "n_segments: 24"))
     # the experiment's reference sensors: 0.005 m/s² rms white at 100 Hz, one-sided 2 σ² / fs
-    cfg.write_text(cfg.read_text() + "noise: {floor: spec, sensor_noise_density: 5.0e-7}\n")
+    cfg.write_text(cfg.read_text().replace("noise: {floor: auto}", "noise: {floor: spec, sensor_noise_density: 5.0e-7}"))
     out = run(load_config(cfg), progress=False, log=lambda s: None)
     r = out.result
     assert max(r["errors_percent"].values()) < 8.0, r["errors_percent"]
@@ -192,17 +192,50 @@ def test_run_with_a_specified_floor_reports_and_saves_it(tmp_path):
 
 
 def test_model_error_keeps_a_given_systematic_gain():
-    """Two dates of one vehicle through apply_model_error share its systematic gain when it is passed on;
-    without it the first draw of rng is that gain, as before."""
-    from suspid.data.experiment import ReferenceOptions, apply_model_error, smooth_gain_db, systematic_grid
+    """Two dates of one vehicle through apply_model_error share its fixed gains when they are passed on;
+    without them the first draws of rng are those gains (the smooth one, then one flat gain per channel)."""
+    from suspid.data.experiment import (ReferenceOptions, apply_model_error, fixed_gains_db, measurement_process,
+                                        smooth_gain_db, systematic_grid)
     from suspid.interfaces import Response
 
     fs = 100.0
     a = np.random.default_rng(0).standard_normal((2, 2000))
     r = [Response(["x", "y"], fs, a, "s1")]
-    opt = ReferenceOptions(model_error_db=1.5, model_error_scatter_db=0.0, sensor_noise_rms=0.0)
+    opt = ReferenceOptions(model_error_db=1.5, model_error_scatter_db=0.0, sensor_noise_rms=0.0, segment_gain_db=0.0)
     drawn = apply_model_error(r, opt, np.random.default_rng(3))[0].accelerations
-    sys_db = smooth_gain_db(np.random.default_rng(3), systematic_grid(fs), 2, 1.5, opt.correlation_octaves)
+    rng = np.random.default_rng(3)
+    sys_db = smooth_gain_db(rng, systematic_grid(fs), 2, 1.5, opt.correlation_octaves)
+    sys_db = sys_db + opt.channel_gain_db * rng.standard_normal(2)[:, None]
+    np.testing.assert_allclose(fixed_gains_db(np.random.default_rng(3), fs, 2, opt), sys_db)
     given = apply_model_error(r, opt, np.random.default_rng(99), sys_db)[0].accelerations
     np.testing.assert_allclose(given, drawn, atol=1e-12)
     assert not np.allclose(drawn, a)
+    # measurement_process draws them from its fixed seed: every date passing that seed shares them
+    np.testing.assert_allclose(measurement_process(r, opt, np.random.default_rng(5), fixed_seed=3)[0].accelerations,
+                               drawn, atol=1e-12)
+
+
+def test_measurement_process_gains_per_channel_and_per_segment():
+    """A flat fixed gain per channel (the same on both dates) and a flat gain per segment, in Y = 10 log10|A|:
+    the log-amplitude ratio of a measured to a simulated record is the gain in dB, exactly (no noise)."""
+    from suspid.data.experiment import ReferenceOptions, fixed_gains_db, measurement_process
+    from suspid.interfaces import Response
+
+    fs, n_t = 100.0, 4000
+    base = np.random.default_rng(0).standard_normal((3, n_t))
+    segs = [Response(["x", "y", "z"], fs, base, f"s{i}") for i in range(30)]
+    opt = ReferenceOptions(model_error_db=0.0, model_error_scatter_db=0.0, sensor_noise_rms=0.0,
+                           channel_gain_db=1.0, segment_gain_db=0.5)
+
+    def gains(out):   # (segments, channels) dB: 10 log10 of the rms ratio, the gain being flat in frequency
+        return np.array([10 * np.log10(np.std(o.accelerations, axis=1) / np.std(base, axis=1)) for o in out])
+
+    ref = gains(measurement_process(segs, opt, np.random.default_rng(1), fixed_seed=0))
+    mes = gains(measurement_process(segs, opt, np.random.default_rng(2), fixed_seed=0))
+    fixed = fixed_gains_db(np.random.default_rng(0), fs, 3, opt)   # (3, 512), flat: one value per channel
+    assert np.ptp(fixed, axis=1).max() < 1e-12 and np.ptp(fixed[:, 0]) > 1.0   # the channels' gains differ
+    # both dates hold the same fixed gains, up to the mean of 30 segment gains (0.5 dB rms: 4 sigma = 0.37 dB)
+    np.testing.assert_allclose(ref.mean(axis=0), fixed[:, 0], atol=4 * 0.5 / np.sqrt(30))
+    np.testing.assert_allclose(mes.mean(axis=0), fixed[:, 0], atol=4 * 0.5 / np.sqrt(30))
+    assert 0.3 < ref.std(axis=0, ddof=1).mean() < 0.7      # per-segment gains of 0.5 dB rms
+    assert not np.allclose(ref, mes)                        # drawn anew on each date

@@ -25,6 +25,7 @@ data:
   track: {{spectrum: german-low, n_segments: 16, length_m: 800.0, speed_kmh: 300.0}}
   w_ref: {{k_sec_z: 330.0e3, c_sec_z: 27.0e3}}
 spectra: {{f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 120}}
+noise: {{floor: auto}}
 objective: {{plugin: {objective}}}
 design: {{n_initial: {m0}}}
 ego: {{max_iter: {m1}}}
@@ -57,6 +58,11 @@ def test_run_recovers_w_ref(tmp_path, objective):
     assert saved["w_opt"] == r["w_opt"]
     report = (out.run_dir / "report.md").read_text()
     assert "figure1_spectra.png" in report and (out.run_dir / "figure2_parameters.png").exists()
+    # the model-error checks do not run on the numerical experiment: trust is not assessed, never yes
+    assert r["trustworthy"] == {"k_sec_z": None, "c_sec_z": None} and out.trust == {"k_sec_z": "not assessed",
+                                                                                     "c_sec_z": "not assessed"}
+    assert all("model_error.run: measured" in " ".join(v) for v in r["not_assessed_reasons"].values())
+    assert report.count("| *not assessed* |") == 2 and "Model-error checks that ran: none." in report
     # the run directory holds the noise model of the reference date, reusable at later dates
     assert (out.run_dir / "noise_model.npz").exists()
 

@@ -63,9 +63,11 @@ def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model
     result = json.loads((run / "result.json").read_text())
     assert (run / "noise_model.npz").exists()
     assert set(result["trustworthy"]) == {"c_sec_y", "c_yaw"}
-    assert all(isinstance(v, bool) for v in result["trustworthy"].values())
+    assert all(isinstance(v, bool) for v in result["trustworthy"].values())  # every check ran: yes or no
+    assert result["not_assessed_reasons"] == {}
+    assert all(c["ran"] for c in result["model_error"]["checks"].values() if c["required"])
     for n, reasons in result["untrustworthy_reasons"].items():
-        assert not result["trustworthy"][n] and reasons
+        assert result["trustworthy"][n] is False and reasons
     sc = result["model_error"]["self_check"]
     assert sc["status"] == "done" and sc["n_splits"] == 2 and sc["segments_fit"] == 4
     assert result["model_error"]["adequacy"]["status"] == "done"
@@ -166,3 +168,36 @@ def test_a_significant_self_check_shift_over_the_tolerance_is_a_bias():
     bias = [0.047, -0.047, 0.047, 0.020, 0.060]
     se = [0.012, 0.012, 0.030, 0.005, 0.035]
     assert biased(bias, se, 0.03).tolist() == [True, True, False, False, False]
+
+
+def test_with_a_noise_model_file_no_component_is_called_trustworthy(two_dates, capsys):
+    """noise.path without the reference date's files: the self-check cannot run, and with the adequacy test off
+    no check examines any component: each is *not assessed* (never yes), with the reason, in result.json,
+    report.md and the terminal table."""
+    first = two_dates / "runs" / "two-dates"
+    if not (first / "noise_model.npz").exists():
+        assert _cli("run", str(_config(two_dates)), "--quiet") == 0
+    cfg = _config(two_dates, name="two-dates-path", noise={"path": str(first / "noise_model.npz")})
+    with open(cfg) as fh:
+        raw = yaml.safe_load(fh)
+    raw["identifiability"]["model_error"]["adequacy"]["enabled"] = False
+    cfg.write_text(yaml.safe_dump(raw, sort_keys=False))
+    capsys.readouterr()
+    assert _cli("run", str(cfg), "--quiet") == 0
+    out = capsys.readouterr().out
+    run = two_dates / "runs" / "two-dates-path"
+    result = json.loads((run / "result.json").read_text())
+    assert result["trustworthy"] == {"c_sec_y": None, "c_yaw": None}
+    for n in result["parameters"]:
+        reasons = " ".join(result["not_assessed_reasons"][n])
+        assert "self-check not run" in reasons and "noise.path" in reasons and "adequacy" in reasons
+    checks = result["model_error"]["checks"]
+    assert not checks["self_check"]["ran"] and not checks["adequacy"]["ran"] and not checks["groups"]["ran"]
+    assert result["interval"] == result["interval_sampling"]   # nothing bounds the bias: sampling only
+    report = (run / "report.md").read_text()
+    assert "Model-error checks that ran: none." in report
+    assert "reference-date self-check (needed for a yes): not run" in report
+    assert report.count("| *not assessed* |") == 2 and "| yes | yes |" not in report
+    header = next(line for line in out.splitlines() if "identifiable" in line)
+    assert "trustworthy" in header
+    assert out.count("not assessed") >= 2 and "Model-error checks that ran: none." in out

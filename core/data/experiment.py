@@ -1,32 +1,47 @@
-"""The numerical experiment of paper §3.3, and its reference date.
+"""The numerical experiment of paper §3.3: its two dates and their measurement process.
 
-Two dates are simulated:
+Two dates are simulated, both through one documented **measurement process**
+(:class:`ReferenceOptions`, ``data.reference``) applied to the simulated
+accelerations, so that the "measurements" are not the very simulations they
+are compared with (or B would be zero) and carry what real records bring:
 
-1. **Reference date** (identifies the noise model B, paper §2.3). The
-   "measurements" must not be the very simulations they are compared with,
-   or B would be zero. They are the model at w0 on the reference-date track,
-   made into a measurement by a prescribed, documented model-error process
-   (:class:`ReferenceOptions`), applied to the accelerations:
+- *fixed gains*, the same on every segment and on both dates (the same vehicle
+  and the same sensors): a flat gain per channel, different between channels
+  (a sensor's calibration, rms ``channel_gain_db``), times a smooth gain
+  g_k(f) per channel (what a rigid model misses in a structured way:
+  unmodelled flexibility, sensor transfer functions; a stationary Gaussian
+  process in log2(f) with rms ``model_error_db`` and a squared-exponential
+  correlation of ``correlation_octaves``);
+- *per-segment gains*, drawn anew for every segment of every date: a flat gain
+  per channel (mounting, temperature, rms ``segment_gain_db``) and a smooth
+  one (varying operating conditions, rms ``model_error_scatter_db``);
+- a *sensor-noise floor*: white acceleration noise of rms ``sensor_noise_rms``
+  (m/s^2) added to every channel, which adds power where the vehicle's
+  response is weak and is not a gain.
 
-   - a *systematic* model error: a smooth gain g_k(f) in dB per channel, the
-     same on every segment (what a rigid model misses in a structured way:
-     unmodelled flexibility, sensor transfer functions); a stationary
-     Gaussian process in log2(f) with rms ``model_error_db`` and a
-     squared-exponential correlation of ``correlation_octaves``;
-   - a *random* model error: another such gain, drawn anew for every segment
-     with rms ``model_error_scatter_db`` (varying operating conditions);
-   - *sensor noise*: white acceleration noise of rms ``sensor_noise_rms``
-     (m/s^2) added to every channel.
+The gains multiply the amplitude |Â(ω)|: in the paper's unit
+Y = 10 log10 |Â| (eq. 1) a gain of g dB adds g to Y. So the noise model B
+(eq. 3) identified at the reference date absorbs the fixed gains in its mean
+and the per-segment gains in its covariance; the floor it absorbs only at
+w0 (``noise.floor`` models it apart).
 
-   The gains multiply the amplitude |Â(ω)|: in the paper's unit
-   Y = 10 log10 |Â| (eq. 1) a gain of g dB adds g to Y.
-
+1. **Reference date** (identifies B, paper §2.3): the model at w0 on the
+   reference-date track through the process.
 2. **Measurement date**: the track measured on that date (its own
-   realisations) and y_ref_i = y_sim_i(w_ref) + b_i (eq. 10), with b_i drawn
-   from the identified noise model, independent of the paths used in Y_mod.
+   realisations) and, by default (``data.measurement.errors: process``), the
+   model at w_ref through the same process: the same fixed gains, new
+   per-segment gains and sensor noise. With ``errors: noise-model`` it is the
+   paper's eq. 10 instead, y_ref_i = y_sim_i(w_ref) + b_i with b_i drawn from
+   the identified B (a measurement date that B describes exactly).
+
+Every draw comes from the config's seed: the fixed gains from one stream
+shared by every date (:func:`fixed_gains_db`), the per-segment parts from a
+stream per date.
 """
 
 from __future__ import annotations
+
+from typing import Literal
 
 import numpy as np
 from pydantic import Field
@@ -36,11 +51,17 @@ from suspid.interfaces import Response
 
 
 class ReferenceOptions(Section):
-    """``data.reference``: how the reference-date measurements are made (numerical experiment)."""
+    """``data.reference``: the measurement process of the numerical experiment (both dates), and the reference
+    date's size and model."""
 
     n_segments: int | None = Field(default=None, ge=4,
                                    description="v0, segments at the reference date (default: as the measurement date)")
-    sensor_noise_rms: float = Field(default=0.005, ge=0, description="white acceleration noise, m/s^2 rms")
+    sensor_noise_rms: float = Field(default=0.005, ge=0, description="white acceleration noise, m/s^2 rms "
+                                    "(the sensors' noise floor)")
+    channel_gain_db: float = Field(default=1.0, ge=0, description="fixed flat gain of each channel (calibration), "
+                                   "dB rms; the same on both dates")
+    segment_gain_db: float = Field(default=0.5, ge=0, description="flat gain of each channel on each segment "
+                                   "(mounting, temperature), dB rms")
     model_error_db: float = Field(default=1.5, ge=0, description="systematic gain error per channel, dB rms")
     model_error_scatter_db: float = Field(default=1.0, ge=0, description="per-segment gain error, dB rms")
     correlation_octaves: float = Field(default=0.7, gt=0, description="correlation length of the gains, octaves")
@@ -50,7 +71,12 @@ class ReferenceOptions(Section):
 
 
 class MeasurementOptions(Section):
-    """``data.measurement``: how the measurement-date 'measurements' of eq. 10 are simulated (numerical experiment).
+    """``data.measurement``: how the measurement-date 'measurements' are simulated (numerical experiment).
+
+    ``errors: process`` (the default) passes y_sim(w_ref)'s accelerations through the
+    measurement process of ``data.reference`` (the same fixed gains as the reference
+    date); ``errors: noise-model`` is the paper's eq. 10, y_sim_i(w_ref) + b_i with b_i
+    drawn from the identified noise model.
 
     ``simulator_options`` are merged into the simulator's options for y_sim(w_ref)
     only: the "real" vehicle may have what the identification model lacks, e.g.
@@ -58,6 +84,9 @@ class MeasurementOptions(Section):
     the test case of ``suspid diagnose``.
     """
 
+    errors: Literal["process", "noise-model"] = Field(
+        default="process", description="process: the reference date's measurement process (same fixed gains, new "
+        "per-segment gains and sensor noise); noise-model: eq. 10, noise paths drawn from B")
     simulator_options: dict = Field(
         default_factory=dict, description="options merged into the simulator's for the measurement-date data")
 
@@ -85,22 +114,48 @@ def systematic_grid(fs: float) -> np.ndarray:
     return np.geomspace(0.05, fs / 2, 512)
 
 
+def fixed_gains_db(rng: np.random.Generator, fs: float, n_channels: int, options: ReferenceOptions) -> np.ndarray:
+    """``(n_channels, 512)`` dB on :func:`systematic_grid`: the gains that stay the same on every segment and date.
+
+    The smooth systematic gain (rms ``model_error_db``) drawn first, then a flat gain
+    per channel (rms ``channel_gain_db``) added to it.
+    """
+    f_ref = systematic_grid(fs)
+    smooth = smooth_gain_db(rng, f_ref, n_channels, options.model_error_db, options.correlation_octaves)
+    return smooth + options.channel_gain_db * rng.standard_normal(n_channels)[:, None]
+
+
+def measurement_process(responses: list[Response], options: ReferenceOptions, rng: np.random.Generator,
+                        fixed_seed: int) -> list[Response]:
+    """:func:`apply_model_error` with the fixed gains drawn from ``fixed_seed`` (:func:`fixed_gains_db`).
+
+    Every date of one experiment passes the same ``fixed_seed`` (one vehicle, one set of
+    sensors) and its own ``rng`` (the per-segment gains and the sensor noise).
+    """
+    if not responses:
+        return []
+    fixed = fixed_gains_db(np.random.default_rng(fixed_seed), responses[0].fs,
+                           responses[0].accelerations.shape[0], options)
+    return apply_model_error(responses, options, rng, fixed)
+
+
 def apply_model_error(responses: list[Response], options: ReferenceOptions,
                       rng: np.random.Generator, systematic: np.ndarray | None = None) -> list[Response]:
-    """Turn simulated responses into reference-date 'measurements' (see the module docstring).
+    """Turn simulated responses into 'measurements' through the measurement process (module docstring).
 
-    :param responses: simulations at w0, accelerations ``(n_channels, n_t)`` m/s^2.
-    :param systematic: ``(n_channels, 512)`` dB, the systematic gain on :func:`systematic_grid`
-        (another date of the same vehicle keeps it); default: drawn first from ``rng``.
+    :param responses: simulations, accelerations ``(n_channels, n_t)`` m/s^2.
+    :param systematic: ``(n_channels, 512)`` dB, the fixed gains on :func:`systematic_grid`
+        (another date of the same vehicle keeps them); default: drawn first from ``rng``
+        (:func:`fixed_gains_db`).
     :returns: new responses of the same shapes.
     """
     if not responses:
         return []
     n_ch = responses[0].accelerations.shape[0]
-    # the systematic gain is drawn on a reference grid common to all segments
+    # the fixed gains are drawn on a reference grid common to all segments
     f_ref = systematic_grid(responses[0].fs)
     if systematic is None:
-        systematic = smooth_gain_db(rng, f_ref, n_ch, options.model_error_db, options.correlation_octaves)
+        systematic = fixed_gains_db(rng, responses[0].fs, n_ch, options)
     out = []
     for r in responses:
         n_t = r.accelerations.shape[1]
@@ -108,7 +163,8 @@ def apply_model_error(responses: list[Response], options: ReferenceOptions,
         f_log = np.log2(np.maximum(f, 0.05))
         sys_here = np.array([np.interp(f_log, np.log2(f_ref), g) for g in systematic])
         scatter = smooth_gain_db(rng, f, n_ch, options.model_error_scatter_db, options.correlation_octaves)
-        gain = 10.0 ** ((sys_here + scatter) / 10.0)  # Y = 10 log10|A|: g dB multiplies |A| by 10^(g/10)
+        flat = options.segment_gain_db * rng.standard_normal(n_ch)[:, None]
+        gain = 10.0 ** ((sys_here + scatter + flat) / 10.0)  # Y = 10 log10|A|: g dB multiplies |A| by 10^(g/10)
         a = np.fft.irfft(np.fft.rfft(r.accelerations, axis=1) * gain, n=n_t, axis=1)
         a = a + options.sensor_noise_rms * rng.standard_normal(a.shape)
         out.append(Response(r.channels, r.fs, a, r.segment))

@@ -23,7 +23,9 @@ random tilt that other data of the same kind would give (zero on average).
 The maximum then moves by Δ = -H⁻¹ g, so Cov(w_opt) ≈ H⁻¹ Σ_g H⁻¹, where
 The diagonal of H comes from simulations at w_opt ± h e_k, its correlation
 structure from the metamodel. Σ_g, the covariance of the gradient of J at w_opt, comes from a bootstrap
-over segments with redrawn noise paths
+over segments with redrawn noise paths, and over the reference date's
+segments with B fitted again on each resample (``bootstrap_reference``: the
+finite reference date moves w_opt too)
 (:func:`suspid.workflows.analysis.gradient_noise`). Segments are resampled as pairs:
 segment i's measured spectra and its simulated spectra come from the same
 track, so they vary together. Resampling the two sets independently
@@ -128,6 +130,9 @@ class IdentifiabilityOptions(Section):
     bootstrap: Literal["paired", "independent"] = Field(
         default="paired", description="resample the segments as (measured, simulated) pairs, which share the "
         "segment's track, or the two sets independently")
+    bootstrap_reference: bool = Field(
+        default=True, description="each bootstrap replicate also resamples the reference date's segments and fits "
+        "the noise model again on them (its finite sample is data too); needs the reference date's data in the run")
     model_error: ModelErrorOptions = Field(default_factory=ModelErrorOptions)
 
 

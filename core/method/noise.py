@@ -511,6 +511,21 @@ class NoiseModel:
                             f"or a negative variance)")
 
 
+def reference_paths(model: "NoiseModel", y_mes: np.ndarray, y_sim: np.ndarray) -> np.ndarray:
+    """The reference date's noise paths ``(v0, n_channels, n_freqs)`` dB the Gaussian part of ``model`` was fitted
+    on: b_i = y_mes_i − y_sim_i(w0) (eq. 3), or with ``model``'s floor the paths m + e_i under it."""
+    return noise_samples(y_mes, y_sim) if model.floor_ is None else model.floor_.paths(y_mes, y_sim)
+
+
+def refit_gaussian(model: "NoiseModel", paths: np.ndarray, freqs: np.ndarray | None = None,
+                   channels: Sequence[str] | None = None, speeds: Sequence[float] | None = None) -> "NoiseModel":
+    """A noise model with ``model``'s options and floor, its mean and covariance fitted again on ``paths``
+    ``(v0, n_channels, n_freqs)`` dB (e.g. a bootstrap resample of :func:`reference_paths`)."""
+    refit = NoiseModel(**model.options).fit(paths, freqs=freqs, channels=channels, speeds=speeds)
+    refit.floor_ = model.floor_
+    return refit
+
+
 def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions | Mapping[str, Any] | None = None,
                     freqs: np.ndarray | None = None, channels: Sequence[str] | None = None,
                     speeds: Sequence[float] | None = None) -> NoiseModel:

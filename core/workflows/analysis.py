@@ -20,14 +20,16 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.adequacy import band_residuals, frequency_bands, information_share
 from suspid.method.identifiability import ModelErrorOptions, assess, bias_aware_half_width
+from suspid.method.noise import refit_gaussian, reference_paths
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.evaluation import j_of_spectra
-from suspid.workflows.problem import Problem
+from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.nuisance import nuisance_shifts
 from suspid.workflows.linearised import calibration_result, linearised_model_error
 from suspid.workflows.reference import self_check
+from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
 
 
 def _y_sim_key(problem: Problem, u: np.ndarray) -> tuple[str, dict[str, float]]:
@@ -77,7 +79,7 @@ def cached_y_sim(problem: Problem, ledger: Ledger, u: np.ndarray, retry_failed: 
 
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
                    paired: bool = True, failed: list[dict[str, Any]] | None = None,
-                   retry_failed: bool = False, executor: Executor | None = None
+                   retry_failed: bool = False, executor: Executor | None = None, reference: bool = True
                    ) -> tuple[np.ndarray, np.ndarray, float]:
     """Covariance of the noise in the gradient of J at w_opt, in [0, 1]^q coordinates.
 
@@ -91,6 +93,19 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     w_opt ± h e_k (clipped to the box). The spread of these gradients over the
     replicates, Σ_g, is how far the data of the same kind could tilt J at its
     maximum. The 2q spectra are simulated once, together on ``executor`` (cached in the ledger).
+
+    With ``reference`` and the reference date's data in the run, each replicate
+    also resamples the v0 reference segments (y_mes0 and y_sim0 as pairs) and
+    fits the noise model B again on them (eq. 3, the run's ``noise:`` options),
+    then draws its noise paths from that B: the finite reference date is data
+    too. Its mean μ_B, estimated from v0 segments, enters every Y_mod alike, so
+    its error moves w_opt like a bias that a bootstrap of the measurement date
+    alone cannot see (on the numerical experiment with the measurement process
+    of :mod:`suspid.data.experiment` it left the intervals too narrow,
+    ``benchmarks/RESULTS.md``). With a noise model read from ``noise.path``
+    B is taken as known. The
+    sensor-noise floor (``noise.floor``) is kept as fitted: only B's Gaussian
+    part (mean and covariance) is fitted again, on the resampled paths.
 
     The same 2q + 1 spectra with the run's own data give the curvature of J
     along each axis, d²J/du_k² (central second differences).
@@ -122,14 +137,22 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     plus, minus = np.array(plus), np.array(minus)
     step = np.diag(plus - minus)
     rng = named_rng(config.seed, "noise-redraws")
+    ref_rng = named_rng(config.seed, "noise-redraws-reference")  # a stream of its own: the others' draws unchanged
+    ref = problem.reference if reference and config.noise.path is None else {}  # B fitted in this run on them
+    ref_speeds = segment_speeds(problem.reference_segments)
+    paths = reference_paths(problem.noise_model, ref["y_mes0"], ref["y_sim0"]) if ref else None
     v = len(problem.segments)
     grads, j_opt = np.empty((n_redraws, q)), np.empty(n_redraws)
     for k in range(n_redraws):
-        b = problem.noise_model.sample(v, rng)
+        model = problem.noise_model
+        if ref:
+            i0 = ref_rng.integers(0, len(ref_speeds), len(ref_speeds))
+            model = refit_gaussian(model, paths[i0], problem.freqs, problem.channels, [ref_speeds[i] for i in i0])
+        b = model.sample(v, rng)
         i_mes = rng.integers(0, v, v)
         i_mod = i_mes if paired else rng.integers(0, v, v)
         y_mes = problem.y_mes[i_mes]
-        J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes)[0]  # noqa: E731
+        J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes, model)[0]  # noqa: E731
         grads[k] = [(J(yp) - J(ym)) / step[i] if step[i] > 0 else 0.0  # both sides failed: no gradient
                     for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
         j_opt[k] = J(y_opt)
@@ -159,7 +182,8 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     u_opt = problem.to_unit(x_opt)
     sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
                                                  paired=opts.bootstrap == "paired", failed=failed,
-                                                 retry_failed=retry_failed, executor=executor)
+                                                 retry_failed=retry_failed, executor=executor,
+                                                 reference=opts.bootstrap_reference)
     rng = named_rng(config.seed, "identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
@@ -190,10 +214,13 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         "interval_sampling": {n: [float(a), float(b)] for n, (a, b) in zip(names, sampling_si)},
         "trustworthy": trust["trustworthy"],
         "untrustworthy_reasons": trust["reasons"],
+        "not_assessed_reasons": trust["not_assessed"],
         "model_error": trust["report"],
         "calibration": calibration_result(trust["report"]),
         "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
                             "bootstrap": opts.bootstrap,
+                            "bootstrap_reference": bool(opts.bootstrap_reference and problem.reference
+                                                        and config.noise.path is None),
                             "widened_by_model_error": bool(opts.model_error.widen and trust["bias_bound"] is not None),
                             "n_sigmas": opts.n_sigmas,
                             "covariance_normalized": verdict.covariance.tolist()},
@@ -279,6 +306,7 @@ def imprecise(trust: dict[str, Any], names: list[str], identifiable: np.ndarray,
     for k, n in enumerate(names):
         if identifiable[k] and half[k] > max_half_width:
             trust["trustworthy"][n] = False
+            trust.get("not_assessed", {}).pop(n, None)
             trust["reasons"].setdefault(n, []).append(
                 f"too uncertain under model error: its bias-aware interval is ± {100 * half[k]:.1f} % of the "
                 f"admissible one (sampling ± {100 * sampling_half[k]:.1f} %, model-error bound on the bias "
@@ -324,8 +352,12 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     reported intervals without the truth, mostly k_prim_z and c_sec_z, whose errors added up from
     several differences of the vehicle (``benchmarks/RESULTS.md``).
 
+    A component no check flags is trustworthy only when the checks of :data:`REQUIRED_CHECKS` all ran,
+    otherwise *not assessed* (:func:`suspid.workflows.trust.trust_states`); ``report["checks"]`` says which ran and why not.
+
     :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
-    :returns: ``{"trustworthy": name -> bool, "reasons": name -> [str], "bias_bound": (q,) or None,
+    :returns: ``{"trustworthy": name -> True | False | None (not assessed), "reasons": name -> [str],
+        "not_assessed": name -> [str] (the checks that did not run), "bias_bound": (q,) or None,
         that bound in [0, 1] (:func:`suspid.method.identifiability.bias_aware_half_width` widens the
         intervals by it), "report": the JSON-able details for result.json}``.
     """
@@ -333,21 +365,28 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     q = problem.q
     reasons: list[list[str]] = [[] for _ in range(q)]
     if options.run == "never" or (options.run == "measured" and problem.config.data.source != "measured"):
-        return {"trustworthy": {n: True for n in names}, "reasons": {}, "bias_bound": None,
-                "report": {"status": f"not run (identifiability.model_error.run: {options.run}, "
-                                     f"data.source: {problem.config.data.source})"}}
+        why = (f"not run (identifiability.model_error.run: {options.run}, data.source: "
+               f"{problem.config.data.source}; 'always' runs them)")
+        checks = {c: why for c in CHECK_LABELS}
+        return {**trust_states(names, reasons, checks), "bias_bound": None,
+                "report": {"status": why, "checks": checks_report(checks)}}
     if options.method == "linearised":  # the checks by linearisation, within budget (suspid.workflows.linearised)
         return linearised_model_error(problem, ledger, u_opt, h, options, retry_failed, sd, executor, model_error)
     report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
+    checks: dict[str, str] = {}
     bound = None
     sc_opt = options.self_check
     if not sc_opt.enabled:
-        report["self_check"] = {"status": "disabled"}
+        report["self_check"] = {"status": "disabled (identifiability.model_error.self_check.enabled: false)"}
     else:
         check = self_check(problem, ledger, sc_opt, executor=executor)
         if check is None:
-            report["self_check"] = {"status": "not run: the reference date's data are not part of this run "
-                                              "(give noise.reference, or use at least 8 reference segments)"}
+            if not problem.reference or not problem.reference_segments:
+                why = "the reference date's data are not part of this run" + (
+                    " (the noise model is read from noise.path)" if problem.config.noise.path is not None else "")
+            else:
+                why = f"the reference date has {len(problem.reference_segments)} segments, the self-check needs 8"
+            report["self_check"] = {"status": f"not run: {why} (give noise.reference with at least 8 segments)"}
         else:
             bias = np.abs(check.bias)
             bound = bias
@@ -365,9 +404,11 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                         f"{100 * se[k]:.1f} % of the interval where the truth is w0 (B fitted on half the "
                         f"segments, w identified on the other half, {n_splits} splits; threshold "
                         f"{100 * options.max_bias:.0f} %, the bias beyond 2 standard errors)")
+    checks["self_check"] = report["self_check"]["status"]
     ad_opt = options.adequacy
     if not ad_opt.enabled:
-        report["adequacy"] = {"status": "disabled"}
+        report["adequacy"] = {"status": "disabled (identifiability.model_error.adequacy.enabled: false)"}
+        checks["groups"] = "not run: the adequacy test is disabled"
     else:
         y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed, executor)
         bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
@@ -393,7 +434,10 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                   for c, j in cells)
                 reasons[k].append(f"model inadequate where it is read: {100 * share[k]:.0f} % of its information "
                                   f"lies in bands the model does not reproduce at w_opt ({where})")
-        if ad_opt.groups:
+        if not ad_opt.groups:
+            checks["groups"] = "disabled (identifiability.model_error.adequacy.groups: false)"
+        else:
+            checks["groups"] = "done"
             ge = group_estimates(problem, u_opt, S, ad_opt.min_group_share, ad_opt.group_evaluations,
                                  options.self_check.initial_step, ledger, executor)
             informed = np.isfinite(ge.u)
@@ -417,13 +461,18 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                       f"read from, it lies at {parts} of its interval (spread "
                                       f"{100 * spread[k]:.0f} %, threshold {100 * ad_opt.max_spread:.0f} %): "
                                       f"the model's sensitivity to it differs from the vehicle's")
+    checks["adequacy"] = report["adequacy"]["status"]
     nu_opt = options.nuisance
-    if nu_opt.parameters:
+    if not nu_opt.parameters:
+        checks["nuisance"] = "not run: no nuisance parameters declared (identifiability.model_error.nuisance)"
+    else:
         check = nuisance_shifts(problem, ledger, u_opt, nu_opt, options.self_check.initial_step, executor=executor)
         if check is None:
             report["nuisance"] = {"status": "not run: the reference date's data are not part of this run "
                                             "(give noise.reference)"}
+            checks["nuisance"] = report["nuisance"]["status"]
         else:
+            checks["nuisance"] = "done"
             largest, rows = check.largest()
             report["nuisance"] = {**check.to_dict(names), "max_shift_percent": 100 * nu_opt.max_shift,
                                   "largest_shift_percent": {n: float(100 * v) for n, v in zip(names, largest)}}
@@ -438,5 +487,5 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                         f"rests on an assumed model parameter: with {name} = {value:g} (plausible {lo:g} to {hi:g}) "
                         f"it is identified {100 * check.shifts[rows[k], k]:+.1f} % of its interval away "
                         f"(threshold {100 * nu_opt.max_shift:.0f} %)")
-    return {"trustworthy": {n: not r for n, r in zip(names, reasons)},
-            "reasons": {n: r for n, r in zip(names, reasons) if r}, "bias_bound": bound, "report": report}
+    report["checks"] = checks_report(checks)
+    return {**trust_states(names, reasons, checks), "bias_bound": bound, "report": report}

@@ -24,17 +24,20 @@ from suspid import registry
 from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger, evaluation_key
 from suspid.interfaces import Executor
+from suspid.method.noise import NoiseModel
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.problem import Problem
 from suspid.workflows.tasks import SpectraTask, in_process
 
 
 def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
-                 y_mes: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra)."""
+                 y_mes: np.ndarray | None = None, noise_model: NoiseModel | None = None) -> tuple[float, np.ndarray]:
+    """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra);
+    the sensor-noise floor is ``noise_model``'s (by default the run's)."""
+    model = problem.noise_model if noise_model is None else noise_model
     fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
                            problem.b if b is None else b, weights=problem.weights, channels=problem.channels,
-                           floor=problem.noise_model.floor_)
+                           floor=model.floor_)
     J, psi = fn.evaluate(y_sim)
     return J, psi
 

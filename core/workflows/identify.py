@@ -47,7 +47,7 @@ from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.problem import Problem, build_problem
-from suspid.workflows.report import write_report
+from suspid.workflows.report import trust_word, write_report
 
 
 def make_progress(enabled: bool):
@@ -72,8 +72,11 @@ class IdentificationResult:
     :ivar identifiable: ``name -> bool``; :ivar reasons: why a component is not identifiable.
     :ivar w_ref: the known parameters of a numerical experiment, else None.
     :ivar errors_percent: ``|w_opt - w_ref|`` in % of the interval (numerical experiment), else None.
-    :ivar trustworthy: ``name -> bool``: False where the model-error checks (measured data) say the
-        value is not a finding (reasons in ``result["untrustworthy_reasons"]``).
+    :ivar trustworthy: ``name -> True | False | None``, trust under model error: True (yes) where the
+        model-error checks all ran and none flags the component, False (no) where a check flags it (the value
+        is not a finding; reasons in :attr:`untrustworthy_reasons`), None (not assessed) where no check that
+        ran flags it but the checks that would judge it did not all run (why in :attr:`not_assessed_reasons`).
+    :ivar untrustworthy_reasons, not_assessed_reasons: ``name -> [str]`` for the no's and the not assessed.
     :ivar J_max: J(w_opt).
     :ivar n_initial, n_iterations, n_simulator_calls: m0, EGO iterations, evaluations of J.
     :ivar stop_reason, refine_stop_reason: why the EGO loop (and the refinement) stopped.
@@ -99,7 +102,9 @@ class IdentificationResult:
     run_dir: Path
     w_ref: dict[str, float] | None = None
     errors_percent: dict[str, float] | None = None
-    trustworthy: dict[str, bool] | None = None
+    trustworthy: dict[str, bool | None] | None = None
+    untrustworthy_reasons: dict[str, list[str]] = field(default_factory=dict)
+    not_assessed_reasons: dict[str, list[str]] = field(default_factory=dict)
     problem: Problem | None = field(default=None, repr=False, compare=False)
     ego: EGOResult | None = field(default=None, repr=False, compare=False)
     _data: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -118,6 +123,8 @@ class IdentificationResult:
                    stop_reason=data["stop_reason"], refine_stop_reason=data.get("refine_stop_reason"),
                    wall_time_s=float(data["wall_time_s"]), run_dir=Path(run_dir), w_ref=data.get("w_ref"),
                    errors_percent=data.get("errors_percent"), trustworthy=data.get("trustworthy"),
+                   untrustworthy_reasons=dict(data.get("untrustworthy_reasons", {})),
+                   not_assessed_reasons=dict(data.get("not_assessed_reasons", {})),
                    problem=problem, ego=ego, _data=data)
 
     @classmethod
@@ -134,6 +141,11 @@ class IdentificationResult:
     def to_dict(self) -> dict[str, Any]:
         """A copy of the JSON-able dict written to ``result.json`` (equal to it once read back)."""
         return copy.deepcopy(self._data)
+
+    @property
+    def trust(self) -> dict[str, str]:
+        """``name -> "yes" | "no" | "not assessed"``: :attr:`trustworthy` in words."""
+        return {n: trust_word((self.trustworthy or {}).get(n)) for n in self.parameters}
 
     @property
     def max_error_percent(self) -> float | None:

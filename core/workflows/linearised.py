@@ -60,6 +60,7 @@ from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
+from suspid.workflows.trust import checks_report, trust_states
 
 __all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_markdown",
            "equivalent_bias_bound", "DateJacobian"]
@@ -414,7 +415,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         why = f"not run: the spectra's Jacobian failed ({exc})"
         report.update({"self_check": {"status": why}, "nuisance": {"status": why}, "calibration": {"status": why},
                        "budget": budget})
-        return {**trust, "reasons": reasons, "report": report}
+        checks = {"adequacy": _base_status(report, "adequacy"), "self_check": why, "groups": why, "nuisance": why}
+        return _trust(names, reasons, checks, trust["bias_bound"], report)
     budget["jacobian_measurement_w_opt"] = jac_opt.n_simulations
     budget["methods"] = jac_opt.methods
 
@@ -571,7 +573,26 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     budget["total"] = int(sum(v for k, v in budget.items() if isinstance(v, int) and k != "total"))
     budget["wall_time_s"] = round(time.perf_counter() - t_start, 2)
     report["budget"] = budget
-    return {"trustworthy": {n: n not in reasons for n in names}, "reasons": reasons, "bias_bound": bound,
+    groups = report.get("adequacy", {}).get("groups")
+    checks = {"adequacy": _base_status(report, "adequacy"),
+              "self_check": report["self_check"]["status"],
+              "groups": ("done" if groups is not None else
+                         "not run: the adequacy test is disabled" if not ad.enabled else
+                         "disabled (identifiability.model_error.adequacy.groups: false)"),
+              "nuisance": report.get("nuisance", {}).get("status", "done")}
+    return _trust(names, reasons, checks, bound, report)
+
+
+def _base_status(report: dict[str, Any], check: str) -> str:
+    """The status the full checks' own run gave ``check`` (the adequacy test runs there)."""
+    return report.get("checks", {}).get(check, {}).get("status", report.get(check, {}).get("status", "not run"))
+
+
+def _trust(names: list[str], reasons: dict[str, list[str]], checks: dict[str, str], bound: Any,
+           report: dict[str, Any]) -> dict[str, Any]:
+    """The contract of :func:`suspid.workflows.analysis.model_error`: trust in three states on the same rule."""
+    report["checks"] = checks_report(checks)
+    return {**trust_states(names, [reasons.get(n, []) for n in names], checks), "bias_bound": bound,
             "report": report}
 
 

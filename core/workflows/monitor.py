@@ -61,6 +61,11 @@ dates and 40 %: 0, 8, 16, 24, 32, 40 % lost).
 - ``warning``: otherwise, the interval overlaps an edge of the domain;
 - ``not-identifiable``: the run flags the parameter as not identifiable; it
   has no value to judge, so it is never flagged;
+- ``not-trustworthy``: identifiable, but a model-error check of the run says
+  its value is not a finding (``trustworthy: false``); never flagged either.
+  A value whose trust is *not assessed* (the checks that would judge it did
+  not run) keeps its status from the interval, and its row says so
+  (``trustworthy``: yes, no or not assessed);
 - ``unmonitored``: no acceptable domain given.
 
 The **alert date** of a parameter is its first ``out-of-domain`` date.
@@ -89,11 +94,11 @@ from suspid.infra.seeds import seed_for
 from suspid.sections import W_REF_MEASURED, MonitorOptions, Scenario
 from suspid.workflows.identify import IdentificationResult, run
 from suspid.workflows.problem import build_problem
-from suspid.workflows.report import markdown_table
+from suspid.workflows.report import markdown_table, trust_word
 
 ConfigSource = str | Path | Mapping[str, Any]
 
-STATUSES = ("ok", "warning", "out-of-domain", "not-identifiable", "unmonitored")
+STATUSES = ("ok", "warning", "out-of-domain", "not-identifiable", "not-trustworthy", "unmonitored")
 
 
 # -- the monitor: section ----------------------------------------------------------------
@@ -281,14 +286,19 @@ def monitor_dates(source: ConfigSource, overrides: Sequence[str], config: Config
 
 
 # -- status and alerts ---------------------------------------------------------------------------
-def status_of(interval: Sequence[float], domain: Sequence[float | None] | None, identifiable: bool) -> str:
-    """``ok``, ``warning``, ``out-of-domain``, ``not-identifiable`` or ``unmonitored`` (module docstring).
+def status_of(interval: Sequence[float], domain: Sequence[float | None] | None, identifiable: bool,
+              trustworthy: bool | None = None) -> str:
+    """``ok``, ``warning``, ``out-of-domain``, ``not-identifiable``, ``not-trustworthy`` or ``unmonitored``
+    (module docstring).
 
     :param interval: ``(a, b)`` the uncertainty interval, SI units.
     :param domain: ``(lo, hi)`` the acceptable domain, ``None`` for an open side; ``None`` for no domain.
+    :param trustworthy: the run's trust under model error (None: not assessed, judged by the interval).
     """
     if not identifiable:
         return "not-identifiable"
+    if trustworthy is False:
+        return "not-trustworthy"
     if domain is None:
         return "unmonitored"
     lo = -np.inf if domain[0] is None else domain[0]
@@ -313,7 +323,9 @@ def monitor_rows(dated: Sequence[tuple[dt.date, dict[str, Any]]],
                 "interval_low": r["interval"][n][0], "interval_high": r["interval"][n][1],
                 "acceptable_low": domain[0] if domain else None, "acceptable_high": domain[1] if domain else None,
                 "identifiable": bool(r["identifiable"][n]),
-                "status": status_of(r["interval"][n], domain, bool(r["identifiable"][n])),
+                "trustworthy": trust_word(r.get("trustworthy", {}).get(n)),
+                "status": status_of(r["interval"][n], domain, bool(r["identifiable"][n]),
+                                    r.get("trustworthy", {}).get(n)),
                 "w_ref": r["w_ref"][n] if "w_ref" in r else None,
             })
     return rows
@@ -417,8 +429,8 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
     lines += ["", "## Acceptable domains", "",
               markdown_table(["parameter", "acceptable domain"], [[f"`{n}`", domain_text(n)] for n in names]),
               "", "## Per date", "",
-              "Each cell: identified value, uncertainty interval and status. `not-identifiable` values are not "
-              "findings and are never flagged.", ""]
+              "Each cell: identified value, uncertainty interval and status. `not-identifiable` and "
+              "`not-trustworthy` values are not findings and are never flagged.", "", trust_summary(rows), ""]
     header = ["date"] + (["loss"] if losses else []) + [f"{n} ({units.get(n, '')})" for n in names]
     table = []
     for d, r in dated:
@@ -434,8 +446,19 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
     return summary
 
 
+def trust_summary(rows: Sequence[Mapping[str, Any]]) -> str:
+    """One sentence: how many (date, parameter) values are trustworthy under model error, not, or not assessed."""
+    counts = {w: sum(r["trustworthy"] == w for r in rows) for w in ("yes", "no", "not assessed")}
+    text = (f"Trust under model error (the dates' model-error checks): yes for {counts['yes']}, no for "
+            f"{counts['no']}, not assessed for {counts['not assessed']} of the {len(rows)} values")
+    if counts["not assessed"]:
+        text += (" (the checks that would judge them did not run, e.g. on the reference date's noise model "
+                 "without its data: each date's report.md says which ran)")
+    return text + "."
+
+
 _COLOURS = {"ok": "tab:green", "warning": "tab:orange", "out-of-domain": "tab:red",
-            "not-identifiable": "0.55", "unmonitored": "tab:blue"}
+            "not-identifiable": "0.55", "not-trustworthy": "0.55", "unmonitored": "tab:blue"}
 
 
 def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str, Any]],
@@ -469,7 +492,7 @@ def figure_monitor(path: Path, name: str, unit: str, rows: Sequence[Mapping[str,
         idx = [i for i, r in enumerate(rows) if r["status"] == status]
         if not idx:
             continue
-        hollow = status == "not-identifiable"
+        hollow = status in ("not-identifiable", "not-trustworthy")
         yerr = np.maximum([value[idx] - lo_i[idx], hi_i[idx] - value[idx]], 0.0)
         ax.errorbar([dates[i] for i in idx], value[idx], yerr=yerr,
                     fmt="o", ms=7, capsize=4, color=_COLOURS[status], mfc="white" if hollow else _COLOURS[status],

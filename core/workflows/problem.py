@@ -3,8 +3,9 @@
 :func:`build_problem` gathers everything J(w) needs, once per run:
 
 1. the measured spectra y_mes of the measurement date: read from files
-   (``data.source: measured``), or the numerical experiment of §3.3, where
-   y_mes_i = y_sim_i(w_ref) + b_i (eq. 10) on a synthetic track;
+   (``data.source: measured``), or the numerical experiment of §3.3 on a
+   synthetic track: y_sim(w_ref) through the experiment's measurement process
+   (:mod:`suspid.data.experiment`), or y_mes_i = y_sim_i(w_ref) + b_i (eq. 10);
 2. the noise model B, identified at the reference date from
    b_i = y_mes_i − y_sim_i(w0) (eq. 3), or loaded from ``noise.path``;
 3. the noise paths b_i of Y_mod = Y_sim(w) + b_i, drawn once from the run's
@@ -28,7 +29,7 @@ from suspid import registry
 from suspid.config import Config, build_simulator, channel_weights, identified_bounds, validate_options
 from suspid.data.corrections import resolve as resolve_corrections
 from suspid.data.corrections import untilt
-from suspid.data.experiment import apply_model_error
+from suspid.data.experiment import measurement_process
 from suspid.data.files import read_accelerations_records, read_track
 from suspid.data.track import synthetic_segments
 from suspid.errors import DataError
@@ -328,6 +329,7 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
         segments = synthetic_track(config, "measurement")
         ref_opt = config.data.reference
+        fixed_seed = seed_for(config.seed, "measurement-process-fixed")  # one vehicle, one set of sensors: every date
         jobs = []
         if noise_path:
             noise_model = NoiseModel.load(noise_path)
@@ -341,7 +343,8 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                               ref_opt.model_dump(), spectra_options.model_dump(), config.seed)
             err_rng = named_rng(config.seed, "reference-model-error")
             jobs += [(key + ":mes", _task(ref_sim, ref_segments, spectra_options,
-                                          partial(apply_model_error, options=ref_opt, rng=err_rng)), {}),
+                                          partial(measurement_process, options=ref_opt, rng=err_rng,
+                                                  fixed_seed=fixed_seed)), {}),
                      (key + ":sim", _task(simulator, ref_segments, spectra_options), {})]
         log("measurement date: simulating w_ref (eq. 10)")
         speeds = segment_speeds(segments)
@@ -354,8 +357,15 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             meas_id = meas_sim.identity()
         # identified effect parameters (<effect>/<parameter>) keep the measurement simulator's own values
         w_meas = {k: v for k, v in w_ref.items() if meas_sim is simulator or "/" not in k or k in config.data.w_ref}
-        key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump())
-        jobs.append((key, _task(meas_sim, segments, spectra_options), w_meas))
+        through_process = meas_opt.errors == "process"
+        transform = None
+        if through_process:   # the same fixed gains as the reference date, this date's own segment gains and noise
+            transform = partial(measurement_process, options=ref_opt, fixed_seed=fixed_seed,
+                                rng=named_rng(config.seed, "measurement-process-" + segments_digest(segments)[:16]))
+        key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump(),
+                          *([ref_opt.model_dump(exclude={"n_segments", "simulator_options"}), config.seed]
+                            if through_process else []))
+        jobs.append((key, _task(meas_sim, segments, spectra_options, transform), w_meas))
         *reference_spectra, (y_sim_ref, freqs) = cached_spectra(ledger, executor, jobs)
         if not noise_path:
             (y_mes0, freqs0), (y_sim0, _) = reference_spectra
@@ -363,10 +373,13 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
                                           speeds=segment_speeds(ref_segments))
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
             reference_segments = ref_segments
-        # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
-        b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
-                                                            + segments_digest(segments)[:16]), speeds)
-        y_mes = modelled_spectra(y_sim_ref, b_ref, noise_model.floor_)
+        if through_process:
+            y_mes = y_sim_ref
+        else:
+            # the measurement noise of a date belongs to that date's track (monitoring runs many dates)
+            b_ref = noise_model.sample(len(segments), named_rng(config.seed, "noise-measurement-"
+                                                                + segments_digest(segments)[:16]), speeds)
+            y_mes = modelled_spectra(y_sim_ref, b_ref, noise_model.floor_)
     else:
         w_ref = None
         segments, responses = measured_data(config, channels)

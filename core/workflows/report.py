@@ -18,6 +18,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
 from suspid.optimize.ego import EGOResult
+from suspid.workflows.trust import CHECK_LABELS
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
 from suspid.workflows.tasks import SpectraTask, run_one
@@ -128,13 +129,46 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     return "\n".join(lines)
 
 
+def trust_word(trustworthy: bool | None) -> str:
+    """A component's trust under model error in words: True "yes", False "no", None (or absent) "not assessed"."""
+    return "yes" if trustworthy is True else "no" if trustworthy is False else "not assessed"
+
+
+def trust_cell(result: dict[str, Any], name: str) -> str:
+    """The report's "trustworthy under model error" cell: yes, **no** with the reasons, or not assessed."""
+    word = trust_word(result.get("trustworthy", {}).get(name))
+    if word == "no":
+        return "**no**: " + "; ".join(result.get("untrustworthy_reasons", {}).get(name, []))
+    return "*not assessed*" if word == "not assessed" else word
+
+
+def checks_lines(result: dict[str, Any]) -> list[str]:
+    """Which model-error checks ran and which did not, and why (from ``result["model_error"]["checks"]``)."""
+    checks = (result.get("model_error") or {}).get("checks")
+    if not checks:
+        return ["Model-error checks: not recorded in this result."]
+    labels = CHECK_LABELS
+    ran = [labels.get(c, c) for c, v in checks.items() if v["ran"]]
+    out = [f"Model-error checks that ran: {', '.join(ran) if ran else 'none'}."]
+    out += [f"- {labels.get(c, c)}{' (needed for a yes)' if v['required'] else ''}: {v['status']}"
+            for c, v in checks.items() if not v["ran"]]
+    missing = [labels.get(c, c) for c, v in checks.items() if v["required"] and not v["ran"]]
+    if missing:
+        out.append(f"\nSo no component is called trustworthy: without the {', '.join(missing)}, a component that "
+                   f"no check flags is not assessed.")
+    return out
+
+
 def model_error_section(result: dict[str, Any]) -> str:
-    """The report's "Model error" section: the self-check and the adequacy test (empty without them)."""
+    """The report's "Model error" section: which checks ran, then the self-check, adequacy test, data groups
+    and nuisance sweep that did."""
     me = result.get("model_error")
     if not me:
         return ""
     names = result["parameters"]
-    out = ["", "## Model error", ""]
+    out = ["", "## Model error", "", *checks_lines(result), ""]
+    if "self_check" not in me and "adequacy" not in me:
+        return "\n".join(out) + "\n"
     sc = me.get("self_check", {})
     if sc.get("status") == "done":
         out.append(f"Reference-date self-check ({sc['n_splits']} random halves: B fitted on {sc['segments_fit']} "
@@ -145,7 +179,7 @@ def model_error_section(result: dict[str, Any]) -> str:
                                    "scatter over splits (%)"],
                                   [[n, f"{sc['bias_percent'][n]:+.2f}", f"{sc['standard_error_percent'][n]:.2f}",
                                     f"{sc['scatter_percent'][n]:.2f}"] for n in names]))
-    else:
+    elif "checks" not in me:   # a result written before the checks' summary
         out.append(f"Reference-date self-check: {sc.get('status', 'not run')}.")
     ad = me.get("adequacy", {})
     out.append("")
@@ -171,7 +205,7 @@ def model_error_section(result: dict[str, Any]) -> str:
                                    [[n] + ["-" if groups["estimates_percent"][g][n] is None
                                            else f"{groups['estimates_percent'][g][n]:.1f}" for g in gnames]
                                     + [f"{groups['spread_percent'][n]:.1f}"] for n in names])]
-    else:
+    elif "checks" not in me:
         out.append(f"Adequacy at w_opt: {ad.get('status', 'not run')}.")
     nu = me.get("nuisance")
     if nu and nu.get("status") == "done":
@@ -182,7 +216,7 @@ def model_error_section(result: dict[str, Any]) -> str:
                 markdown_table(["nuisance parameter", "value"] + names,
                                [[row["parameter"], f"{row['value']:g}"] + [f"{row[n]:+.1f}" for n in names]
                                 for row in nu["shifts_percent"]])]
-    elif nu:
+    elif nu and "checks" not in me:
         out += ["", f"Nuisance parameters: {nu['status']}."]
     bound = me.get("bias_bound_percent")
     if bound:
@@ -249,11 +283,9 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
         if "w_ref" in result:
             row += [result["w_ref"][n], f"{result['errors_percent'][n]:.2f}"]
         lo_i, hi_i = result["interval"][n]
-        trusted = result.get("trustworthy", {}).get(n, True)
         row += [f"[{lo_i:.4g}, {hi_i:.4g}]", "yes" if result["identifiable"][n] else
                 "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
-                "yes" if trusted else "**no**: " + "; ".join(result.get("untrustworthy_reasons", {}).get(n, [])),
-                f"{result['sensitivity']['total_sobol'][n]:.3f}"]
+                trust_cell(result, n), f"{result['sensitivity']['total_sobol'][n]:.3f}"]
         rows.append(row)
     header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
         + ["interval", "identifiable", "trustworthy under model error", "total Sobol index"]
@@ -265,6 +297,8 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
                "self-check bias + half the spread of the data groups' estimates + the nuisance parameters' shifts; "
                "Armstrong and Kolesár's fixed-length interval, which keeps the level for any bias within the bound)"
                if result.get("interval_method", {}).get("widened_by_model_error") else "")
+    reference_date = (", and over the reference date's segments with B fitted again on each resample"
+                      if result.get("interval_method", {}).get("bootstrap_reference") else "")
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
@@ -274,10 +308,13 @@ J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
 {markdown_table(header, rows)}
 
 Components marked **no** (not identifiable, or not trustworthy under model error) are not findings:
-their value is not to be reported.
+their value is not to be reported. *not assessed*: no model-error check that ran flags the component, but
+the checks that would judge it did not all run (see "Model error"); its interval holds no bias those
+checks would have bounded.
 Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
-bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths){widened}, clipped to the admissible box.
+bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths{reference_date}){widened}, clipped to the
+admissible box.
 {model_error_section(result)}
 {calibration_markdown(result)}
 ## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`

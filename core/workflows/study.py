@@ -173,14 +173,20 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]], stats: 
         + ["wall time (s)"]
     table = []
 
+    # trust under model error per run and component: True, False or None (not assessed)
+    assessed = any(v is not None for _, r in rows for v in r.get("trustworthy", {}).values())
+
     def cells_of(r: dict[str, Any], values: dict[str, Any]) -> list[str]:
         cells = []
         for n in names:
             cell = f"{values['errors_percent'][n]:.2f}" if has_ref else f"{values['w_opt'][n]:.4g}"
+            trust = r.get("trustworthy", {}).get(n)
             if not r["identifiable"][n]:
                 cell = f"({cell}) n.i."
-            elif not r.get("trustworthy", {}).get(n, True):
+            elif trust is False:
                 cell = f"({cell}) n.t."  # not trustworthy under model error: not a finding either
+            elif trust is None and assessed:
+                cell = f"{cell} n.a."  # trust not assessed in this run (its checks did not all run)
             cells.append(cell)
         return cells
 
@@ -190,6 +196,8 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]], stats: 
             table.append([f"{label}: paper's loop", p["n_iterations"], p["n_simulator_calls"], *cells_of(r, p), ""])
             label = f"{label}: + refinement"
         table.append([label, r["n_iterations"], r["n_simulator_calls"], *cells_of(r, r), f"{r['wall_time_s']:.0f}"])
+    trust_note = "" if assessed else ("No run assessed trust under model error (its checks did not run), "
+                                      "so no cell carries `n.a.`: none is trustworthy or not.")
     what = "error in % of the admissible interval" if has_ref else "w_opt"
     refined = ""
     if any("paper_loop" in r for _, r in rows):
@@ -198,7 +206,8 @@ def write_study(study_dir: Path, rows: list[tuple[str, dict[str, Any]]], stats: 
                    "the identifiability flags are those of the final analysis.\n\n")
     text = (f"# Study\n\n{statistics}\n## Runs\n\nPer component: {what}; `n.i.` marks a component flagged "
             f"not identifiable, `n.t.` one not trustworthy under model error (its value is shown in brackets "
-            f"and is not a finding).\n\n{refined}{markdown_table(header, table)}"
+            f"and is not a finding), `n.a.` one whose trust under model error was not assessed (the checks that "
+            f"would judge it did not all run). {trust_note}\n\n{refined}{markdown_table(header, table)}"
             f"\n\n![parameters](study_parameters.png)\n")
     write_text(study_dir / "study.md", text)
     variants = {label: np.array([r["w_opt_normalized"][n] for n in names]) for label, r in rows}
