@@ -66,6 +66,13 @@ class TrackSegment:
     :ivar irregularities: ``(4, n_x)`` m, rows as :data:`IRREGULARITY_CHANNELS`.
     :ivar speed: train speed in m/s, a constant or a ``(n_x,)`` record at each
         distance sample (variable speed).
+    :ivar curvature: ``(n_x,)`` 1/m, the track's design curvature (1 / radius),
+        positive for a curve to the left in the direction of travel; ``None``
+        for straight track.
+    :ivar cant: ``(n_x,)`` m, the design cant: height of the right rail above
+        the left one in the direction of travel (positive in a canted
+        left-hand curve, whose outer rail is the right one); ``None`` for no
+        cant.
     """
 
     name: str
@@ -73,6 +80,8 @@ class TrackSegment:
     irregularities: np.ndarray
     speed: float | np.ndarray
     meta: dict[str, Any] = field(default_factory=dict)
+    curvature: np.ndarray | None = None
+    cant: np.ndarray | None = None
 
     @property
     def dx(self) -> float:
