@@ -23,8 +23,10 @@ from rich.table import Table
 import suspid
 from suspid import api, registry
 from suspid.errors import ConfigError, SuspidError
-from suspid.workflows.report import checks_lines, trust_word
+from suspid.workflows.report import checks_lines
 from suspid.workflows.simulate import format_modes, format_stability
+from suspid.workflows.verdict import rows_of
+from suspid.workflows.verdict import table as verdict_table
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
@@ -220,17 +222,18 @@ def _print_result(result: dict, run_dir: Path) -> None:
         console.width = 200  # keep rows whole when piped
     table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
                         f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
-    for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable", "trustworthy"):
+    rows = rows_of(result)
+    header, cells = verdict_table(rows, with_reference="w_ref" in result)
+    for col in header:
         table.add_column(col)
-    style = {"yes": "yes", "no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]"}
-    for n in result["parameters"]:
-        lo, hi = result["interval"][n]
-        table.add_row(n, f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
-                      f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
-                      f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
-                      "yes" if result["identifiable"][n] else "[red]no[/red]",
-                      style[trust_word(result.get("trustworthy", {}).get(n))])
+    style = {"no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]", "warning": "[yellow]warning[/yellow]",
+             "alarm": "[bold red]alarm[/bold red]", "not assessable": "[dim]not assessable[/dim]"}
+    for row in cells:
+        table.add_row(*[style.get(c, c) if h in ("identifiable", "trustworthy", "verdict") else c
+                        for h, c in zip(header, row)])
     console.print(table)
+    for r in rows:
+        console.print(r.summary.replace("`", ""), markup=False, highlight=False)
     for line in checks_lines(result):
         console.print(line.strip(), markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
