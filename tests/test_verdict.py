@@ -19,7 +19,8 @@ from suspid.errors import ConfigError
 from suspid.infra import files
 from suspid.interfaces import Parameter
 from suspid.sections import Limits
-from suspid.workflows import report
+from suspid.workflows import identify, report
+from suspid.workflows.phases import ProgressPhases
 from suspid.workflows.verdict import judge, rows_of, summary_line, verdict_rows, zone
 
 DAMPER = Limits(warning=-25, alarm=-40)
@@ -145,7 +146,18 @@ SMALL = {"name": "verdict", "seed": 5,
          "limits": {"c_yaw": {"warning": -25, "alarm": -40}, "c_sec_y": {"warning": [-20, 20], "alarm": [-45, 45]}},
          "data": {"track": {"n_segments": 6, "length_m": 1000.0}, "w_ref": {"c_yaw": 180.0e3, "c_sec_y": 30.0e3}},
          "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
-         "design": {"n_initial": 6}, "ego": {"max_iter": 2}, "identifiability": {"n_redraws": 6}}
+         "design": {"n_initial": 6}, "ego": {"max_iter": 2},
+         "identifiability": {"n_redraws": 6, "model_error": {"run": "always"}}}
+
+
+class RecordedPhases(ProgressPhases):
+    """The run's phase display, recording what it was told."""
+
+    seen: list[str] = []
+
+    def start(self, name: str) -> None:
+        RecordedPhases.seen.append(name)
+        super().start(name)
 
 
 @pytest.fixture(scope="module")
@@ -155,7 +167,8 @@ def small_run(tmp_path_factory):
     cfg = folder / "verdict.yaml"
     cfg.write_text(yaml.safe_dump(SMALL | {"output": {"dir": str(folder / "run")}}, sort_keys=False))
     out = io.StringIO()
-    with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exit_:
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(out), pytest.raises(SystemExit) as exit_:
+        mp.setattr(identify, "ProgressPhases", RecordedPhases)
         cli.main(["run", str(cfg), "--quiet"])
     assert exit_.value.code == 0
     return out.getvalue(), folder / "run"
@@ -177,16 +190,24 @@ def test_terminal_table_and_report_show_units_nominal_change_trust_and_verdict(s
         # the terminal's row: nominal and identified value with their units, change in %, trust, verdict
         line = next(ln for ln in out.splitlines() if f" {r.name} " in ln and "kN s/m" in ln)
         assert "300 kN s/m" in line or "30 kN s/m" in line
-        assert f"{r.change_percent:+.1f} %" in line and "not assessed" in line and r.verdict in line
-        assert r.trust == "not assessed"   # the model-error checks do not run on the numerical experiment
+        assert f"{r.change_percent:+.1f} %" in line and r.trust in line and r.verdict in line
+        # 6 segments: the self-check (8 needed) does not run, so no component is trustworthy
+        assert r.trust in ("not assessed", "no")
         # the same in report.md's verdict table, and a plain-language line each
         cells = [c.strip() for c in next(ln for ln in first.splitlines() if ln.startswith(f"| {r.name} |")).split("|")]
-        assert f"{r.change_percent:+.1f} %" in cells and r.verdict in cells and "not assessed" in cells
+        assert f"{r.change_percent:+.1f} %" in cells and r.verdict in cells and r.trust in cells
         assert any(c.endswith("kN s/m") for c in cells)
         assert f"- {summary_line(r)}" in first and summary_line(r).replace("`", "") in out
         expected = judge(identifiable=r.identifiable, trust=r.trust, change=r.change_percent,
                          interval=r.interval_percent, warning=r.warning, alarm=r.alarm)
         assert r.verdict == expected[0] and r.rule.startswith(expected[1])   # (the reasons are quoted after it)
+
+
+def test_every_phase_after_the_optimiser_is_shown(small_run):
+    """The analysis (intervals, identifiability, the model-error checks that run) and the report each show a
+    phase on the progress display (about 3.5 of 4.3 minutes of a measured two-date run used to show nothing)."""
+    seen = [name.split(" (")[0] for name in RecordedPhases.seen]
+    assert seen == ["intervals", "identifiability", "self-check", "adequacy", "data groups", "figures and report"]
 
 
 def test_notebook_summary_html_rows_and_dataframe(small_run, monkeypatch):

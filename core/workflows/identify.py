@@ -47,6 +47,7 @@ from suspid.workflows.analysis import analyse, cached_y_sim
 from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.gradient import ProblemSpectraModel
+from suspid.workflows.phases import ProgressPhases
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import trust_word, write_report
 from suspid.workflows.verdict import VerdictRow, rows_of, table, verdict_block, verdict_rows
@@ -310,8 +311,8 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         as_ego_result(opt_result, surrogate_for(config), problem)
     ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
-    with single_blas_thread():
-        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor)
+    with make_progress(progress) as bars, single_blas_thread():   # minutes on measured data: shown phase by phase
+        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor, ProgressPhases(bars))
     result.update({
         "run_id": run_id,
         "n_initial": int(ego.n_initial), "n_iterations": int(ego.n_iterations),
@@ -335,8 +336,12 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
                                  "channels": floor.summary(problem.freqs, problem.channels)}
     add_verdict(result, problem, config)   # after every other finding (a localisation's groups included)
     write_json(run_dir / "result.json", result)
-    y_opt = cached_y_sim(problem, ledger, problem.to_unit(np.asarray(ego.x_opt, float)), executor=executor)
-    write_report(run_dir, problem, ego, result, ei_history, executor, y_opt=y_opt)
+    with make_progress(progress) as bars:
+        phases = ProgressPhases(bars)
+        phases.start("figures and report")
+        y_opt = cached_y_sim(problem, ledger, problem.to_unit(np.asarray(ego.x_opt, float)), executor=executor)
+        write_report(run_dir, problem, ego, result, ei_history, executor, y_opt=y_opt)
+        phases.done()
     return IdentificationResult.from_dict(result, run_dir, problem, ego)
 
 
