@@ -18,7 +18,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
 from suspid.optimize.ego import EGOResult
-from suspid.workflows.trust import CHECK_LABELS
+from suspid.workflows.trust import CHECK_LABELS, trust_word  # trust_word: importers take it from here too
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
 from suspid.workflows.tasks import SpectraTask, run_one
@@ -161,7 +161,9 @@ def figure_verdict(path: Path, rows: Sequence[VerdictRow]) -> Path:
     ax.set_title("Identified parameters against their nominal values and limits (nominal value under each name)",
                  fontsize=9, pad=18)
     ax.grid(alpha=0.3, axis="y")
-    ax.legend(handles=list(seen.values()), fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    order = ["nominal", "warning level", "alarm level", *(f"verdict {v}" for v in VERDICT_COLOURS), *STYLE_LABELS,
+             "w_ref"]
+    ax.legend(handles=[seen[k] for k in order if k in seen], fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -242,11 +244,6 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
     return "\n".join(lines)
-
-
-def trust_word(trustworthy: bool | None) -> str:
-    """A component's trust under model error in words: True "yes", False "no", None (or absent) "not assessed"."""
-    return "yes" if trustworthy is True else "no" if trustworthy is False else "not assessed"
 
 
 def trust_cell(result: dict[str, Any], name: str) -> str:

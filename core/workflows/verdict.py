@@ -34,6 +34,7 @@ from typing import Any, Mapping, Sequence
 from suspid.config import kind_of
 from suspid.interfaces import Parameter
 from suspid.sections import Limits
+from suspid.workflows.trust import trust_word
 
 __all__ = ["VERSION", "STATES", "ACTIONS", "VerdictRow", "verdict_rows", "verdict_block", "rows_of",
            "zone", "judge", "format_value", "table", "summary_line", "verdict_markdown"]
@@ -210,10 +211,6 @@ def label_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[str
 
 
 # -- rows from a result ----------------------------------------------------------------------------------
-def _trust_word(value: bool | None) -> str:
-    return "yes" if value is True else "no" if value is False else "not assessed"
-
-
 def _row(name: str, value: float, interval: Sequence[float], identifiable: bool, trust: str, reasons: Sequence[str],
          unit: str, parameters: Mapping[str, Parameter], limits: Mapping[str, Limits], source: str,
          w_ref: float | None = None, error: float | None = None, alternatives: Sequence[str] = ()) -> VerdictRow:
@@ -238,13 +235,22 @@ def _group_name(item: Any) -> str:
     return str(item.get("group", item)) if isinstance(item, Mapping) else str(item)
 
 
-def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter],
-                 limits: Mapping[str, Limits]) -> list[VerdictRow]:
+def localisation_items(localisation: Any) -> list[Mapping[str, Any]]:
+    """The rows of a localisation: a list of rows, or a mapping holding them under ``rows`` (None: none)."""
+    if isinstance(localisation, Mapping):
+        localisation = localisation.get("rows")
+    return list(localisation or [])
+
+
+def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], limits: Mapping[str, Limits],
+                 localisation: Any = None) -> list[VerdictRow]:
     """One :class:`VerdictRow` per identified parameter (``result.json``'s keys), then one per group of a
-    localisation (``result["localisation"]``: rows with ``group``, ``value`` SI, ``interval``, and optionally
-    ``evidence``, ``alternatives``, ``identifiable``, ``trustworthy``), when the result has one.
+    localisation: rows with ``group``, ``value`` SI, ``interval``, and optionally ``evidence``,
+    ``alternatives``, ``identifiable``, ``trustworthy``, ``reasons``.
 
     :param parameters: the simulator's parameters (nominal values, units, descriptions).
+    :param localisation: the localisation's rows (or a mapping with them under ``rows``); default
+        ``result["localisation"]`` when the result has one.
     """
     params = {p.name: p for p in parameters}
     trust = result.get("trustworthy") or {}
@@ -252,17 +258,17 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter],
     errors = result.get("errors_percent") or {}
     rows = []
     for n in result["parameters"]:
-        t = _trust_word(trust.get(n))
+        t = trust_word(trust.get(n))
         reasons = (result.get("non_identifiable_reasons", {}).get(n, []) if not result["identifiable"][n]
                    else result.get("untrustworthy_reasons", {}).get(n, []) if t == "no" else [])
         rows.append(_row(n, result["w_opt"][n], result["interval"][n], result["identifiable"][n], t, reasons,
                          result.get("units", {}).get(n, ""), params, limits, "identification", w_ref.get(n), errors.get(n)))
-    for item in result.get("localisation") or []:
+    for item in localisation_items(localisation if localisation is not None else result.get("localisation")):
         name = str(item["group"])
         kind = kind_of(name)
         unit = params[name].unit if name in params else params[kind].unit if kind in params else \
             result.get("units", {}).get(kind, "")
-        t = _trust_word(item.get("trustworthy"))
+        t = trust_word(item.get("trustworthy"))
         rows.append(_row(name, float(item["value"]), item["interval"], bool(item.get("identifiable", True)), t,
                          list(item.get("reasons", [])), unit, params, limits, "localisation", None, None,
                          [_group_name(a) for a in item.get("alternatives") or []]))
