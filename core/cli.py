@@ -25,7 +25,7 @@ from suspid import api, registry
 from suspid.errors import ConfigError, SuspidError
 from suspid.workflows.report import checks_lines
 from suspid.workflows.simulate import format_modes, format_stability
-from suspid.workflows.verdict import rows_of
+from suspid.workflows.verdict import rows_of, summary_line
 from suspid.workflows.verdict import table as verdict_table
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
@@ -233,7 +233,7 @@ def _print_result(result: dict, run_dir: Path) -> None:
                         for h, c in zip(header, row)])
     console.print(table)
     for r in rows:
-        console.print(r.summary.replace("`", ""), markup=False, highlight=False)
+        console.print(summary_line(r, markdown=False), markup=False, highlight=False)
     for line in checks_lines(result):
         console.print(line.strip(), markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""

@@ -50,7 +50,7 @@ from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.phases import ProgressPhases
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import trust_word, write_report
-from suspid.workflows.verdict import VerdictRow, rows_of, table, verdict_block, verdict_rows
+from suspid.workflows.verdict import VerdictRow, rows_of, summary_line, table, verdict_block, verdict_rows
 
 
 def make_progress(enabled: bool):
@@ -185,7 +185,7 @@ class IdentificationResult:
         title = (f"{self._data.get('name', 'identification')}: J_max = {self.J_max:.6g}, "
                  f"{self.n_simulator_calls} simulations, {self.wall_time_s:.0f} s")
         out = [title, line(header), line(["-" * w for w in widths]), *map(line, cells), ""]
-        out += [r.summary for r in self.verdict]
+        out += [summary_line(r, markdown=False) for r in self.verdict]
         return "\n".join(out)
 
     def _repr_html_(self) -> str:
@@ -196,7 +196,7 @@ class IdentificationResult:
         body = "".join("<tr>" + "".join(
             f'<td style="color:{colour.get(c, "inherit")}">{escape(c)}</td>' if i == k else f"<td>{escape(c)}</td>"
             for i, c in enumerate(row)) + "</tr>" for row in cells)
-        lines = "".join(f"<li>{escape(r.summary)}</li>" for r in self.verdict)
+        lines = "".join(f"<li>{escape(summary_line(r, markdown=False))}</li>" for r in self.verdict)
         return (f"<p><b>{escape(str(self._data.get('name', 'identification')))}</b>: J_max = {self.J_max:.6g}, "
                 f"{self.n_simulator_calls} simulations, run directory <code>{escape(str(self.run_dir))}</code></p>"
                 f"<table><thead><tr>{''.join(f'<th>{escape(h)}</th>' for h in header)}</tr></thead>"

@@ -339,9 +339,10 @@ def table(rows: Sequence[VerdictRow], *, with_reference: bool = False, with_rule
     return header, cells
 
 
-def summary_line(row: VerdictRow) -> str:
-    """``bogie 2: yaw dampers (c_yaw[bogie2]): -38 % (interval -44 to -32 %), alarm: replace``."""
-    head = f"{row.label} (`{row.name}`)"
+def summary_line(row: VerdictRow, markdown: bool = True) -> str:
+    """``bogie 2: yaw dampers (`c_yaw[bogie2]`): -38 % (interval -44 to -32 %), alarm: replace`` (the name as
+    code where ``markdown``)."""
+    head = f"{row.label} (`{row.name}`)" if markdown else f"{row.label} ({row.name})"
     if row.change_percent is None:
         return f"{head}: identified {format_value(row.value, row.unit)}, no nominal value: not assessable"
     lo, hi = row.interval_percent
