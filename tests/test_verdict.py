@@ -103,6 +103,7 @@ def test_rows_from_a_result_kind_level_and_a_localisation_with_group_names():
     g1 = by["c_yaw[bogie1,left]"]
     assert g1.nominal == 250e3 and g1.change_percent == pytest.approx(-52.0) and g1.verdict == "warning"
     assert g1.label.startswith("bogie 1, left: ")
+    assert verdict_rows(_result(), PARAMETERS, limits, localisation={"rows": loc}) == rows   # a mapping with rows
     # typed serialisation: a row goes through result.json and back unchanged
     block = {"verdict": {"rows": [r.to_dict() for r in rows]}}
     assert rows_of(json.loads(json.dumps(block))) == rows

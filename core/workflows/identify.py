@@ -217,8 +217,11 @@ class IdentificationResult:
 
 
 def resolved_config(config: Config) -> dict[str, Any]:
-    """The resolved config as data: what ``config.yaml`` holds, and what the run id is the digest of."""
-    return config.model_dump(mode="json", exclude={"source_file"})
+    """The resolved config as data: what ``config.yaml`` holds, and what the run id is the digest of.
+
+    An empty ``limits:`` is left out, so that a config without limits keeps the run id it had before the
+    section existed (its earlier runs are resumed, not run again beside them)."""
+    return config.model_dump(mode="json", exclude={"source_file"} | (set() if config.limits else {"limits"}))
 
 
 def write_config(config: Config, run_dir: Path) -> None:

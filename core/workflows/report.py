@@ -80,11 +80,10 @@ def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_model: np
         ax.set_visible(False)
     for ax in axes[:, 0]:
         ax.set_ylabel(Y_LABEL, fontsize=8)
-    for ax in axes[-1]:
+    for ax in axes.flat[:n]:   # every panel keeps its Hz ticks (a hidden panel leaves the one above it last)
+        ax.xaxis.set_tick_params(labelbottom=True)
+    for ax in axes.flat[max(n - ncols, 0):n]:
         ax.set_xlabel("frequency (Hz)")
-        ax.xaxis.set_tick_params(labelbottom=True)
-    for ax in axes.flat[:n]:   # a hidden panel leaves the one above it without an axis below
-        ax.xaxis.set_tick_params(labelbottom=True)
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="upper center", ncol=4, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 1.0))
     fig.suptitle(title, fontsize=10, y=1.0 - 0.3 / fig.get_figheight())
