@@ -217,11 +217,8 @@ class IdentificationResult:
 
 
 def resolved_config(config: Config) -> dict[str, Any]:
-    """The resolved config as data: what ``config.yaml`` holds, and what the run id is the digest of.
-
-    An empty ``limits:`` is left out, so that a config without limits keeps the run id it had before the
-    section existed (its earlier runs are resumed, not run again beside them)."""
-    return config.model_dump(mode="json", exclude={"source_file"} | (set() if config.limits else {"limits"}))
+    """The resolved config as data: what ``config.yaml`` holds, and what the run id is the digest of."""
+    return config.model_dump(mode="json", exclude={"source_file"})
 
 
 def write_config(config: Config, run_dir: Path) -> None:
