@@ -21,7 +21,7 @@ from suspid.interfaces import Parameter
 from suspid.sections import Limits
 from suspid.workflows import identify, report
 from suspid.workflows.phases import ProgressPhases
-from suspid.workflows.verdict import judge, rows_of, summary_line, verdict_rows, zone
+from suspid.workflows.verdict import judge, rows_of, summary_line, table, verdict_rows, zone
 
 DAMPER = Limits(warning=-25, alarm=-40)
 
@@ -107,6 +107,17 @@ def test_rows_from_a_result_kind_level_and_a_localisation_with_group_names():
     # typed serialisation: a row goes through result.json and back unchanged
     block = {"verdict": {"rows": [r.to_dict() for r in rows]}}
     assert rows_of(json.loads(json.dumps(block))) == rows
+
+
+def test_measured_data_tables_have_no_w_ref_columns():
+    """Without a known truth (measured data) the table has no w_ref or error columns; with it, both."""
+    rows = verdict_rows(_result(), PARAMETERS, {"c_yaw": DAMPER})
+    header, cells = table(rows)
+    assert "w_ref" not in header and "error (% of interval)" not in header and len(cells[0]) == len(header)
+    assert cells[0][:4] == ["c_yaw", "300 kN s/m", "210 kN s/m", "-30.0 %"] and cells[0][-3:] == ["yes", "yes",
+                                                                                                 "warning"]
+    header, _ = table(verdict_rows(_result(w_ref={"c_yaw": 2e5}), PARAMETERS, {}), with_reference=True)
+    assert header[5:7] == ["w_ref", "error (% of interval)"]
 
 
 def test_an_alarm_line_says_replace():
