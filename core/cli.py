@@ -9,10 +9,12 @@ has none, says that the output folder keeps the previous ingest).
 from __future__ import annotations
 
 import errno
+import importlib.util
 import sqlite3
 import sys
 import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import List, Optional
 
 import click
@@ -21,10 +23,29 @@ from rich.console import Console
 from rich.table import Table
 
 import suspid
-from suspid import api, registry
+from suspid import registry
 from suspid.errors import ConfigError, SuspidError
-from suspid.workflows.report import checks_lines, trust_word
-from suspid.workflows.simulate import format_modes, format_stability
+
+
+def _lazy(name: str) -> ModuleType:
+    """The module ``name``, executed on its first attribute access (importlib's ``LazyLoader``).
+
+    The workflows import numpy, scipy, GPy and matplotlib (seconds); a command
+    pays for them when it runs, ``suspid --help`` and ``--version`` do not.
+    """
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+api = _lazy("suspid.api")
+_report = _lazy("suspid.workflows.report")
+_simulate = _lazy("suspid.workflows.simulate")
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
@@ -162,7 +183,7 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
     report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6, out_dir=out)
-    console.print(format_modes(report, max_hz), markup=False, highlight=False)
+    console.print(_simulate.format_modes(report, max_hz), markup=False, highlight=False)
     where = out if out is not None else api.load_config(config, set_ or []).run_dir()
     console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")
 
@@ -174,7 +195,7 @@ def stability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
               ) -> None:
     """Linear critical speed of the train model, against conicity and each identified parameter over its bounds."""
     report = api.stability(config, set_ or [], n_points=n_points, out_dir=out)
-    console.print(format_stability(report), markup=False, highlight=False)
+    console.print(_simulate.format_stability(report), markup=False, highlight=False)
 
 
 @app.command()
@@ -229,9 +250,9 @@ def _print_result(result: dict, run_dir: Path) -> None:
                       f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
                       f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
                       "yes" if result["identifiable"][n] else "[red]no[/red]",
-                      style[trust_word(result.get("trustworthy", {}).get(n))])
+                      style[_report.trust_word(result.get("trustworthy", {}).get(n))])
     console.print(table)
-    for line in checks_lines(result):
+    for line in _report.checks_lines(result):
         console.print(line.strip(), markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
     console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")
