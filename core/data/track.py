@@ -26,7 +26,7 @@ the US Federal Railroad Administration):
   k A_v Omega_c^2 / (Omega^2 (Omega^2 + Omega_c^2)) cm^2/(rad/m), k = 0.25,
   Omega_c = 0.8245, A_v = 1.2107, 1.0181, 0.6816, 0.5376, 0.2095, 0.0339
   cm^2 rad/m for classes 1-6. The FRA constants of the other channels could
-  not be confirmed (railway-data.md §2), so alignment, cross-level and gauge
+  not be confirmed from public sources, so alignment, cross-level and gauge
   of an FRA track **fall back to the German spectra**: ``german-high`` for
   classes 1-4, ``german-low`` for classes 5 and 6.
 
@@ -63,10 +63,12 @@ GERMAN_A = {
     "german-low": {"vertical": 4.032e-7, "lateral": 2.119e-7, "gauge": 0.532e-7},
     "german-high": {"vertical": 1.080e-6, "lateral": 6.125e-7, "gauge": 1.032e-7},
 }
-"""A_v, A_a, A_g in m rad (railway-data.md §2)."""
+"""A_v, A_a, A_g in m rad: the German high-speed track spectra, low and high disturbance, as tabulated in
+the vehicle-dynamics literature."""
 
 FRA = {"k": 0.25, "omega_c": 0.8245, "A_v": (1.2107, 1.0181, 0.6816, 0.5376, 0.2095, 0.0339)}
-"""FRA vertical constants, A_v in cm^2 rad/m for classes 1-6 (railway-data.md §2)."""
+"""FRA vertical constants, A_v in cm^2 rad/m for classes 1-6 (US Federal Railroad Administration track
+classes, e.g. V. K. Garg and R. V. Dukkipati, Dynamics of Railway Vehicle Systems, Academic Press 1984)."""
 
 SPECTRA = ("german-low", "german-high", "fra-1", "fra-2", "fra-3", "fra-4", "fra-5", "fra-6")
 """Names of the available spectra."""
