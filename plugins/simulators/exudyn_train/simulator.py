@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Literal, Mapping, Sequence
 
@@ -21,6 +22,7 @@ from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
+from .variable_speed import SpeedFamily, simulate_variable_speed
 
 
 MODEL_VERSION = 2
@@ -80,8 +82,8 @@ class Options(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     solver: Literal["time", "frequency"] = Field(
-        default="frequency", description="'frequency': linearised model, constant speed, fast; "
-        "'time': exudyn generalised-alpha, nonlinear options, variable speed")
+        default="frequency", description="'frequency': linearised model, fast (a speed record: "
+        "short-time constant speed with overlap-add); 'time': exudyn generalised-alpha, nonlinear options")
     fs_hz: PositiveFloat = Field(default=100.0, description="output sampling rate, Hz")
     step_s: PositiveFloat = Field(default=0.002, le=0.01,
                                   description="largest time step of the time solver, s (used: 1/(k fs))")
@@ -250,6 +252,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         self._models: dict = {}
         self._spectra = InputSpectra()
         self._frf: dict = {}
+        self._blocks: dict = {}
         self._checked: dict = {}
 
     # ------------------------------------------------------------------ options and parameters
@@ -471,30 +474,67 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
 
     def _simulate_frequency(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
-        varying = [s.name for s in segments if not is_constant_speed(s)]
-        if varying:
-            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
-                                 f"constant speed per segment; use solver: time")
         groups: dict[float, list[int]] = {}
+        varying: list[int] = []
         for i, s in enumerate(segments):
-            groups.setdefault(float(s.mean_speed), []).append(i)
+            if is_constant_speed(s):
+                groups.setdefault(float(s.mean_speed), []).append(i)
+            else:
+                varying.append(i)
         out: list[Response | None] = [None] * len(segments)
         channels = tuple(s.name for s in self.sensors(values))
+        for i in varying:      # short-time constant speed with overlap-add (:mod:`.variable_speed`)
+            out[i] = simulate_variable_speed(lambda v0, n_fft: self._speed_family(values, v0, n_fft), segments[i],
+                                             o.fs_hz, o.taper_m, o.settle_s, channels)
         for speed, idx in groups.items():
-            model = self._model(values, speed, TimeFeatures())
-            key = tuple(sorted(values.items()))
-            cached = self._frf.get(speed)
-            if cached is not None and cached[0] == key:
-                response, frf_cache = cached[1], cached[2]
-            else:   # once per parameter vector and speed, reused for every segment
-                response = FrequencyResponse(model.linear_system())
-                frf_cache = {}
-                self._frf[speed] = (key, response, frf_cache)
+            response, frf_cache = self._frequency_response(values, speed)
             results = simulate_frequency(response, [segments[i] for i in idx], o.fs_hz, o.taper_m, o.settle_s,
                                          self._spectra, channels, frf_cache)
             for i, r in zip(idx, results):
                 out[i] = r
         return out  # type: ignore[return-value]
+
+    def _frequency_response(self, values: dict[str, float], speed: float) -> tuple[FrequencyResponse, dict]:
+        """The linear model's frequency response at ``speed`` and its FRF cache, once per parameter vector
+        and speed, reused for every segment."""
+        key = tuple(sorted(values.items()))
+        cached = self._frf.get(speed)
+        if cached is not None and cached[0] == key:
+            return cached[1], cached[2]
+        model = self._model(values, speed, TimeFeatures())
+        response = FrequencyResponse(model.linear_system())
+        self._frf[speed] = (key, response, {})
+        return response, self._frf[speed][2]
+
+    def _speed_family(self, values: dict[str, float], v0: float, n_fft: int) -> SpeedFamily:
+        """The per-wheelset responses about ``v0`` (m/s) on the lines k fs / n_fft, for any speed
+        (:class:`.variable_speed.SpeedFamily`): only the creep damping depends on the speed
+        (D = D_inf + D_creep / v, as in :class:`.modes.SpeedDependentSystem`), separated from two
+        linearisations; one eigen-decomposition per parameter vector and ``v0``."""
+        blocks = self._frf_blocks(values)
+        hit = blocks.get((v0, n_fft))
+        if hit is not None:
+            return hit
+        if "d_creep" not in blocks:
+            a = self._model(values, 50.0, TimeFeatures()).linear_system()
+            b = self._model(values, 100.0, TimeFeatures()).linear_system()
+            d_creep = (a.D - b.D) * 100.0        # D(50) - D(100) = D_creep (1/50 - 1/100)
+            blocks["d_creep"] = (b, b.D - d_creep / 100.0, d_creep)
+        base, d_inf, d_creep = blocks["d_creep"]
+        if ("response", v0) not in blocks:
+            blocks[("response", v0)] = FrequencyResponse(dataclasses.replace(base, D=d_inf + d_creep / v0,
+                                                                              speed=float(v0)))
+        freqs = np.arange(n_fft // 2 + 1) * self.opts.fs_hz / n_fft if n_fft else np.zeros(0)
+        family = blocks[(v0, n_fft)] = SpeedFamily(blocks[("response", v0)], d_creep, freqs)
+        return family
+
+    def _frf_blocks(self, values: dict[str, float]) -> dict:
+        """Per-wheelset responses of the variable-speed blocks for ``values``, keyed by (speed, FFT length)."""
+        key = tuple(sorted(values.items()))
+        if self._blocks.get("values") != key:
+            self._blocks.clear()
+            self._blocks["values"] = key
+        return self._blocks
 
     # ------------------------------------------------------------------ modes
     def linear_system(self, w: Mapping[str, float] | None = None, speed: float | None = None):
@@ -537,5 +577,6 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         state["_effects"] = None
         state["_spectra"] = InputSpectra()
         state["_frf"] = {}
+        state["_blocks"] = {}
         state["_checked"] = {}
         return state
