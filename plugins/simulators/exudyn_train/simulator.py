@@ -22,7 +22,8 @@ from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
                       simulate_frequency, simulate_time)
-from .variable_speed import SpeedFamily, simulate_variable_speed
+from .variable_speed import SpeedFamily, car_distance, quantised_speed, simulate_variable_speed
+from .curving import CurveModel, check_curve, curve_response, has_curve
 
 
 MODEL_VERSION = 2
@@ -386,6 +387,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             key = InputSpectra._fingerprint(s)
             if key not in self._checked:
                 check_segment(s)
+                check_curve(s)
                 self._checked[key] = (s.irregularities, s.distance)   # keep the arrays: ids stay unique
                 if len(self._checked) > 1024:
                     self._checked.pop(next(iter(self._checked)))
@@ -458,6 +460,10 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
 
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
+        curved = [s.name for s in segments if has_curve(s)]
+        if curved:
+            raise SimulatorError(f"segment '{curved[0]}' has a curvature or cant record: the time solver does "
+                                 f"not take curves; use solver: frequency")
         features = self._features(segments)
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
                                 # a speed record puts the creep forces (f/v, v the odometer's velocity) into a
@@ -492,7 +498,38 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
                                          self._spectra, channels, frf_cache)
             for i, r in zip(idx, results):
                 out[i] = r
+        for i, seg in enumerate(segments):     # curves and cant: superposed on the track's response
+            if has_curve(seg):
+                out[i] = self._add_curve(values, seg, out[i])
         return out  # type: ignore[return-value]
+
+    def _add_curve(self, values: dict[str, float], segment: TrackSegment, record: Response) -> Response:
+        """``record`` plus the response to the segment's curvature and cant (:mod:`.curving`), with the
+        linear model at the segment's (mean) speed."""
+        o = self.opts
+        if is_constant_speed(segment):
+            v = float(segment.mean_speed)
+            response = self._frequency_response(values, v)[0]
+            x0 = float(segment.distance[0])
+
+            def s_of_t(t):
+                return x0 + v * t
+
+            def v_of_t(t):
+                return np.full_like(t, v)
+        else:
+            v0 = quantised_speed(segment.length / segment.duration())
+            response = self._speed_family(values, v0, 0) and self._frf_blocks(values)[("response", v0)]
+
+            def s_of_t(t):
+                return car_distance(segment, t)[0]
+
+            def v_of_t(t):
+                return car_distance(segment, t)[1]
+        cm = CurveModel.of(values, o.layout, self.sensors(values), o.gravity_roll)
+        y = curve_response(response, cm, segment, o.fs_hz, record.accelerations.shape[1], o.settle_s,
+                           s_of_t, v_of_t)
+        return Response(record.channels, record.fs, record.accelerations + y, record.segment)
 
     def _frequency_response(self, values: dict[str, float], speed: float) -> tuple[FrequencyResponse, dict]:
         """The linear model's frequency response at ``speed`` and its FRF cache, once per parameter vector
