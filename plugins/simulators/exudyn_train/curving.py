@@ -293,3 +293,110 @@ def curve_response(response: FrequencyResponse, cm: CurveModel, segment: TrackSe
     y += static_matrix(response) @ F[:, inside]
     y += frame_outputs(cm, design, s[inside], v[inside])
     return y
+
+
+# ====================================================================== time solver
+CURVE_DT = 0.02
+"""Time step (s) of the curve force tables of the time solver (the forces change over transitions of
+tens of metres: seconds)."""
+
+
+def forced_rows(cm: CurveModel, lin) -> np.ndarray:
+    """Free coordinates on which a curve can act (those with a non-zero force for some curve)."""
+    x = np.arange(0.0, 64.0, 1.0)
+    probe = TrackSegment("probe", x, np.zeros((4, x.size)), 50.0, curvature=1e-3 * np.sin(x / 5.0),
+                         cant=0.1 * np.cos(x / 7.0))
+    s = np.linspace(20.0, 44.0, 7)
+    F = curve_forces(cm, lin, DesignTrack(probe), s, np.full(s.size, 50.0))
+    return np.flatnonzero(np.any(F != 0.0, axis=1))
+
+
+def _node_coordinates(model) -> dict[int, tuple[object, int, int]]:
+    """Global ODE2 index -> (node, coordinate within the node, number of the node's coordinates)."""
+    out = {}
+    for name in model.bodies:
+        start = model.node_index[name]
+        for k in range(6):
+            out[start + k] = (model.nodes[name], k, 6)
+    for node, _, labels in model.effect_nodes:
+        start = model.mbs.GetNodeODE2Index(node)
+        for k in range(len(labels)):
+            out[start + k] = (node, k, len(labels))
+    return out
+
+
+class CurveTables:
+    """Curve forces in the time solver: per node with forced coordinates, a linear element whose symbolic
+    force function reads time tables (``capacity`` samples at :data:`CURVE_DT`) of the forces on that node's
+    coordinates; :meth:`set` fills the tables and the nodes' initial coordinates (the static equilibrium of
+    the forces at the start) for one segment."""
+
+    def __init__(self, model, rows: np.ndarray, capacity: int) -> None:
+        from exudyn import itemInterface as ii
+        from exudyn.advancedUtilities import CreateSymbolicUserFunction
+
+        from .model import _lookup
+
+        esym = model.exu.symbolic
+        mbs = model.mbs
+        self.model, self.rows, self.capacity = model, np.asarray(rows), int(capacity)
+        self.step = esym.Real("curve_dt_inv", 1.0 / CURVE_DT)
+        where = _node_coordinates(model)
+        by_node: dict[object, list[tuple[int, int]]] = {}
+        sizes: dict[object, int] = {}
+        for i in self.rows:
+            node, k, size = where[int(model.free[i])]
+            by_node.setdefault(node, []).append((k, int(i)))
+            sizes[node] = size
+        self.leaves: dict[int, list] = {}
+        self._keep: list = []
+        self.nodes = list(by_node)
+        for node, items in by_node.items():
+            n_c = sizes[node]
+            forced = {}
+            for k, i in items:
+                leaves = [esym.Real(f"curve_{i}_{m}", 0.0) for m in range(self.capacity + 1)]
+                self.leaves[i] = leaves
+                forced[k] = leaves
+            zeros = np.zeros((n_c, n_c))
+            element = mbs.AddObject(ii.ObjectGenericODE2(nodeNumbers=[node], massMatrix=zeros,
+                                                         stiffnessMatrix=zeros, dampingMatrix=zeros,
+                                                         forceVector=[0.0] * n_c))
+
+            uf = CreateSymbolicUserFunction(mbs, self._force_function(esym, _lookup, forced, n_c),
+                                            "forceUserFunction", element)
+            mbs.SetObjectParameter(element, "forceUserFunction", uf)
+            self._keep.append(uf)
+        mbs.Assemble()
+
+    def _force_function(self, esym, lookup, forced: dict[int, list], n_c: int):
+        """The symbolic force function of one node: its forced coordinates read their tables at t / dt."""
+        step, capacity = self.step, self.capacity
+
+        def force(mbs, t, itemNumber, q, q_t):
+            q.SetVector([0.0] * n_c)
+            q_t.SetVector([0.0] * n_c)
+            tau = t * step
+            return [lookup(esym, forced[k], tau, capacity) if k in forced else 0.0 for k in range(n_c)]
+
+        return force
+
+    def set(self, F: np.ndarray, q0: dict[int, float]) -> None:
+        """Fill the tables with F ``(n_free, n_samples)`` (N, N m) at times k :data:`CURVE_DT` from the start of
+        the integration (held after the last sample) and set the initial coordinates ``q0`` (free index -> m
+        or rad; every other coordinate of the forced nodes 0)."""
+        if F.shape[1] > self.capacity:
+            raise SimulatorError(f"curve table of {F.shape[1]} samples exceeds its capacity {self.capacity}")
+        for i, leaves in self.leaves.items():
+            row = F[i]
+            last = float(row[-1])
+            for m in range(self.capacity + 1):
+                leaves[m].SetValue(float(row[m]) if m < row.size else last)
+        model = self.model
+        where = _node_coordinates(model)
+        initial: dict[object, list[float]] = {}
+        for i, g in enumerate(model.free):        # every free node: a straight segment resets a curve's offsets
+            node, k, size = where[int(g)]
+            initial.setdefault(node, [0.0] * size)[k] = float(q0.get(i, 0.0))
+        for node, values in initial.items():
+            model.mbs.SetNodeParameter(node, "initialCoordinates", values)

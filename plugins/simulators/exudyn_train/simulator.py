@@ -20,10 +20,11 @@ from .layout import layout_of
 from .model import TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
-from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
+from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed, output_samples,
                       simulate_frequency, simulate_time)
 from .variable_speed import SpeedFamily, car_distance, quantised_speed, simulate_variable_speed
-from .curving import CurveModel, check_curve, curve_response, has_curve
+from .curving import (CURVE_DT, CurveModel, CurveTables, DesignTrack, check_curve, curve_forces, curve_response,
+                      forced_rows, frame_outputs, has_curve, static_coordinates)
 
 
 MODEL_VERSION = 2
@@ -460,11 +461,12 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
 
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
-        curved = [s.name for s in segments if has_curve(s)]
-        if curved:
-            raise SimulatorError(f"segment '{curved[0]}' has a curvature or cant record: the time solver does "
-                                 f"not take curves; use solver: frequency")
         features = self._features(segments)
+        if any(has_curve(s) for s in segments):
+            ahead = max(15.0, float(np.max(o.layout.wheelset_x(self._nominal()))) + 2.0)
+            longest = max(s.duration() + ahead / float(np.min(s.speed)) + 1.0 for s in segments)
+            features = dataclasses.replace(
+                features, curve_capacity=1 << max(6, int(math.ceil(math.log2(longest / CURVE_DT + 60)))))
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
                                 # a speed record puts the creep forces (f/v, v the odometer's velocity) into a
                                 # symbolic function: a single linear solve would keep the step matrix of the
@@ -474,9 +476,46 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         out = []
         for seg in segments:
             speed = float(seg.mean_speed)
+            frame = self._time_curve(values, seg, features, settings) if features.curve_capacity else None
             model = self._model(values, speed, features)
-            out.append(simulate_time(model, seg, settings))
+            record = simulate_time(model, seg, settings)
+            if frame is not None and has_curve(seg):
+                record = Response(record.channels, record.fs, record.accelerations + frame, record.segment)
+            out.append(record)
         return out
+
+    def _time_curve(self, values: dict[str, float], segment: TrackSegment, features: TimeFeatures,
+                    settings: TimeSettings) -> np.ndarray:
+        """Fill the time model's curve force tables for ``segment`` (zero for straight track) and its initial
+        state (the static equilibrium of the curve at the start); returns the sensors' frame terms
+        ``(n_sensors, n_t)`` (:mod:`.curving`)."""
+        fs = settings.fs
+        speed = float(segment.mean_speed)
+        lin = self._model(values, speed, TimeFeatures()).linear_system()      # M, G, labels: the same coordinates
+        model = self._model(values, speed, features)
+        if getattr(model, "curve_tables", None) is None:
+            cm0 = CurveModel.of(values, self.opts.layout, self.sensors(values), self.opts.gravity_roll)
+            model.curve_tables = CurveTables(model, forced_rows(cm0, lin), features.curve_capacity)
+        cm = CurveModel.of(values, self.opts.layout, self.sensors(values), self.opts.gravity_roll)
+        # the time solver's run-in: the car starts n_pre samples before the record (see simulate_time)
+        v_start = float(np.atleast_1d(segment.speed)[0])
+        t_pre = (int(math.ceil(float(np.max(lin.wheelset_x)) / v_start * fs)) + 1) / fs
+        n_t = output_samples(segment, fs)
+        tau = np.arange(features.curve_capacity) * CURVE_DT
+        tau = tau[: int(math.ceil((t_pre + n_t / fs + 0.1 + 12.0 / fs) / CURVE_DT)) + 2]
+        if has_curve(segment):
+            design = DesignTrack(segment)
+            s, v = car_distance(segment, tau - t_pre)
+            F = curve_forces(cm, lin, design, s, v)
+            static = static_coordinates(lin, F[:, :1])
+            q0 = {lin.labels.index(k): float(val[0]) for k, val in static.items()}
+            t = np.arange(n_t) / fs
+            s_r, v_r = car_distance(segment, t)
+            frame = frame_outputs(cm, design, s_r, v_r)
+        else:
+            F, q0, frame = np.zeros((lin.M.shape[0], tau.size)), {}, np.zeros((len(cm.sensors), n_t))
+        model.curve_tables.set(F, q0)
+        return frame
 
     def _simulate_frequency(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
