@@ -19,17 +19,23 @@ v would not be: 10 m at 300 km/h and 1 % speed error is 1.2 ms, 0.15 rad at
 windows add up to one and the model is linear); the error comes from the
 speed change within a block (the creep damping at v_k instead of v(t)) and
 from the block's response tail, computed with v_k. Resampling the record to
-distance would be exact for the delays but not for the creep damping, and a
-chirped input needs the same frozen model: the blocks are the simplest exact
-limit.
+distance would be exact for the delays but not for the creep damping (the
+vehicle's modes do not scale with the speed), and a chirped input needs the
+same frozen model: the blocks are the simplest construction that is exact in
+the limit.
 
-Validity. Block length :data:`BLOCK_S` (4 s: one carbody period at 0.25 Hz,
-short against a speed change of +-10 % over a segment); block speeds rounded
-to a relative step :data:`SPEED_STEP` (0.5 %) so that the linearisations are
-shared between blocks and runs. The method assumes the speed changes by a few
-per cent per block: accelerations up to about 1 m/s^2 at 300 km/h. Periodic
-wheel inputs of effects (polygons) have a speed-dependent frequency and are
-refused here (the time solver runs them).
+Cost. Only the creep damping depends on the speed, D(v) = D_inf + D_creep / v
+with D_creep of rank 3 per wheelset: H_j(f; v_k) comes from the model
+linearised once per parameter vector at v0 by a low-rank update
+(:class:`SpeedFamily`), one r x r solve per frequency line and block, no
+linearisation per block.
+
+Validity. Block length :data:`BLOCK_S` (4 s, 50 % overlap); v0 is the mean
+speed rounded to a relative step :data:`SPEED_STEP` (shared between runs).
+Measured against the time solver for +-10 % over a segment (benchmarks/
+bench_variable_speed.py); the error grows with the speed change inside a
+block. Periodic wheel inputs of effects (polygons) have a speed-dependent
+frequency and are refused here (the time solver runs them).
 """
 
 from __future__ import annotations
@@ -50,11 +56,11 @@ BLOCK_S = 4.0
 """Length (s) of one block of constant speed; consecutive blocks overlap by half."""
 
 SPEED_STEP = 0.005
-"""Relative step (0.5 %) of the speeds at which the model is linearised for the blocks."""
+"""Relative step (0.5 %) of the grid of reference speeds v0 about which the model is linearised."""
 
 
 def quantised_speed(v: float, step: float = SPEED_STEP) -> float:
-    """``v`` (m/s) rounded to the logarithmic grid (1 + step)^k: the speed at which a block is linearised."""
+    """``v`` (m/s) rounded to the logarithmic grid (1 + step)^k: the reference speed v0 of a segment."""
     k = round(math.log(v) / math.log1p(step))
     return float(math.exp(k * math.log1p(step)))
 
