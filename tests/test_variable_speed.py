@@ -3,11 +3,9 @@ plugins/simulators/exudyn_train/variable_speed.py) against its parts and against
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import numpy as np
-import pytest
 
 from suspid.data.track import synthetic_segments
 from suspid.interfaces import TrackSegment
