@@ -184,3 +184,25 @@ def test_speed_record_through_a_curve_in_both_solvers():
     (rt,) = ExudynTrain(solver="time", fs_hz=100.0).simulate({}, [ramp])
     scale = np.max(np.abs(rt.accelerations), axis=1, keepdims=True)
     assert np.all(np.abs(rf.accelerations - rt.accelerations) <= 0.04 * scale)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".h5"])
+def test_track_files_keep_curvature_and_cant(tmp_path, suffix):
+    from suspid.data.files import read_track, write_track, write_track_csv
+    from suspid.errors import DataError
+
+    seg = synthetic_segments({"n_segments": 1, "length_m": 200.0, "seed": 1,
+                              "curve": {"radius_m": 1200.0, "cant_m": 0.1, "start_m": 20.0, "transition_m": 60.0,
+                                        "direction": "right"}})[0]
+    path = tmp_path / f"track{suffix}"
+    write_track_csv(seg, path) if suffix == ".csv" else write_track([seg], path)
+    (back,) = read_track(path)
+    np.testing.assert_array_equal(back.curvature, seg.curvature)
+    np.testing.assert_array_equal(back.cant, seg.cant)
+    assert back.curvature.min() == pytest.approx(-1 / 1200.0)          # a right-hand curve
+    straight = TrackSegment("s", seg.distance, seg.irregularities, seg.speed)
+    write_track_csv(straight, tmp_path / "s.csv")
+    assert read_track(tmp_path / "s.csv")[0].curvature is None
+    bad = TrackSegment("b", seg.distance, seg.irregularities, seg.speed, cant=seg.cant[:-1])
+    with pytest.raises(DataError, match="cant must have one value per distance sample"):
+        write_track_csv(bad, tmp_path / "b.csv")
