@@ -230,3 +230,18 @@ def test_track_files_keep_curvature_and_cant(tmp_path, suffix):
     bad = TrackSegment("b", seg.distance, seg.irregularities, seg.speed, cant=seg.cant[:-1])
     with pytest.raises(DataError, match="cant must have one value per distance sample"):
         write_track_csv(bad, tmp_path / "b.csv")
+
+
+def test_segments_digest_tells_a_curve_from_straight_track():
+    """Run caches key on the segments' digest: a curve must not reuse straight track's results (straight track
+    keeps the digest it had without the curve fields)."""
+    from suspid.workflows.problem import array_digest, segments_digest
+    from suspid.workflows.problem import stable_hash
+
+    x = np.arange(10.0)
+    irr = np.zeros((4, 10))
+    straight = TrackSegment("a", x, irr, 50.0)
+    assert segments_digest([straight]) == stable_hash([array_digest(x, irr, np.atleast_1d(50.0))])
+    digests = {segments_digest([TrackSegment("a", x, irr, 50.0, **kw)])
+               for kw in ({}, {"curvature": np.full(10, 1e-3)}, {"cant": np.full(10, 1e-3)})}
+    assert len(digests) == 3
