@@ -245,3 +245,26 @@ def test_segments_digest_tells_a_curve_from_straight_track():
     digests = {segments_digest([TrackSegment("a", x, irr, 50.0, **kw)])
                for kw in ({}, {"curvature": np.full(10, 1e-3)}, {"cant": np.full(10, 1e-3)})}
     assert len(digests) == 3
+
+
+def test_jacobian_on_curves_and_speed_records():
+    """simulate_jacobian on a curved segment with a speed record: central differences of simulate (the
+    analytic derivatives hold for straight constant-speed segments only); for a curve at constant speed
+    they equal the analytic derivatives of the straight-track record plus the curve record's own (linear
+    superposition), within 1e-3 of the largest derivative."""
+    sim = ExudynTrain(fs_hz=100.0)
+    rough = synthetic_segments({"n_segments": 1, "length_m": 300.0, "speed_kmh": 250.0, "seed": 4})[0]
+    x, v = rough.distance, rough.speed
+    kappa, cant = curve_geometry(x, {"radius_m": 2000.0, "cant_m": 0.1, "start_m": 30.0, "transition_m": 100.0})
+    curved = TrackSegment("curved", x, rough.irregularities, v, curvature=kappa, cant=cant)
+    smooth = TrackSegment("smooth", x, np.zeros_like(rough.irregularities), v, curvature=kappa, cant=cant)
+    straight = TrackSegment("straight", x, rough.irregularities, v)
+    names = ["k_sec_y", "c_yaw"]
+    (r, g), (rs, gs) = sim.simulate_jacobian({}, [curved, straight], names)
+    ((_, g0),) = sim.simulate_jacobian({}, [smooth], names)
+    np.testing.assert_allclose(r.accelerations, sim.simulate({}, [curved])[0].accelerations, atol=1e-12)
+    np.testing.assert_allclose(g, gs + g0, rtol=0, atol=1e-3 * np.max(np.abs(g)))
+    assert np.max(np.abs(g0)) > 0.01 * np.max(np.abs(gs))          # the curve's part is not negligible
+    ramp = TrackSegment("ramp", x, rough.irregularities, v * (0.95 + 0.1 * x / x[-1]))
+    ((rr, gr),) = sim.simulate_jacobian({}, [ramp], names)
+    assert gr.shape == (2,) + rr.accelerations.shape and np.all(np.isfinite(gr)) and np.any(gr != 0)

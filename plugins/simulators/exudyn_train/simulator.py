@@ -78,6 +78,11 @@ class YawDamperOptions(BaseModel):
         default=20e3, description="damping rate above the blow-off velocity, N s/m (same source: 20 kN s/m)")
 
 
+DIFFERENCE_STEP = 1e-4
+"""Relative step of the central differences :meth:`ExudynTrain.simulate_jacobian` takes on segments with a speed
+record or a curve (their derivatives are not analytic)."""
+
+
 class Options(BaseModel):
     """The ``simulator.options`` of ``exudyn-train``."""
 
@@ -431,10 +436,9 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             return []
         self._check_segments(segments)
         values = self.values(w)
-        varying = [s.name for s in segments if not is_constant_speed(s)]
-        if varying:
-            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
-                                 f"constant speed per segment; use solver: time")
+        special = [i for i, s in enumerate(segments) if not is_constant_speed(s) or has_curve(s)]
+        if special:
+            return self._jacobian_by_differences(w, segments, names, special)
         o = self.opts
         channels = tuple(s.name for s in self.sensors(values))
         out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
@@ -457,6 +461,30 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             grads = record_derivatives(response, derivatives, group, o.fs_hz, o.taper_m, o.settle_s, self._spectra)
             for i, r, g in zip(idx, records, grads):
                 out[i] = (r, g)
+        return out  # type: ignore[return-value]
+
+    def _jacobian_by_differences(self, w: Mapping[str, float], segments: list[TrackSegment], names: list[str],
+                                 special: list[int]) -> list[tuple[Response, np.ndarray]]:
+        """:meth:`simulate_jacobian` when some segments have a speed record or a curve: the others
+        analytically, these by central differences of :meth:`simulate` (relative step
+        :data:`DIFFERENCE_STEP`; the records are smooth in the parameters)."""
+        plain = [i for i in range(len(segments)) if i not in special]
+        out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
+        if plain:
+            for i, pair in zip(plain, self.simulate_jacobian(w, [segments[i] for i in plain], names)):
+                out[i] = pair
+        group = [segments[i] for i in special]
+        base = self.simulate(w, group)
+        values = self.values(w)
+        grads = [np.zeros((len(names),) + r.accelerations.shape) for r in base]
+        for k, name in enumerate(names):
+            h = DIFFERENCE_STEP * max(abs(values[name]), 1e-12)
+            up = self.simulate({**w, name: values[name] + h}, group)
+            down = self.simulate({**w, name: values[name] - h}, group)
+            for g, a, b in zip(grads, up, down):
+                g[k] = (a.accelerations - b.accelerations) / (2 * h)
+        for i, r, g in zip(special, base, grads):
+            out[i] = (r, g)
         return out  # type: ignore[return-value]
 
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
