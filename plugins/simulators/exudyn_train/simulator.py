@@ -586,7 +586,8 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
                 return np.full_like(t, v)
         else:
             v0 = quantised_speed(segment.length / segment.duration())
-            response = self._speed_family(values, v0, 0) and self._frf_blocks(values)[("response", v0)]
+            self._speed_family(values, v0, 0)             # the model about v0 (cached with the blocks)
+            response = self._frf_blocks(values)[("response", v0)]
 
             def s_of_t(t):
                 return car_distance(segment, t)[0]
