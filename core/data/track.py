@@ -111,6 +111,39 @@ def psd(spectrum: str, channel: str, omega: np.ndarray | float) -> np.ndarray:
     return (2 * b) ** 2 * (a["vertical"] / b ** 2) * shape   # cross-level: roll angle PSD x (2b)^2
 
 
+class CurveOptions(BaseModel):
+    """A curve laid on every synthetic segment: straight, entry transition, circular arc, exit transition,
+    straight (distances from the segment's start). In the transitions (clothoids) the curvature and the
+    cant ramp linearly between zero and their values in the arc."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    radius_m: PositiveFloat = Field(description="radius of the circular arc, m")
+    direction: Literal["left", "right"] = Field(default="left", description="direction of the curve in the "
+                                                "direction of travel")
+    cant_m: float = Field(default=0.0, ge=0.0, le=0.2, description="cant in the arc, m (height of the outer "
+                          "rail above the inner one; EN 13803 allows at most 0.18-0.20 m)")
+    start_m: float = Field(default=0.0, ge=0.0, description="where the entry transition begins, m")
+    transition_m: float = Field(default=0.0, ge=0.0, description="length of each transition, m")
+    arc_m: PositiveFloat | None = Field(default=None, description="length of the circular arc, m (default: "
+                                        "to the end of the segment)")
+
+
+def curve_geometry(distance: np.ndarray, curve: CurveOptions | Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Design curvature (1/m, positive to the left) and cant (m, right rail above the left) of ``curve`` at
+    ``distance`` ``(n_x,)`` m from the segment start (see :class:`CurveOptions`); each ``(n_x,)``."""
+    c = parse_options(CurveOptions, curve, "data.track.curve")
+    s = np.asarray(distance, dtype=float) - float(distance[0]) - c.start_m
+    L = c.transition_m
+    end_arc = L + (c.arc_m if c.arc_m is not None else math.inf)
+    if L > 0:
+        ramp = np.clip(s / L, 0.0, 1.0) - np.clip((s - end_arc) / L, 0.0, 1.0)
+    else:
+        ramp = ((s >= 0) & (s <= end_arc)).astype(float)
+    sign = 1.0 if c.direction == "left" else -1.0
+    return sign * ramp / c.radius_m, sign * ramp * c.cant_m
+
+
 class TrackOptions(BaseModel):
     """A synthetic track section: ``n_segments`` independent segments of one spectrum.
 
@@ -131,6 +164,8 @@ class TrackOptions(BaseModel):
         default=None, description="longest wavelength realised, m (default: the segment length)")
     seed: int = Field(default=0, ge=0, description="seed of numpy.random.default_rng")
     name_prefix: str = Field(default="seg", min_length=1, description="segment names are <prefix>-001, ...")
+    curve: CurveOptions | None = Field(default=None, description="a curve with transitions on every segment "
+                                       "(default: straight track)")
 
     @model_validator(mode="after")
     def _speed(self) -> "TrackOptions":
@@ -193,6 +228,8 @@ def synthetic_segments(options: TrackOptions | Mapping[str, Any] | None = None,
     out = []
     for i in range(opt.n_segments):
         irr = realise(opt.spectrum, n, opt.dx_m, rng, (opt.min_wavelength_m, opt.max_wavelength_m))
+        curvature, cant = curve_geometry(x, opt.curve) if opt.curve is not None else (None, None)
         out.append(TrackSegment(f"{opt.name_prefix}-{i + 1:0{width}d}", x.copy(), irr, opt.speed,
-                                meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i}))
+                                meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i},
+                                curvature=curvature, cant=cant))
     return out
