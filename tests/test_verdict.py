@@ -193,7 +193,7 @@ def test_terminal_table_and_report_show_units_nominal_change_trust_and_verdict(s
     assert result["verdict"]["version"] == 1 and [r.name for r in rows] == ["c_yaw", "c_sec_y"]
     assert result["nominal"] == {"c_yaw": 300e3, "c_sec_y": 30e3}
     header = next(line for line in out.splitlines() if "identifiable" in line)
-    for col in ("nominal", "identified", "change", "interval (% of nominal)", "w_ref", "trustworthy", "verdict"):
+    for col in ("nominal", "identified", "change", "interval", "w_ref", "trustworthy", "verdict"):
         assert col in header, col
     report = (run / "report.md").read_text()
     first = report.split("\n## ")[1]

@@ -321,7 +321,7 @@ def table(rows: Sequence[VerdictRow], *, with_reference: bool = False, with_rule
     :param with_reference: add ``w_ref`` and its error (numerical experiments, where the truth is known).
     :param with_rule: add the levels and the rule that gave the verdict.
     """
-    header = ["parameter", "nominal", "identified", "change", "interval (% of nominal)"]
+    header = ["parameter", "nominal", "identified", "change", "interval"]
     header += ["w_ref", "error (% of interval)"] if with_reference else []
     header += ["identifiable", "trustworthy", "verdict"] + (["limits", "rule"] if with_rule else [])
     cells = []
