@@ -142,11 +142,13 @@ def replace_block(text: str, name: str, block: str) -> str:
 
 
 def git_commit() -> str:
-    """The short hash of HEAD, with ``+dirty`` when the work tree has changes; ``unknown`` outside git."""
+    """The short hash of HEAD, ``+dirty`` when tracked files other than RESULTS.md differ from it; ``unknown``
+    outside git (RESULTS.md itself is what this script rewrites, so its changes do not count)."""
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                               text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                ":(exclude)benchmarks/RESULTS.md"], cwd=ROOT,
                                capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
