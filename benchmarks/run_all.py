@@ -72,7 +72,7 @@ BENCHMARKS: tuple[Benchmark, ...] = (
     _b("curve_spectra", "benchmarks/bench_curve_spectra.py --seed 3", "benchmarks/bench_curve_spectra.py --seed 3",
        "what a curve does to the spectra"),
     _b("ego", "benchmarks/bench_ego.py --seeds 5 --jobs 1",
-       "benchmarks/bench_ego.py --seeds 2 --functions branin,hartmann3 --tools suspid --jobs 1",
+       "benchmarks/bench_ego.py --seeds 2 --functions branin,hartmann3 --jobs 1",
        "EGO against peer Bayesian optimisers: evaluations to reach 1 %"),
     _b("ego_sklearn", "benchmarks/bench_ego.py --functions branin --tools suspid,suspid-sklearn --seeds 5 --jobs 1",
        None, "EGO with the sklearn-gp surrogate against gpy-kriging"),
