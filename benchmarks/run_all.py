@@ -25,6 +25,7 @@ import argparse
 import datetime
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -165,8 +166,9 @@ def load_average() -> str:
 def run_one(argv: tuple[str, ...], *, python: str = sys.executable, prefix: str = "") -> tuple[int, str]:
     """Run ``python *argv`` from the repository root, echoing its lines; returns (exit status, stdout).
 
-    Its stderr goes to ours (progress bars and warnings are not part of the table). On Ctrl-C the
-    child (which gets the same SIGINT) is given 10 s to stop, then killed, and the interrupt re-raised.
+    Its stderr goes to ours (progress bars and warnings are not part of the table). On Ctrl-C (or a
+    SIGINT to this process alone) the child is sent SIGINT too, given 10 s to stop, then killed, and the
+    interrupt re-raised.
     """
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen([python, *argv], cwd=ROOT, stdout=subprocess.PIPE, text=True, env=env)
@@ -178,6 +180,8 @@ def run_one(argv: tuple[str, ...], *, python: str = sys.executable, prefix: str 
             print(prefix + line, end="", flush=True)
         return proc.wait(), "".join(lines)
     except KeyboardInterrupt:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
         try:
             proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
