@@ -58,7 +58,7 @@ def header(what: str) -> None:
 # ------------------------------------------------------------------------------------------- jacobian
 def jacobian_part(repeats: int, n_segments: int | None) -> None:
     from suspid.config import build_simulator, load_config
-    from suspid.method.jacobian import spectra_jacobian
+    from suspid.workflows.jacobian import spectra_jacobian
     from suspid.testing import check_differentiable
     from suspid.workflows.problem import synthetic_track
     from suspid.workflows.tasks import simulate_spectra

@@ -10,7 +10,8 @@ import pytest
 from conftest import ROOT
 from suspid import registry
 from suspid.interfaces import DifferentiableSimulator
-from suspid.method.jacobian import gauss_newton_information, linearised_shift, spectra_jacobian
+from suspid.method.jacobian import gauss_newton_information, linearised_shift
+from suspid.workflows.jacobian import spectra_jacobian
 from suspid.testing import check_differentiable, sample_segments
 
 SPECTRA = {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 60}
