@@ -34,7 +34,7 @@ from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
 from suspid.options import parse_options
 
 __all__ = ["SpectraJacobian", "spectra_derivatives", "gauss_newton_information", "linearised_shift",
-           "DEFAULT_REL_STEP"]
+           "fisher_information", "fisher_identifiability", "FisherVerdict", "DEFAULT_REL_STEP"]
 
 DEFAULT_REL_STEP = 1e-4
 """Relative step of the finite differences: below it the simulators' own rounding (an exudyn linearisation is
@@ -129,3 +129,122 @@ def linearised_shift(jacobian_w: np.ndarray, jacobian_theta: np.ndarray, varianc
     A = Jw.reshape(-1, Jw.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
     B = Jt.reshape(-1, Jt.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
     return -np.linalg.lstsq(A, B, rcond=None)[0]
+
+
+def fisher_information(y_sim: np.ndarray, jacobian: np.ndarray, noise_model, rel_floor: float = 1e-3) -> np.ndarray:
+    """The Fisher information ``(n_p, n_p)`` of the parameters in the modelled spectra, with B's own covariance.
+
+    With y_mod_i = f(y_sim_i(w)) + b_i (eq. 4; f the sensor-noise floor's
+    5 log10(10^{(y + m)/5} + N) - m, the identity without a floor) and the noise
+    paths b_i independent over segments, each Gaussian with the noise model's
+    covariance C (low rank plus diagonal, :class:`~suspid.method.noise.NoiseModel`),
+    F = Σ_i G_iᵀ C⁻¹ G_i, G_i = f'(y_sim_i) ∂y_sim_i/∂w ``(D, n_p)``. C⁻¹ is applied
+    by the Woodbury identity (never formed); unlike
+    :func:`gauss_newton_information` the correlations of B over channels and
+    frequencies are kept, so that 200 frequencies that a smooth gain moves
+    together do not count as 200 independent readings. The diagonal part is
+    kept at ``rel_floor`` of B's marginal variance at least (a component that
+    explains 99.99 % of a point's variance would otherwise make that point
+    nearly noise-free). Where the floor N dominates, f' = P / (P + N) → 0: a
+    parameter that moves the spectra only below the sensors' floor carries no
+    information.
+
+    :param y_sim: ``(v, n_channels, n_freqs)`` dB at the point.
+    :param jacobian: ``(v, n_channels, n_freqs, n_p)`` dB per unit of each parameter (SI, or scaled).
+    :param noise_model: a fitted :class:`~suspid.method.noise.NoiseModel`.
+    :returns: F in the inverse square units of the Jacobian's parameters.
+    """
+    y = np.asarray(y_sim, dtype=float)
+    Jm = np.asarray(jacobian, dtype=float)
+    floor = getattr(noise_model, "floor_", None)
+    if floor is not None:
+        power = 10.0 ** ((y + floor.gain_db) / 5.0)
+        Jm = Jm * (power / (power + floor.power))[..., None]
+    v, n_p = Jm.shape[0], Jm.shape[-1]
+    G = Jm.reshape(v, -1, n_p)                                                          # (v, D, n_p)
+    d = np.maximum(np.asarray(noise_model.residual_variance_, dtype=float).ravel(),
+                   rel_floor * np.asarray(noise_model.variance_, dtype=float).ravel())
+    d = np.maximum(d, 1e-300)
+    U = np.asarray(noise_model.components_, dtype=float).T                              # (D, r)
+    s = (1.0 - float(noise_model.shrinkage_)) * np.asarray(noise_model.eigenvalues_, dtype=float)
+    GD = G / d[None, :, None]                                                           # D⁻¹ G_i
+    F = np.einsum("vdp,vdq->pq", G, GD)
+    keep = s > 0
+    if np.any(keep):
+        U, s = U[:, keep], s[keep]
+        inner = np.diag(1.0 / s) + (U / d[:, None]).T @ U                              # S⁻¹ + Uᵀ D⁻¹ U
+        W = np.einsum("dr,vdp->vrp", U, GD)                                             # Uᵀ D⁻¹ G_i
+        r = W.shape[1]
+        X = np.linalg.solve(inner, np.moveaxis(W, 0, 1).reshape(r, -1)).reshape(r, v, n_p)
+        F -= np.einsum("vrp,rvq->pq", W, X)
+    return 0.5 * (F + F.T)
+
+
+@dataclass
+class FisherVerdict:
+    """Identifiability from the Fisher information, per component (arrays ``(q,)``, units of the information's
+    parameters, e.g. [0, 1]^q).
+
+    :ivar sd_alone: the Cramér-Rao standard deviation with every other component known, 1/√F_kk.
+    :ivar sd: the Cramér-Rao standard deviation with the others estimated too, √(F⁻¹)_kk (inf on a null direction).
+    :ivar partner: per component, the component it is most correlated with under F⁻¹ and that correlation.
+    """
+
+    identifiable: np.ndarray
+    reasons: list[list[str]]
+    sd_alone: np.ndarray
+    sd: np.ndarray
+    partner: list[tuple[str, float] | None]
+
+
+def fisher_identifiability(information: np.ndarray, names: Sequence[str], n_sigmas: float,
+                           max_width: float) -> FisherVerdict:
+    """Which components the data pin down, from the Fisher information ``(q, q)`` in [0, 1]^q units.
+
+    A component is **not identifiable** when its ± ``n_sigmas`` Cramér-Rao interval spans more than
+    ``max_width`` of the admissible interval: *no influence on the spectra* when it does so even with
+    every other component known (2 n / √F_kk > max_width: the spectra hardly move with it, against
+    the noise B), a *flat direction* when only together with the others (a combination of components
+    moves the spectra as little). The bound is the best any unbiased estimator from these spectra can
+    do; the run's objective may do worse, which its sandwich intervals say.
+    """
+    F = 0.5 * (np.asarray(information, dtype=float) + np.asarray(information, dtype=float).T)
+    q = F.shape[0]
+    diag = np.diag(F)
+    with np.errstate(divide="ignore"):
+        sd_alone = np.where(diag > 0, 1.0 / np.sqrt(np.maximum(diag, 1e-300)), np.inf)
+    lam, V = np.linalg.eigh(F)
+    scale = max(float(np.max(np.abs(lam))) if lam.size else 0.0, 1e-300)
+    live = lam > 1e-12 * scale
+    cov = (V[:, live] / lam[live]) @ V[:, live].T
+    null = np.sum(V[:, ~live] ** 2, axis=1) > 1e-6          # the component has a share of a null direction
+    sd = np.where(null, np.inf, np.sqrt(np.clip(np.diag(cov), 0, None)))
+    identifiable = np.ones(q, dtype=bool)
+    reasons: list[list[str]] = [[] for _ in range(q)]
+    partner: list[tuple[str, float] | None] = [None] * q
+    def spread(s: float) -> str:
+        return f"± {100 * n_sigmas * s:.0f} %" if n_sigmas * s < 1 else "more than the whole"
+
+    null_vectors = V[:, ~live]
+    for k in range(q):
+        if null[k]:     # on a null direction n the errors move together as n does: r = sign(n_k n_j)
+            share = np.abs(null_vectors[k][None, :] * null_vectors).sum(axis=1)
+            share[k] = 0.0
+            j = int(np.argmax(share))
+            if j != k and share[j] > 1e-6:
+                partner[k] = (names[j], float(np.sign(null_vectors[k] @ null_vectors[j])))
+        else:
+            others = [j for j in range(q) if j != k and np.isfinite(sd[j]) and sd[j] > 0]
+            if sd[k] > 0 and others:
+                r = [cov[k, j] / (sd[k] * sd[j]) for j in others]
+                best = int(np.argmax(np.abs(r)))
+                partner[k] = (names[others[best]], float(r[best]))
+        if 2 * n_sigmas * sd_alone[k] > max_width:
+            reasons[k].append(f"no influence on the spectra (Fisher information: ± {n_sigmas:g} σ = "
+                              f"{spread(sd_alone[k])} of the interval even with the others known)")
+        elif 2 * n_sigmas * sd[k] > max_width:
+            what = f", mostly with {partner[k][0]} (r = {partner[k][1]:+.2f})" if partner[k] else ""
+            reasons[k].append(f"flat direction (Fisher information: ± {n_sigmas:g} σ = {spread(sd[k])} of the "
+                              f"interval with the others estimated{what})")
+        identifiable[k] = not reasons[k]
+    return FisherVerdict(identifiable, reasons, sd_alone, sd, partner)
