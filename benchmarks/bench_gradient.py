@@ -85,22 +85,29 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
         w = {n: float(v) for n, v in config.data.w_ref.items()}
         simulate_spectra(sim, w, segments, config.spectra)
         spectra_jacobian(sim, w, identified, segments, config.spectra)
-        plain, jac_q, jac_all = [], [], []
+        plain, per_record, jac_q, jac_all = [], [], [], []
         for k in range(repeats):
             wk = {**w, identified[0]: w.get(identified[0], sim.values({})[identified[0]]) * (1 + 1e-6 * (k + 1))}
             t = time.perf_counter()
             simulate_spectra(sim, wk, segments, config.spectra)
             plain.append(time.perf_counter() - t)
+            t = time.perf_counter()     # again at the same w: the receptance is cached, the per-record work is left
+            simulate_spectra(sim, wk, segments, config.spectra)
+            per_record.append(time.perf_counter() - t)
             t = time.perf_counter()
             spectra_jacobian(sim, wk, identified, segments, config.spectra)
             jac_q.append(time.perf_counter() - t)
             t = time.perf_counter()
             spectra_jacobian(sim, wk, names_all, segments, config.spectra)
             jac_all.append(time.perf_counter() - t)
-        p, jq, ja = (statistics.median(x) for x in (plain, jac_q, jac_all))
+        p, pr, jq, ja = (statistics.median(x) for x in (plain, per_record, jac_q, jac_all))
         print(f"  cost on {len(segments)} segments (median of {repeats}): plain solve {p:.3f} s; y + Jacobian for the "
               f"q = {len(identified)} identified {jq:.3f} s = {jq / p:.2f} plain (central FD: {2 * len(identified) + 1}); "
               f"for all {len(names_all)} {ja:.3f} s = {ja / p:.2f} plain (central FD: {2 * len(names_all) + 1})")
+        print(f"  per-record work of a plain solve (receptance cached: products, inverse FFTs, spectra) {pr:.3f} s = "
+              f"{pr / p:.2f} of it; a derivative record costs at least as much, so any route through the records "
+              f"needs >= 1 + n_p x {pr / p:.2f} plain: {1 + len(identified) * pr / p:.2f} for q = {len(identified)}, "
+              f"{1 + len(names_all) * pr / p:.2f} for all {len(names_all)}")
 
 
 # ------------------------------------------------------------------------------------------- identify
