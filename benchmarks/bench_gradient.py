@@ -105,8 +105,8 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
               f"q = {len(identified)} identified {jq:.3f} s = {jq / p:.2f} plain (central FD: {2 * len(identified) + 1}); "
               f"for all {len(names_all)} {ja:.3f} s = {ja / p:.2f} plain (central FD: {2 * len(names_all) + 1})")
         print(f"  per-record work of a plain solve (receptance cached: products, inverse FFTs, spectra) {pr:.3f} s = "
-              f"{pr / p:.2f} of it; a derivative record costs at least as much, so any route through the records "
-              f"needs >= 1 + n_p x {pr / p:.2f} plain: {1 + len(identified) * pr / p:.2f} for q = {len(identified)}, "
+              f"{pr / p:.2f} of it; n_p derivative records of every segment at that cost per record: "
+              f"1 + n_p x {pr / p:.2f} = {1 + len(identified) * pr / p:.2f} plain for q = {len(identified)}, "
               f"{1 + len(names_all) * pr / p:.2f} for all {len(names_all)}")
 
 
