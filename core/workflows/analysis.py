@@ -290,6 +290,8 @@ def fisher_verdict(problem: Problem, spectra_model: SpectraModel, x_opt: np.ndar
             reasons[k].append("stuck on the upper bound (J of the linearised spectra still rises beyond it)")
     identifiable = np.array([not r for r in reasons])
     figures = {"kind": "fisher", "n_sigmas": opts.n_sigmas, "max_width_percent": 100 * opts.max_width,
+               "note": "Cramér-Rao spreads under B (no model error, an efficient estimator): lower bounds, not the "
+                       "intervals, which are the sandwich's",
                "sd_alone_percent": {n: float(100 * v) for n, v in zip(names, fv.sd_alone)},
                "sd_percent": {n: (float(100 * v) if np.isfinite(v) else None) for n, v in zip(names, fv.sd)}}
     return replace(verdict, identifiable=identifiable, reasons=reasons), figures
