@@ -193,7 +193,10 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     fisher = None
     if spectra_model is not None:
-        verdict, fisher = fisher_verdict(problem, spectra_model, x_opt, verdict, config)
+        try:
+            verdict, fisher = fisher_verdict(problem, spectra_model, x_opt, verdict, config)
+        except SimulatorError as exc:   # no Jacobian at w_opt: the metamodel's verdict stays, and says so
+            fisher = {"kind": "sobol", "fisher_not_assessed": f"no Jacobian at w_opt: {exc}"}
     sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
     trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor)
     interval_unit = verdict.interval_unit
