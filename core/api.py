@@ -279,3 +279,15 @@ def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | 
     if cfg.fleet is not None and cfg.fleet.database is not None:
         return _fleet().run_indicators(cfg, log=log or (lambda s: None))
     return config_indicators(cfg), None
+
+
+def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ack: bool = False,
+              log: Log | None = None) -> None:
+    """Serve the fleet dashboard over the monitoring database until interrupted (``suspid dashboard``).
+
+    :param host: address to bind; the default serves this machine only.
+    :param allow_ack: let users acknowledge alarms (each acknowledgement is logged and audited).
+    """
+    _fleet()
+    from suspid.dashboard.app import serve   # Flask: the fleet extra, checked just above
+    serve(database, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
