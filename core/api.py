@@ -291,3 +291,14 @@ def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050
     _fleet()
     from suspid.dashboard.app import serve   # Flask: the fleet extra, checked just above
     serve(database, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
+
+
+def fleet_demo(plan: str | Path, *, log: Log | None = None):
+    """Monitor the demo fleet of a fleet plan into its database and check its degrading elements
+    (``suspid fleet demo``; :mod:`suspid.fleet.demo`).
+
+    :returns: a :class:`suspid.fleet.demo.DemoResult` (database URL, output folder, checks).
+    """
+    _fleet()
+    from suspid.fleet.demo import run_demo   # the fleet extra, checked just above
+    return run_demo(plan, log=log or (lambda s: None))

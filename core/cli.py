@@ -236,6 +236,18 @@ def fleet_import(folders: List[Path] = typer.Argument(..., help="monitor or run 
     console.print(f"{out.n_created} runs recorded, {len(out.runs) - out.n_created} already there", markup=False)
 
 
+@fleet_app.command("demo")
+def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-demo.yaml).", show_default=False),
+               serve: bool = typer.Option(True, "--serve/--no-serve", help="Start the dashboard afterwards."),
+               port: int = typer.Option(8050, "--port"),
+               quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Monitor a small demo fleet into its database, check its degrading elements, then serve the dashboard."""
+    out = api.fleet_demo(plan, log=_log(quiet))
+    console.print((out.out_dir / "fleet-demo.md").read_text(encoding="utf-8"), markup=False, highlight=False)
+    if serve:
+        api.dashboard(out.database, port=port, log=_log(False))
+
+
 @app.command()
 def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
     """EN 14363 bogie-frame instability and EN 12299 comfort of the config's recordings, per segment and run."""
