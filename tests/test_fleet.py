@@ -200,3 +200,39 @@ def test_trend_needs_three_usable_points():
     t = fit_trend("c_yaw", [0, 1, 2], [1, 2, 3], [0.1] * 3, [True, False, True], acceptable_low=0,
                   acceptable_high=10)
     assert t.slope is None and "fewer than 3" in t.note
+
+
+def test_cli_indicators_recorded_into_the_configured_database(tmp_path):
+    """`suspid indicators` on a numerical experiment with a fleet: section: printed, and stored as a recording run
+    whose instability limit is the one of the model's 3.5 t bogie."""
+    from conftest import run_cli
+
+    path = tmp_path / "c.yaml"
+    path.write_text("name: ind\nsimulator: {plugin: exudyn-train, options: {solver: frequency}}\n"
+                    "parameters: {c_sec_z: {}}\n"
+                    "data: {source: experiment, track: {n_segments: 2, length_m: 800.0}}\n"
+                    "spectra: {f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 60}\n"
+                    "fleet: {database: f.sqlite, trainset: TS9, date: 2026-02-01, mileage_km: 5000}\n")
+    res = run_cli("indicators", str(path))
+    assert res.returncode == 0, res.stderr
+    assert "en14363-instability" in res.stdout and "recorded as run 1" in res.stdout
+    db = open_database(tmp_path / "f.sqlite")
+    try:
+        rows = queries.indicators(db, "TS9", per_run=False)
+        assert len(rows) == 6 and {r["date"] for r in rows} == {"2026-02-01"}   # 2 segments + the run, x 2
+        assert [r["limit"] for r in rows if r["name"] == "en14363-instability"] == [pytest.approx(5.65)] * 3
+    finally:
+        db.dispose()
+
+
+@pytest.mark.long   # the demo fleet: 4 trainsets x 6 dates, several minutes on 2 cores
+def test_demo_fleet_shows_warning_then_alarm_and_forecasts_contain_the_true_crossings(tmp_path):
+    import shutil
+
+    from suspid.fleet.demo import run_demo
+
+    plan = tmp_path / "fleet-demo.yaml"
+    shutil.copy(Path(__file__).resolve().parents[1] / "configs" / "fleet-demo.yaml", plan)
+    out = run_demo(plan)
+    assert {c.element_group for c in out.checks} == {"c_yaw", "k_sec_z"}
+    assert all(c.holds for c in out.checks), (out.out_dir / "fleet-demo.md").read_text()

@@ -83,3 +83,4 @@ def test_compute_indicators_per_segment_and_per_run():
     assert comfort[None].detail["n_blocks"] == 12
     unassessed = compute_indicators(segs, resps, bogie_mass_kg=None)
     assert {v.verdict for v in unassessed if v.name == "en14363-instability"} == {"not assessable"}
+
