@@ -144,6 +144,10 @@ def test_config_fleet_section_validated(tmp_path):
     with pytest.raises(ConfigError) as info:
         suspid.validate(path)
     assert info.value.key == "fleet.database" and "not supported" in str(info.value)
+    path.write_text(base + "fleet: {database: f.sqlite, acceptable: {c_yaw: [1.0, 2.0]}}\n")
+    with pytest.raises(ConfigError) as info:
+        suspid.validate(path)
+    assert info.value.key == "fleet.acceptable.c_yaw" and "not an identified parameter" in str(info.value)
     path.write_text(base + "fleet: {database: f.sqlite, trainset: 'bad name'}\n")
     res = run_cli("validate", str(path))
     assert res.returncode == 2 and "fleet.trainset" in res.stderr and res.stderr.count("\n") == 1

@@ -13,7 +13,7 @@ import datetime as dt
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
-from suspid.config import Config, load_config
+from suspid.config import Config, build_simulator, identified_bounds, load_config
 from suspid.errors import ConfigError
 from suspid.fleet.db import Database, database_url, open_database
 from suspid.fleet.record import ImportResult, RecordedRun, VehicleKey, import_folders, mileage_at, record_result
@@ -42,6 +42,13 @@ def database_location(config: Config) -> str | None:
 def check_fleet(config: Config) -> None:
     """The ``fleet:`` checks of ``suspid validate``: a usable database URL whose SQLite folder exists."""
     url = database_location(config)
+    known = identified_bounds(config, build_simulator(config))
+    for name, (lo, hi) in config.fleet.acceptable.items():
+        key = f"fleet.acceptable.{name}"
+        if name not in known:
+            raise config.error(f"'{name}' is not an identified parameter; identified: {', '.join(known)}", key)
+        if lo is None and hi is None or lo is not None and hi is not None and not lo < hi:
+            raise config.error("give [lower, upper] with lower < upper, null for an open side", key)
     if url is not None and url.startswith("sqlite:///"):
         folder = Path(url.removeprefix("sqlite:///")).parent
         if not folder.is_dir():
@@ -67,7 +74,7 @@ def record_identification(config: Config, result: Any, *, log: Log = lambda s: N
         return None
     db = open_database(url)
     try:
-        acceptable = {} if config.monitor is None else {n: list(v) for n, v in config.monitor.acceptable.items()}
+        acceptable = {n: list(v) for n, v in config.fleet.acceptable.items()}
         rec = record_result(db, _key(config), config.fleet.date or dt.date.today(), result.to_dict(),
                             result.run_dir, mileage_km=config.fleet.mileage_km, kind="run",
                             acceptable=acceptable, indicators=_indicators(config, log))

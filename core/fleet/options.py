@@ -12,6 +12,8 @@
       km_per_day: 1500              # mileage run per day, for the monitor's later dates
       indicators: true              # compute and store the EN 14363 / EN 12299 indicators of the recordings
       hunting_hz: null              # EN 14363 band centre; default: the spectral peak of the bogie frame
+      acceptable:                   # acceptable domains of a `suspid run`'s verdicts (a monitor uses its own)
+        c_yaw: [225.0e3, 375.0e3]   # SI units, null for an open side
 
 Without a ``fleet:`` section (or without ``database``) nothing is recorded.
 """
@@ -39,3 +41,4 @@ class FleetSection(Section):
     km_per_day: float | None = Field(default=None, ge=0.0)
     indicators: bool = True
     hunting_hz: float | None = Field(default=None, gt=0.0)
+    acceptable: dict[str, tuple[float | None, float | None]] = Field(default_factory=dict)
