@@ -38,10 +38,11 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
 # The API comes last: its modules import the markers above.
-from suspid.api import (Validation, diagnose, identify, ingest, load_config, modes, monitor,  # noqa: E402
-                        segments, simulate, stability, study, validate)
+from suspid.api import (Validation, dashboard, diagnose, fleet_demo, fleet_import, identify,  # noqa: E402
+                        indicators, ingest, load_config, modes, monitor, segments, simulate, stability, study,
+                        validate)
 from suspid.workflows.identify import IdentificationResult  # noqa: E402
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
            "diagnose", "identify", "ingest", "load_config", "modes", "monitor", "segments", "simulate", "stability",
-           "study", "validate"]
+           "study", "validate", "indicators", "fleet_import", "fleet_demo", "dashboard"]
