@@ -55,11 +55,23 @@ class DemoCheck:
     true_warning: str | None
     true_alarm: str | None
     forecasts: dict[str, dict[str, Any]] = field(default_factory=dict)
+    dates: list[str] = field(default_factory=list)
+
+    def on_time(self, level: str) -> bool:
+        """The first ``level`` verdict within one measurement date of the first date at or after the true
+        crossing (a date's verdict judges the identified value, whose interval straddles the truth)."""
+        first, true = getattr(self, f"first_{level}"), getattr(self, f"true_{level}")
+        if first is None or true is None:
+            return False
+        expected = next((i for i, d in enumerate(self.dates) if d >= true), len(self.dates))
+        return abs(self.dates.index(first) - expected) <= 1
 
     @property
     def holds(self) -> bool:
-        dated = all(v.get("contains_true") for v in self.forecasts.values()) and len(self.forecasts) == 2
-        return bool(dated and self.first_warning and self.first_alarm and self.first_warning <= self.first_alarm)
+        """Warning then alarm on the right dates, and both forecast intervals contain the true crossings."""
+        covered = len(self.forecasts) == 2 and all(v.get("contains_true") for v in self.forecasts.values())
+        return bool(covered and self.on_time("warning") and self.on_time("alarm")
+                    and self.first_warning <= self.first_alarm)
 
 
 @dataclass
@@ -145,7 +157,8 @@ def run_demo(plan_file: str | Path, *, log: Log = lambda s: None, progress: bool
             first = {"warning": next((h["date"] for h in hist if h["verdict"] in ("warning", "alarm")), None),
                      "alarm": next((h["date"] for h in hist if h["verdict"] == "alarm"), None)}
             trend = next(t for info, t in queries.trends(db, trainset) if info["element_group"] == s.parameter)
-            check = DemoCheck(trainset, s.parameter, s.loss, first["warning"], first["alarm"], None, None)
+            check = DemoCheck(trainset, s.parameter, s.loss, first["warning"], first["alarm"], None, None,
+                              dates=[d.isoformat() for d in dates])
             for f in trend.forecasts:
                 true = _true_crossing(dates, nominal, s.loss, f.value)
                 check.forecasts[f.level] = {
