@@ -16,7 +16,8 @@ from typing import Any, Callable, Mapping, Sequence
 from suspid.config import Config, build_simulator, identified_bounds, load_config
 from suspid.errors import ConfigError
 from suspid.fleet.db import Database, database_url, open_database
-from suspid.fleet.record import ImportResult, RecordedRun, VehicleKey, import_folders, mileage_at, record_result
+from suspid.fleet.record import (ImportResult, RecordedRun, VehicleKey, import_folders, is_recorded, mileage_at,
+                                  record_result)
 from suspid.indicators.recordings import config_indicators
 from suspid.indicators.standard import IndicatorValue
 
@@ -101,9 +102,11 @@ def record_monitor(config: Config, plans: Sequence[Any], result: Any, *, log: Lo
             if km is None:
                 km = mileage_at(plan.date, first, config.fleet.mileage_km, config.fleet.km_per_day)
             res = result.dates[plan.date.isoformat()]
-            out.append(record_result(db, _key(config), plan.date, res.to_dict(), res.run_dir, mileage_km=km,
+            data = res.to_dict()
+            new = not is_recorded(db, res.run_dir, str(data.get("run_id") or ""))   # a resumed monitor
+            out.append(record_result(db, _key(config), plan.date, data, res.run_dir, mileage_km=km,
                                      kind="monitor-date", acceptable=acceptable,
-                                     indicators=_indicators(plan.config, log)))
+                                     indicators=_indicators(plan.config, log) if new else ()))
         log(f"recorded {len(out)} dates of {config.fleet.trainset} in the monitoring database")
         return out
     finally:

@@ -73,6 +73,16 @@ class Database:
         with self.sessions() as session, session.begin():
             yield session
 
+    @contextlib.contextmanager
+    def read(self) -> Iterator[Session]:
+        """A session for reading: on SQLite a deferred transaction, which does not queue for the write lock."""
+        with self.sessions() as session:
+            session.connection(execution_options={"suspid_read": True})
+            try:
+                yield session
+            finally:
+                session.rollback()
+
     def write(self, work: Callable[[Session], T], *, attempts: int = 20) -> T:
         """Run ``work(session)`` in one write transaction, retried when another writer holds the lock.
 
@@ -105,7 +115,8 @@ def _sqlite_pragmas(engine: Engine) -> None:
 
     @event.listens_for(engine, "begin")
     def _begin(connection):  # noqa: ANN001
-        connection.exec_driver_sql("BEGIN IMMEDIATE")
+        read = connection.get_execution_options().get("suspid_read", False)
+        connection.exec_driver_sql("BEGIN" if read else "BEGIN IMMEDIATE")
 
 
 @contextlib.contextmanager

@@ -23,7 +23,7 @@ def overview(db: Database, *, fleet: str | None = None, trainset: str | None = N
 
     Filters keep the rows of one fleet, trainset, element group (or its kind) or latest verdict.
     """
-    with db.session() as s:
+    with db.read() as s:
         q = select(Run, ElementValue).join(ElementValue).order_by(Run.date, Run.id)
         if fleet:
             q = q.where(Run.fleet == fleet)
@@ -51,13 +51,13 @@ def overview(db: Database, *, fleet: str | None = None, trainset: str | None = N
 
 
 def trainsets(db: Database) -> list[str]:
-    with db.session() as s:
+    with db.read() as s:
         return sorted(set(s.scalars(select(Run.trainset))))
 
 
 def history(db: Database, trainset: str, *, fleet: str | None = None) -> list[dict[str, Any]]:
     """Every element value of a trainset, in date order (one row per run and element group)."""
-    with db.session() as s:
+    with db.read() as s:
         q = select(Run, ElementValue).join(ElementValue).where(Run.trainset == trainset)
         if fleet:
             q = q.where(Run.fleet == fleet)
@@ -72,7 +72,7 @@ def history(db: Database, trainset: str, *, fleet: str | None = None) -> list[di
 def indicators(db: Database, trainset: str | None = None, run_id: int | None = None,
                per_run: bool = True) -> list[dict[str, Any]]:
     """Indicator values (the run's own when ``per_run``, else every segment's too), in date order."""
-    with db.session() as s:
+    with db.read() as s:
         q = select(Run, Indicator).join(Indicator)
         if trainset:
             q = q.where(Run.trainset == trainset)
@@ -112,7 +112,7 @@ def trends(db: Database, trainset: str, *, fleet: str | None = None) -> list[tup
 
 def alarms(db: Database, *, state: str | None = None, trainset: str | None = None) -> list[dict[str, Any]]:
     """Alarms (``raised`` or ``cleared`` with ``state``), newest first."""
-    with db.session() as s:
+    with db.read() as s:
         q = select(Alarm)
         if state:
             q = q.where(Alarm.state == state)
@@ -127,7 +127,7 @@ def alarms(db: Database, *, state: str | None = None, trainset: str | None = Non
 
 def audit(db: Database, limit: int = 200) -> list[dict[str, Any]]:
     """The newest audit entries."""
-    with db.session() as s:
+    with db.read() as s:
         return [{"id": e.id, "at": e.at.isoformat(timespec="seconds"), "actor": e.actor, "action": e.action,
                  "alarm_id": e.alarm_id, "detail": e.detail}
                 for e in s.scalars(select(AuditEntry).order_by(AuditEntry.id.desc()).limit(limit))]
@@ -135,7 +135,7 @@ def audit(db: Database, limit: int = 200) -> list[dict[str, Any]]:
 
 def run_info(db: Database, run_id: int) -> dict[str, Any] | None:
     """One run: its keys, paths and element values (None when there is no such run)."""
-    with db.session() as s:
+    with db.read() as s:
         r = s.get(Run, run_id)
         if r is None:
             return None
@@ -149,7 +149,7 @@ def run_info(db: Database, run_id: int) -> dict[str, Any] | None:
 
 
 def count_runs(db: Database) -> int:
-    with db.session() as s:
+    with db.read() as s:
         return len(s.scalars(select(Run.id)).all())
 
 

@@ -141,6 +141,13 @@ def record_result(db: Database, key: VehicleKey, date: dt.date, result: Mapping[
     return db.write(work)
 
 
+def is_recorded(db: Database, run_dir: Path, config_hash: str) -> bool:
+    """Whether the run of ``run_dir`` with ``config_hash`` is in the database (its indicators need no computing)."""
+    with db.session() as session:
+        return session.scalar(select(Run.id).where(Run.run_dir == str(Path(run_dir).resolve()),
+                                                   Run.config_hash == str(config_hash))) is not None
+
+
 def _read_json(path: Path) -> dict[str, Any]:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -177,17 +184,20 @@ def import_folders(db: Database, folders: Sequence[Path], key: VehicleKey, *, da
             for d in dates:
                 run_dir = folder / "dates" / d.isoformat()
                 log(f"{key.trainset}: {run_dir}")
+                result = _read_json(run_dir / "result.json")
+                new = indicators and not is_recorded(db, run_dir, str(result.get("run_id") or ""))
                 out.runs.append(record_result(
-                    db, key, d, _read_json(run_dir / "result.json"), run_dir, kind="monitor-date",
+                    db, key, d, result, run_dir, kind="monitor-date",
                     mileage_km=mileage_at(d, dates[0], mileage_km, km_per_day),
-                    acceptable=summary.get("acceptable") or {},
-                    indicators=indicators(run_dir) if indicators else ()))
+                    acceptable=summary.get("acceptable") or {}, indicators=indicators(run_dir) if new else ()))
         elif (folder / "result.json").is_file():
             result_path = folder / "result.json"
             d = date or dt.date.fromtimestamp(result_path.stat().st_mtime)
             log(f"{key.trainset}: {folder}")
-            out.runs.append(record_result(db, key, d, _read_json(result_path), folder, kind="run",
-                                          mileage_km=mileage_km, indicators=indicators(folder) if indicators else ()))
+            result = _read_json(result_path)
+            new = indicators and not is_recorded(db, folder, str(result.get("run_id") or ""))
+            out.runs.append(record_result(db, key, d, result, folder, kind="run", mileage_km=mileage_km,
+                                          indicators=indicators(folder) if new else ()))
         else:
             raise DataError(f"{folder}: neither a monitor folder (monitor.json) nor a run folder (result.json)")
     return out
