@@ -76,12 +76,9 @@ class Database:
     @contextlib.contextmanager
     def read(self) -> Iterator[Session]:
         """A session for reading: on SQLite a deferred transaction, which does not queue for the write lock."""
-        with self.sessions() as session:
+        with self.sessions() as session:   # closing ends the transaction and keeps loaded objects readable
             session.connection(execution_options={"suspid_read": True})
-            try:
-                yield session
-            finally:
-                session.rollback()
+            yield session
 
     def write(self, work: Callable[[Session], T], *, attempts: int = 20) -> T:
         """Run ``work(session)`` in one write transaction, retried when another writer holds the lock.
