@@ -36,7 +36,8 @@ except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
 _LAZY = {name: "suspid.api" for name in ("Validation", "diagnose", "identify", "ingest", "load_config", "modes",
-                                          "monitor", "segments", "simulate", "stability", "study", "validate")}
+                                          "monitor", "segments", "simulate", "stability", "study", "validate",
+                                          "indicators", "fleet_import", "fleet_demo", "dashboard")}
 _LAZY["IdentificationResult"] = "suspid.workflows.identify"
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", *_LAZY]

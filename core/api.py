@@ -26,6 +26,8 @@ from suspid.config import Config, build_simulator, identified_bounds, load_confi
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
+from suspid.errors import ConfigError
+from suspid.indicators.recordings import config_indicators
 from suspid.interfaces import TrackSegment
 from suspid.method.spectra import compute_spectra
 from suspid.workflows import diagnose as _diagnose
@@ -51,6 +53,17 @@ def _override_list(overrides: Overrides) -> list[str]:
     if isinstance(overrides, Mapping):
         return override_arguments(overrides)
     return [str(o) for o in overrides]
+
+
+def _fleet():
+    """:mod:`suspid.fleet.api`, which needs the ``fleet`` extra (SQLAlchemy, Alembic): imported when a config
+    records into a monitoring database, so that suspid without the extra runs everything else."""
+    try:
+        from suspid.fleet import api as fleet_api
+    except ImportError as exc:
+        raise ConfigError(f"the monitoring database needs the fleet extra ({exc.name} is missing): "
+                          f"pip install 'suspid[fleet]'") from None
+    return fleet_api
 
 
 def _source(config: ConfigSource) -> str | Path | Mapping[str, Any]:
@@ -99,6 +112,8 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
         _study.study_variants(source, extra, cfg)
     if cfg.monitor is not None:
         _monitor.monitor_plan(source, extra, cfg)
+    if cfg.fleet is not None and cfg.fleet.database is not None:
+        _fleet().check_fleet(cfg)
     return Validation(cfg, n)
 
 
@@ -119,8 +134,11 @@ def identify(config: ConfigSource, overrides: Overrides = None, *, fresh: bool =
     :returns: the typed result; ``result.to_dict()`` equals ``result.json``.
     """
     cfg = validate(config, overrides).config
-    return _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None),
-                         retry_failed=retry_failed, force=force)
+    result = _identify.run(cfg, fresh=fresh, progress=progress, log=log or (lambda s: None),
+                           retry_failed=retry_failed, force=force)
+    if cfg.fleet is not None and cfg.fleet.database is not None:   # the config's monitoring database
+        _fleet().record_identification(cfg, result, log=log or (lambda s: None))
+    return result
 
 
 def study(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
@@ -142,8 +160,12 @@ def monitor(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = 
     :returns: the monitor folder, the per-date rows and the alerts.
     """
     cfg = validate(config, overrides).config
-    return _monitor.run_monitor(_source(config), _override_list(overrides), cfg, fresh=fresh, progress=progress,
-                                log=log or (lambda s: None))
+    result = _monitor.run_monitor(_source(config), _override_list(overrides), cfg, fresh=fresh, progress=progress,
+                                  log=log or (lambda s: None))
+    if cfg.fleet is not None and cfg.fleet.database is not None:   # every date into the monitoring database
+        plans = _monitor.monitor_plan(_source(config), _override_list(overrides), cfg)[3]
+        _fleet().record_monitor(cfg, plans, result, log=log or (lambda s: None))
+    return result
 
 
 def diagnose(config: ConfigSource, overrides: Overrides = None, *, fresh: bool = False, progress: bool = False,
@@ -229,3 +251,54 @@ def ingest(ingest_file: str | Path | Mapping[str, Any], overrides: Overrides = N
     :raises suspid.errors.SuspidError: a config or data problem, in one line.
     """
     return _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))
+
+
+def fleet_import(database: str | Path, folders: Sequence[str | Path], *, fleet: str, trainset: str,
+                 vehicle: str = "car1", date: Any = None, mileage_km: float | None = None,
+                 km_per_day: float | None = None, indicators: bool = True, log: Log | None = None):
+    """Record existing run folders into the monitoring database (``suspid fleet import``).
+
+    :param database: an SQLite path or a database URL (``postgresql://user@host:port/db``).
+    :param folders: ``suspid monitor`` folders (every date) or ``suspid run`` folders.
+    :param date: the date of a run folder (a monitor folder's dates are its own); default: when it was written.
+    :param mileage_km: mileage at that date (at a monitor's first date); ``km_per_day`` for the later dates.
+    :returns: a :class:`suspid.fleet.record.ImportResult` (one row per run, ``created`` False if already there).
+    """
+    return _fleet().import_runs(database, folders, fleet=fleet, trainset=trainset, vehicle=vehicle, date=date,
+                                mileage_km=mileage_km, km_per_day=km_per_day, indicators=indicators,
+                                log=log or (lambda s: None))
+
+
+def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None):
+    """EN 14363 bogie-frame instability and EN 12299 mean comfort of the config's recordings, per segment and
+    per run (``suspid indicators``; ``docs/fleet.md``); stored when the config has a ``fleet.database``.
+
+    :returns: (the list of :class:`suspid.indicators.IndicatorValue`, the database record or None).
+    """
+    cfg = load_config(config, overrides)
+    if cfg.fleet is not None and cfg.fleet.database is not None:
+        return _fleet().run_indicators(cfg, log=log or (lambda s: None))
+    return config_indicators(cfg), None
+
+
+def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ack: bool = False,
+              log: Log | None = None) -> None:
+    """Serve the fleet dashboard over the monitoring database until interrupted (``suspid dashboard``).
+
+    :param host: address to bind; the default serves this machine only.
+    :param allow_ack: let users acknowledge alarms (each acknowledgement is logged and audited).
+    """
+    _fleet()
+    from suspid.dashboard.app import serve   # Flask: the fleet extra, checked just above
+    serve(database, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
+
+
+def fleet_demo(plan: str | Path, *, log: Log | None = None):
+    """Monitor the demo fleet of a fleet plan into its database and check its degrading elements
+    (``suspid fleet demo``; :mod:`suspid.fleet.demo`).
+
+    :returns: a :class:`suspid.fleet.demo.DemoResult` (database URL, output folder, checks).
+    """
+    _fleet()
+    from suspid.fleet.demo import run_demo   # the fleet extra, checked just above
+    return run_demo(plan, log=log or (lambda s: None))

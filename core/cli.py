@@ -229,6 +229,72 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
                   f"report: {r.out_dir / 'ingest.md'}", markup=False, highlight=False)
 
 
+fleet_app = typer.Typer(no_args_is_help=True, help="The fleet's monitoring database (docs/fleet.md).")
+app.add_typer(fleet_app, name="fleet")
+
+
+@fleet_app.command("import")
+def fleet_import(folders: List[Path] = typer.Argument(..., help="monitor or run folders", show_default=False),
+                 db: str = typer.Option(..., "--db", help="SQLite path or database URL (postgresql://...)."),
+                 fleet: str = typer.Option("fleet", "--fleet"),
+                 trainset: str = typer.Option(..., "--trainset"),
+                 vehicle: str = typer.Option("car1", "--vehicle"),
+                 date: Optional[str] = typer.Option(None, "--date", help="date of a run folder (YYYY-MM-DD)."),
+                 mileage_km: Optional[float] = typer.Option(None, "--mileage-km",
+                                                            help="mileage at the (first) date."),
+                 km_per_day: Optional[float] = typer.Option(None, "--km-per-day",
+                                                            help="mileage per day between a monitor's dates."),
+                 no_indicators: bool = typer.Option(False, "--no-indicators", help="Do not compute indicators."),
+                 quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Record existing monitor folders (every date) or run folders into the monitoring database."""
+    import datetime as dt
+    try:
+        day = None if date is None else dt.date.fromisoformat(date)
+    except ValueError:
+        raise ConfigError(f"--date: '{date}' is not a date YYYY-MM-DD") from None
+    out = api.fleet_import(db, folders, fleet=fleet, trainset=trainset, vehicle=vehicle, date=day,
+                           mileage_km=mileage_km, km_per_day=km_per_day, indicators=not no_indicators,
+                           log=_log(quiet))
+    console.print(f"{out.n_created} runs recorded, {len(out.runs) - out.n_created} already there", markup=False)
+
+
+@fleet_app.command("demo")
+def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-demo.yaml).", show_default=False),
+               serve: bool = typer.Option(True, "--serve/--no-serve", help="Start the dashboard afterwards."),
+               port: int = typer.Option(8050, "--port"),
+               quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Monitor a small demo fleet into its database, check its degrading elements, then serve the dashboard."""
+    out = api.fleet_demo(plan, log=_log(quiet))
+    console.print((out.out_dir / "fleet-demo.md").read_text(encoding="utf-8"), markup=False, highlight=False)
+    if serve:
+        api.dashboard(out.database, port=port, log=_log(False))
+
+
+@app.command()
+def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
+    """EN 14363 bogie-frame instability and EN 12299 comfort of the config's recordings, per segment and run."""
+    values, rec = api.indicators(config, set_ or [])
+    table = Table(title="indicators")
+    for col in ("indicator", "segment", "value", "limit", "verdict"):
+        table.add_column(col)
+    for v in values:
+        table.add_row(v.name, v.segment or "[b]run[/b]", f"{v.value:.3g} {v.unit}",
+                      "-" if v.limit is None else f"{v.limit:.3g}", v.verdict)
+    console.print(table)
+    if rec is not None:
+        console.print(f"recorded as run {rec.run_id} in the monitoring database", markup=False)
+
+
+@app.command()
+def dashboard(db: str = typer.Option(..., "--db", help="SQLite path or database URL (postgresql://...)."),
+              host: str = typer.Option("127.0.0.1", "--host", help="Address to bind (default: this machine only)."),
+              port: int = typer.Option(8050, "--port"),
+              allow_ack: bool = typer.Option(False, "--allow-ack", help="Allow acknowledging alarms (logged).")
+              ) -> None:
+    """Serve the fleet dashboard: overview, trainset trends and forecasts, runs, alarms, CSV/JSON export."""
+    api.dashboard(db, host=host, port=port, allow_ack=allow_ack, log=_log(False))
+
+
 def _log(quiet: bool):
     """Progress messages of a command: dimmed lines on the console, none with --quiet."""
     return (lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]"))

@@ -31,6 +31,7 @@ from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_valid
 
 from suspid import registry
 from suspid.errors import ConfigError, UnknownPluginError
+from suspid.fleet.options import FleetSection
 from suspid.infra.seeds import seed_for
 from suspid.method.floor import density_problem
 from suspid.method.identifiability import IdentifiabilityOptions
@@ -74,6 +75,7 @@ class Config(Section):
     limits: dict[str, Limits] = Field(default_factory=dict, description="acceptable domain per identified "
                                       "parameter or element group, for the maintenance verdict")
     output: OutputSection = Field(default_factory=OutputSection)
+    fleet: FleetSection | None = None
 
     # set by load_config, not by the user
     source_file: Path | None = Field(default=None, exclude=True)

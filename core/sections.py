@@ -310,6 +310,8 @@ class ReferenceSection(Section):
 
 class Campaign(Section):
     date: dt.date
+    mileage_km: float | None = Field(default=None, ge=0.0, description="the vehicle's mileage at this date "
+                                     "(recorded with the date in the monitoring database)")
     data: dict[str, Any] = Field(default_factory=dict, description="overrides of the data section at this date")
 
 

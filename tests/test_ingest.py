@@ -569,3 +569,15 @@ def test_hdf5_accelerations_written_straight_to_disk_read_back_and_need_room(tmp
                                         r"about 16 needed\)"):
         files.write_accelerations_h5(recs, tmp_path / "full.h5", in_memory=False)
     assert not (tmp_path / "full.h5").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["acc.h5"]
+
+
+def test_every_ingested_recording_gets_its_indicators(recordings, tmp_path):
+    """ingest writes indicators.json: EN 14363 instability and EN 12299 comfort per segment cut, and the run's."""
+    folder, _ = recordings
+    r = suspid.ingest(folder / "ingest-csv.yaml", out_dir=tmp_path / "out")
+    values = json.loads((r.out_dir / "indicators.json").read_text())["indicators"]
+    for name in ("en14363-instability", "en12299-comfort"):
+        assert {v["segment"] for v in values if v["name"] == name and v["segment"] is not None} == set(r.segments)
+        (run,) = [v for v in values if v["name"] == name and v["segment"] is None]
+        assert run["value"] > 0 and run["verdict"] in ("ok", "warning", "alarm")
+    assert all(v["limit"] == pytest.approx(5.65) for v in values if v["name"] == "en14363-instability")

@@ -33,6 +33,7 @@ from suspid.data.files import (check_response, read_accelerations, read_track, w
                                write_accelerations_h5, write_track_csv, write_track_h5)
 from suspid.data.plausibility import CHECKS
 from suspid.errors import ConfigError, DataError, DataWarning
+from suspid.indicators.recordings import write_indicators
 from suspid.infra.files import write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackSegment
 
@@ -382,5 +383,6 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         figures = _report.figures(opts, rec, al, kept, excluded, stage) if opts.quality.figures else []
         rep["figures"] = [str(p.name) for p in figures]
         _report.write(rep, stage)
+        write_indicators(stage, simulator, segs, resps)   # EN 14363 / EN 12299 of every ingested recording
     return IngestResult(out, track_path, acc_path, al.offset_m, al.peak_ratio, [s.name for s in segs],
                         warnings, rep)

@@ -1,0 +1,1 @@
+"""The fleet dashboard (``suspid dashboard``): a Flask application over the monitoring database."""
