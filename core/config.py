@@ -42,6 +42,7 @@ from suspid.options import Section, against, key_error, raise_validation_error
 from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
+from suspid.elements import check_groups, declared_parameters
 
 
 def _with_seed(options: BaseModel, seed: int) -> BaseModel:
@@ -429,13 +430,18 @@ def build_simulator(config: Config):
 def check_parameters(config: Config, simulator) -> None:
     """Identified parameter names must be the simulator's; lower < upper after defaults."""
     file, lines = config.file, config._lines
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     for group, names in (("parameters", config.parameters), ("data.w_ref", config.data.w_ref)):
+        for name, message in check_groups(simulator, list(names), where=group):   # element groups: kind[tag,...]
+            raise ConfigError(message, file=file, key=f"{group}.{name}",
+                              line=lines.get(tuple(group.split(".")) + (name,)))
         for name in names:
             if name not in known:
                 raise ConfigError(
                     f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
-                    f"known: {', '.join(sorted(known))}",
+                    f"known: {', '.join(sorted(n for n in known if '[' not in n))}"
+                    + (" and element groups kind[tag,...] (see `suspid observability`)" if len(known) > len(
+                        [n for n in known if '[' not in n]) else ""),
                     file=file, key=f"{group}.{name}", line=lines.get(tuple(group.split(".")) + (name,)))
     bounds = identified_bounds(config, simulator)
     for name in config.parameters:
@@ -462,7 +468,7 @@ def check_parameters(config: Config, simulator) -> None:
 def check_nuisance(config: Config, simulator) -> None:
     """``identifiability.model_error.nuisance.parameters`` and ``.calibration.parameters``: the simulator's, not
     identified, low < high in its domain (a calibration range may be null: the simulator's bounds)."""
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     identified = set(config.parameters) or set(simulator.default_parameters())
     me = config.identifiability.model_error
     for section, given in (("nuisance", me.nuisance.parameters), ("calibration", me.calibration.parameters)):
@@ -493,7 +499,7 @@ def identified_bounds(config: Config, simulator) -> dict[str, tuple[float, float
 
     An empty ``parameters:`` section identifies the simulator's default set.
     """
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     names = list(config.parameters) or simulator.default_parameters()
     out = {}
     for name in names:

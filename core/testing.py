@@ -23,6 +23,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
+from suspid.elements import group_parameters
 from suspid.interfaces import (IRREGULARITY_CHANNELS, Executor, Objective, Parameter, Response, Simulator, Surrogate,
                                TrackSegment)
 
@@ -150,6 +151,7 @@ def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
     assert isinstance(sim, DifferentiableSimulator), f"{cls.__name__} must subclass DifferentiableSimulator"
     declared = {p.name: p.nominal for p in sim.parameters()}
     asked = list(names) if names is not None else list(declared)
+    declared |= {p.name: p.nominal for p in group_parameters(sim) if p.name in asked}   # element groups asked for
     offered = sim.differentiable(asked)
     assert isinstance(offered, list) and all(n in asked for n in offered), \
         f"differentiable() must return names among those asked, got {offered}"

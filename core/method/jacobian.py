@@ -37,6 +37,7 @@ from suspid.errors import PluginBugError, SimulatorError, SuspidError
 from suspid.interfaces import DifferentiableSimulator, Executor, Response, Simulator, TrackSegment
 from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
 from suspid.options import parse_options
+from suspid.elements import declared_parameters
 
 __all__ = ["SpectraJacobian", "JacobianTask", "spectra_jacobian", "spectra_derivatives",
            "gauss_newton_information", "linearised_shift", "DEFAULT_REL_STEP"]
@@ -165,7 +166,7 @@ def spectra_jacobian(simulator: Simulator, w: Mapping[str, float], names: Sequen
                           f"or forward and fallback central or forward")
     t0 = time.perf_counter()
     names = list(names)
-    declared = {p.name: p.nominal for p in simulator.parameters()}
+    declared = {p.name: p.nominal for p in declared_parameters(simulator)}
     unknown = [n for n in names if n not in declared]
     if unknown:
         raise SuspidError(f"parameter(s) {', '.join(unknown)} not declared by simulator '{simulator.name}' "

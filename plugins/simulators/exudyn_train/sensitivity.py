@@ -94,7 +94,7 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
     try:
         for name in names:
             x = float(values[name])
-            if name in LINEAR:
+            if name.split("[", 1)[0] in LINEAR:    # an element group (kind[tag,...]) is as linear as its kind
                 h = LINEAR_STEP * abs(x) if x != 0 else LINEAR_STEP
                 model.update({**values, name: x + h}, speed)
                 plus = model.linear_system()

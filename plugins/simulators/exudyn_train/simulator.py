@@ -11,7 +11,9 @@ from pydantic_core import InitErrorDetails
 
 from suspid.options import parse_options
 from suspid.errors import SimulatorError
-from suspid.interfaces import DifferentiableSimulator, Parameter, Response, Simulator, TrackSegment
+from suspid.elements import declared_groups, resolve_group
+from suspid.interfaces import (DifferentiableSimulator, Element, ElementSimulator, Parameter, Response, Simulator,
+                               TrackSegment)
 
 from . import effects as E
 from . import parameters as P
@@ -222,6 +224,16 @@ def validate_effects(value: list[Any]) -> list[dict[str, Any]]:
     return out
 
 
+def _canonical(name: str, groups: dict) -> str | None:
+    """The canonical name of the element group ``name`` (tags in any order, :func:`suspid.elements.resolve_group`),
+    ``None`` when it selects no declared elements."""
+    if name in groups:
+        return name
+    elements = [Element(g.kind, m) for g in groups.values() if not g.tags for m in g.members]
+    g = resolve_group(elements, name)
+    return None if g is None else g.name
+
+
 def _unit(parameter: str) -> str:
     """Unit of an effect parameter from its name's suffix."""
     for suffix, unit in (("_n_per_m", "N/m"), ("_hz", "Hz"), ("_kg", "kg"), ("_deg", "deg"), ("_rad", "rad"),
@@ -231,7 +243,7 @@ def _unit(parameter: str) -> str:
     return "1"
 
 
-class ExudynTrain(Simulator, DifferentiableSimulator):
+class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
     """High-speed car built with exudyn: 7 rigid bodies, suspension, linearised wheel-rail contact.
 
     See :mod:`suspid.plugins.simulators.exudyn_train` for the model and
@@ -304,6 +316,27 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
     def default_parameters(self) -> list[str]:
         return list(P.DEFAULT_IDENTIFIED)
 
+    def elements(self) -> list[Element]:
+        """Every suspension element (:data:`.parameters.ELEMENT_KINDS`, tags of
+        :meth:`.layout.Layout.element_tags`): per axlebox the primary rates, per carbody end and side the
+        secondary springs and dampers, per bogie and side the yaw dampers, per bogie the traction rod and
+        anti-roll bar. The yaw dampers are left out when an effect replaces them or they blow off (one
+        damper law for all of them)."""
+        layout = self.opts.layout
+        replaced = set().union(*(e.replaces for e in self.effects()))
+        out = []
+        for placement, kinds in P.ELEMENT_KINDS.items():
+            if placement == "yaw" and ("yaw_damper" in replaced or self.opts.yaw_damper.blow_off):
+                continue
+            tags = layout.element_tags(placement)
+            out += [Element(kind, t) for kind in kinds for t in tags]
+        return out
+
+    def _groups(self) -> dict:
+        if getattr(self, "_group_cache", None) is None:
+            self._group_cache = declared_groups(self.elements())
+        return self._group_cache
+
     def calibratable(self) -> list[str]:
         """The model parameters the vehicle tables give as assumptions or ranges (:data:`.parameters.CALIBRATABLE`):
         the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity."""
@@ -326,11 +359,14 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         """
         values = self._nominal()
         effect_values = {p.name: p.nominal for p in self._effect_parameters()}
-        unknown = [k for k in w if k not in values and k not in effect_values]
+        groups = self._groups() if any("[" in k for k in w) else {}
+        canonical = {k: _canonical(k, groups) for k in w if "[" in k}
+        unknown = [k for k in w if k not in values and k not in effect_values and canonical.get(k) is None]
         if unknown:
             raise SimulatorError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for exudyn-train; "
                                  f"known: {', '.join(sorted(values) + sorted(effect_values))}")
         values.update({k: float(v) for k, v in w.items() if k in values})
+        values.update({canonical[k]: float(v) for k, v in w.items() if canonical.get(k) is not None})
         problems = P.check_values(values, P.by_name(self.opts.preset))
         effect_values.update({k: float(v) for k, v in w.items() if k in effect_values})
         problems += [f"effect parameter '{k}' = {v!r} must be finite" for k, v in effect_values.items()
@@ -405,7 +441,9 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         (their periodic inputs and parameters): the caller takes finite differences for those."""
         if self.opts.solver != "frequency" or self.opts.effects:
             return []
-        return analytic_parameters(names, {p.name for p in P.parameter_table(self.opts.preset)})
+        table = {p.name for p in P.parameter_table(self.opts.preset)}
+        groups = self._groups() if any("[" in n for n in names) else {}
+        return analytic_parameters(names, table | {n for n in names if _canonical(n, groups) is not None})
 
     def simulate_jacobian(self, w: Mapping[str, float], segments: Sequence[TrackSegment],
                           names: Sequence[str]) -> list[tuple[Response, np.ndarray]]:
@@ -425,6 +463,11 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             return []
         self._check_segments(segments)
         values = self.values(w)
+        groups = self._groups() if any("[" in n for n in names) else {}
+        # a group not in w is differentiated at its elements' value (its kind's, or a wider group's), that
+        # group alone added to the values: a kind asked with it keeps acting on its other elements
+        at = {n: {**values, n: self._element_value(values, groups[_canonical(n, groups)])}
+              for n in names if "[" in n and n not in values}
         varying = [s.name for s in segments if not is_constant_speed(s)]
         if varying:
             raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
@@ -443,7 +486,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
                 raise SimulatorError("exudyn-train: the eigenvectors of the linear model are ill-conditioned "
                                      f"at {speed * 3.6:.1f} km/h; its derivatives need finite differences")
             try:
-                derivatives = matrix_derivatives(model, values, speed, names, base)
+                derivatives = [d for n in names for d in matrix_derivatives(model, at.get(n, values), speed, [n], base)]
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: {exc}") from exc
             group = [segments[i] for i in idx]
@@ -452,6 +495,12 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             for i, r, g in zip(idx, records, grads):
                 out[i] = (r, g)
         return out  # type: ignore[return-value]
+
+    @staticmethod
+    def _element_value(values: dict[str, float], group) -> float:
+        """The value the first element of ``group`` has in ``values``."""
+        placement = next(pl for pl, kinds in P.ELEMENT_KINDS.items() if group.kind in kinds)
+        return float(P.element_view(values, P.ELEMENT_KINDS[placement], group.members[0])[group.kind])
 
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
