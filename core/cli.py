@@ -156,6 +156,19 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
 
 @app.command()
+def observability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+                  quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Which element groups the sensors separate, which only as a sum, and which extra channel would help.
+
+    Writes observability.json in the run directory (the config's localisation: section sets the kinds,
+    the change judged and the χ² threshold).
+    """
+    out = api.observability(config, set_ or [], log=_log(quiet))
+    console.print(out.table(), markup=False, highlight=False)
+    console.print(f"wrote {out.path}")
+
+
+@app.command()
 def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           speed_kmh: Optional[float] = typer.Option(None, "--speed-kmh", help="Speed (default: the simulator's)."),
           out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),

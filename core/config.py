@@ -43,6 +43,7 @@ from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, Execu
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
 from suspid.elements import check_groups, declared_parameters
+from suspid.method.localisation import LocalisationOptions
 
 
 def _with_seed(options: BaseModel, seed: int) -> BaseModel:
@@ -72,6 +73,7 @@ class Config(Section):
     study: StudyOptions | None = None
     monitor: MonitorOptions | None = None
     diagnose: DiagnoseOptions = Field(default_factory=DiagnoseOptions)
+    localisation: LocalisationOptions = Field(default_factory=LocalisationOptions)
     output: OutputSection = Field(default_factory=OutputSection)
 
     # set by load_config, not by the user

@@ -255,6 +255,20 @@ class ElementSimulator(ABC):
     def elements(self) -> list[Element]:
         """Every element, each kind among :meth:`Simulator.parameters`' names, tags unique within a kind."""
 
+    def candidate_channels(self) -> list[str]:
+        """Channels the simulator could output besides :meth:`Simulator.channels` (an accelerometer elsewhere):
+        what a sensor-placement advice chooses from (:func:`suspid.workflows.elements.observability`).
+        Default: none."""
+        return []
+
+    def with_channels(self, channels: Sequence[str]) -> "Simulator":
+        """A simulator like this one whose outputs are its channels followed by ``channels`` (names from
+        :meth:`candidate_channels`).
+
+        :raises NotImplementedError: the simulator offers no extra channel (the default).
+        """
+        raise NotImplementedError(f"{type(self).__name__} offers no extra channel")
+
 
 class Objective(ABC):
     """Ψ_k: a per-channel comparison of measured and modelled spectra (eq. 5-8).

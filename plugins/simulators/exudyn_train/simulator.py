@@ -18,7 +18,7 @@ from suspid.interfaces import (DifferentiableSimulator, Element, ElementSimulato
 from . import effects as E
 from . import parameters as P
 from .layout import layout_of
-from .model import TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
+from .model import FLOOR_HEIGHT, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
@@ -331,6 +331,51 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
             tags = layout.element_tags(placement)
             out += [Element(kind, t) for kind in kinds for t in tags]
         return out
+
+    def candidate_sensors(self) -> list[Sensor]:
+        """Accelerometers a sensor-placement advice may add (:meth:`candidate_channels`): on each carbody above
+        each of its pivots, left and right (floor level, y = ±b_sec), vertical and longitudinal; on each bogie
+        frame left and right (±b_yaw) vertical and longitudinal, and lateral over its leading and trailing
+        wheelset; on each wheelset's axleboxes (±b_prim) vertical."""
+        v = self._nominal()
+        layout = self.opts.layout
+        z = FLOOR_HEIGHT - v["h_car"]
+        out = []
+        for car in layout.carbodies:
+            for where, x in (("front", v["a_bogie"]), ("rear", -v["a_bogie"])):
+                for side, y in (("left", v["b_sec"]), ("right", -v["b_sec"])):
+                    for d in ("vertical", "longitudinal"):
+                        out.append(Sensor(f"{car}_{where}_{side}_{d}", car, d, (x, y, z)))
+        for bogie in layout.bogies:
+            for side, y in (("left", v["b_yaw"]), ("right", -v["b_yaw"])):
+                for d in ("vertical", "longitudinal"):
+                    out.append(Sensor(f"{bogie}_{side}_{d}", bogie, d, (0.0, y, 0.0)))
+            for where, x in (("leading", v["a_ws"]), ("trailing", -v["a_ws"])):
+                out.append(Sensor(f"{bogie}_{where}_lateral", bogie, "lateral", (x, 0.0, 0.0)))
+        for ws in layout.wheelsets:
+            for side, y in (("left", v["b_prim"]), ("right", -v["b_prim"])):
+                out.append(Sensor(f"{ws}_{side}_vertical", ws, "vertical", (0.0, y, 0.0)))
+        have = set(self.channels())
+        return [s for s in out if s.name not in have]
+
+    def candidate_channels(self) -> list[str]:
+        return [s.name for s in self.candidate_sensors()]
+
+    def with_channels(self, channels: Sequence[str]) -> "ExudynTrain":
+        """This simulator with the candidate ``channels`` added after its own (:meth:`candidate_sensors`).
+
+        :raises SimulatorError: a name that is not a candidate channel.
+        """
+        by_name = {s.name: s for s in self.candidate_sensors()}
+        unknown = [c for c in channels if c not in by_name]
+        if unknown:
+            raise SimulatorError(f"exudyn-train: unknown candidate channel(s) {', '.join(unknown)} "
+                                 f"(candidates: {', '.join(by_name)})")
+        current = [{"name": s.name, "body": s.body, "direction": s.direction, "position": list(s.position)}
+                   for s in self.sensors()]
+        extra = [{"name": c, "body": by_name[c].body, "direction": by_name[c].direction,
+                  "position": list(by_name[c].position)} for c in channels]
+        return type(self)(**{**self.options, "sensors": current + extra})
 
     def _groups(self) -> dict:
         if getattr(self, "_group_cache", None) is None:

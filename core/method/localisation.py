@@ -1,0 +1,217 @@
+"""Observability of element groups and localisation of a change to the element group(s) that explain it.
+
+Both read the model through the Jacobian of its mean spectra with respect to
+the *logarithm* of each finest element group's value (one element each):
+``J (n_channels, n_freqs, n_g)`` in dB per unit of ln(value), and the variance
+``var (n_channels, n_freqs)`` dB² of the observed change of the mean spectra
+between two dates (the measurement date against the reference date, where
+w = w0: :func:`change_statistics`).
+
+**Fisher information and separability.** With independent cells,
+F = Jᵀ diag(1/var) J ``(n_g, n_g)``. A change of relative size ``change`` of
+element i (θ_i = ln(1 - change)) is told apart from the best-fitting change of
+element j when the χ² the fit of j leaves, θ_i² (F_ii - F_ij² / F_jj), exceeds
+``separation_chi2``; i and j are *separable* when that holds both ways.
+Elements of one kind that are not separable form a cluster (connected
+components): the cluster is the finest level the sensors resolve, identifiable
+only through the sum of its members' changes (a left and a right yaw damper of
+one bogie act on the carbody and bogie through their sum in a linear model).
+A cluster is *detectable* when a change of its members together gives
+θ² uᵀ F u >= ``separation_chi2`` (u the cluster's indicator).
+
+**Localisation.** Each cluster c is a hypothesis "the elements of c deviate
+together by θ": fitted by weighted least squares to the observed change Δ,
+θ_c = (u_cᵀ Jᵀ W Δ) / (u_cᵀ F u_c), χ²_c = Σ W (Δ - J u_c θ_c)², then refined by
+Gauss-Newton on simulations by the caller. Its evidence against "nothing
+changed" is the Bayesian information criterion's difference
+(χ²_0 - χ²_c) / s² - ln(n_cells), with s² = max(1, χ²_c / (n_cells - 1)) the
+reduced χ² of the fit (model error and correlated cells widen the noise, never
+narrow it): above ``min_evidence`` the best cluster is named, with every
+hypothesis within ``near`` of it as an alternative that fits nearly as well.
+Evidences of about 10 and more are "very strong" on Kass and Raftery's scale
+(Bayes factors, JASA 90 (1995) 773-795), the default.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+from pydantic import Field
+
+from suspid.options import Section
+
+__all__ = ["LocalisationOptions", "Hypothesis", "HypothesisFit", "fisher_information", "separability",
+           "clusters", "fit_hypotheses", "change_statistics", "fisher_information_unbiased"]
+
+
+class LocalisationOptions(Section):
+    """The ``localisation:`` section: observability of element groups and localisation of a change."""
+
+    enabled: bool | str = Field(
+        default="auto", description="localise after an identification: true, false or 'auto' (when an identified "
+        "kind with declared elements moved out of its nominal value by more than its interval)")
+    kinds: list[str] | None = Field(default=None, description="kinds whose elements are hypotheses (default: the "
+                                    "identified parameters' kinds that have declared elements)")
+    change: float = Field(default=0.3, gt=0.0, lt=1.0, description="relative change at which separability is "
+                          "judged (0.3: an element at 70 % of its nominal value)")
+    separation_chi2: float = Field(default=10.8, gt=0.0, description="χ² by which a change of one element must fit "
+                                   "worse as another element's to be told apart (10.8: 1 dof, 0.1 %)")
+    min_evidence: float = Field(default=10.0, ge=0.0, description="evidence (BIC difference against no change) to "
+                                "name a group")
+    near: float = Field(default=6.0, ge=0.0, description="alternatives: hypotheses within this evidence of the best")
+    n_segments: int = Field(default=8, ge=2, description="measurement-date segments the Jacobians are computed on (their "
+                            "spread removes the track realisations' part from the Fisher information)")
+    refine_top: int = Field(default=3, ge=1, description="hypotheses refined by Gauss-Newton on simulations")
+    gauss_newton_steps: int = Field(default=3, ge=0, le=10, description="Gauss-Newton steps of each refinement")
+    floor_db: float = Field(default=0.05, gt=0.0, description="least standard deviation of a cell's change, dB")
+
+
+def change_statistics(residual_mes: np.ndarray, residual_ref: np.ndarray, floor_db: float = 0.05
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The observed change Δ and its variance from per-segment residuals (measured minus model at w0).
+
+    :param residual_mes: ``(v, n_channels, n_freqs)`` dB, measurement date.
+    :param residual_ref: ``(v0, n_channels, n_freqs)`` dB, reference date (w = w0).
+    :returns: ``Δ (n_channels, n_freqs)`` dB: the mean residual's change; ``var`` dB², the variance of that
+        mean (segment spread over v on each date), at least ``floor_db``².
+    """
+    v, v0 = residual_mes.shape[0], residual_ref.shape[0]
+    delta = residual_mes.mean(axis=0) - residual_ref.mean(axis=0)
+    s_mes = residual_mes.var(axis=0, ddof=1) if v > 1 else np.zeros_like(delta)
+    s_ref = residual_ref.var(axis=0, ddof=1) if v0 > 1 else np.zeros_like(delta)
+    var = np.maximum(s_mes / v + s_ref / v0, floor_db ** 2)
+    return delta, var
+
+
+def fisher_information(J: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """F = Jᵀ diag(1/var) J ``(n_g, n_g)`` from ``J (n_channels, n_freqs, n_g)`` and ``var (n_channels, n_freqs)``."""
+    A = J.reshape(-1, J.shape[-1]) / np.sqrt(var.reshape(-1))[:, None]
+    return A.T @ A
+
+
+def fisher_information_unbiased(J_segments: np.ndarray, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fisher information of the *expected* spectra from per-segment Jacobians, and their mean.
+
+    The mean Jacobian over v segments carries each segment's own realisation of the track: a left and a right
+    element of a mirror-symmetric car change the expected spectra of centreline sensors identically (a mirror
+    image of the track is as likely), yet a single segment's spectra differently. E ||J̄ d||² = ||E[J] d||² +
+    dᵀ Cov(J) d / v, so F = J̄ᵀ W J̄ - Σ_cells W Cov_s(J_cell) / v, negative eigenvalues set to 0.
+
+    :param J_segments: ``(v, n_channels, n_freqs, n_g)``; :param var: ``(n_channels, n_freqs)``.
+    :returns: ``F (n_g, n_g)`` and ``J̄ (n_channels, n_freqs, n_g)``.
+    """
+    v = J_segments.shape[0]
+    J = J_segments.mean(axis=0)
+    F = fisher_information(J, var)
+    if v > 1:
+        A = ((J_segments - J) / np.sqrt(var)[None, ..., None]).reshape(v, -1, J.shape[-1])
+        C = np.einsum("sci,scj->ij", A, A) / (v - 1)
+        lam, V = np.linalg.eigh(F - C / v)
+        F = (V * np.maximum(lam, 0.0)) @ V.T
+    return F, J
+
+
+def separability(F: np.ndarray, change: float) -> np.ndarray:
+    """``(n_g, n_g)``: S[i, j] = θ² (F_ii - F_ij² / F_jj), the χ² a change of element i by ``change`` leaves when
+    fitted as a change of j (θ = ln(1 - change)); the diagonal is 0."""
+    theta2 = math.log(1.0 - change) ** 2
+    d = np.diag(F)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        S = theta2 * (d[:, None] - F ** 2 / np.where(d[None, :] > 0, d[None, :], np.inf))
+    np.fill_diagonal(S, 0.0)
+    return np.maximum(S, 0.0)
+
+
+def clusters(S: np.ndarray, kinds: Sequence[str], threshold: float) -> list[list[int]]:
+    """Connected components, within each kind, of "not separable" (min(S_ij, S_ji) < ``threshold``)."""
+    n = len(kinds)
+    parent = list(range(n))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if kinds[i] == kinds[j] and min(S[i, j], S[j, i]) < threshold:
+                parent[find(i)] = find(j)
+    out: dict[int, list[int]] = {}
+    for i in range(n):
+        out.setdefault(find(i), []).append(i)
+    return list(out.values())
+
+
+@dataclass
+class Hypothesis:
+    """"The elements ``members`` (indices of the finest groups) deviate together": one cluster."""
+
+    name: str
+    kind: str
+    members: list[int]
+    nominal: float
+    note: str = ""
+
+
+@dataclass
+class HypothesisFit:
+    """A hypothesis fitted to the observed change.
+
+    :ivar theta: ln(value / nominal) of its elements; :ivar sd: its standard deviation (reduced-χ² scaled).
+    :ivar chi2: χ² of the fit; :ivar evidence: BIC difference against no change (larger: better).
+    """
+
+    hypothesis: Hypothesis
+    theta: float
+    sd: float
+    chi2: float
+    evidence: float
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def value(self) -> float:
+        """SI value of every element of the hypothesis."""
+        return self.hypothesis.nominal * math.exp(self.theta)
+
+    def interval(self, n_sigmas: float = 2.0) -> tuple[float, float]:
+        """SI interval exp(θ ± n sd) times the nominal value."""
+        n = self.hypothesis.nominal
+        return n * math.exp(self.theta - n_sigmas * self.sd), n * math.exp(self.theta + n_sigmas * self.sd)
+
+
+def fit_column(column: np.ndarray, delta: np.ndarray, var: np.ndarray) -> tuple[float, float, float]:
+    """Weighted least squares of ``delta ≈ column θ`` over the cells: ``(θ, sd of θ, χ²)`` (sd unscaled)."""
+    w = 1.0 / var
+    a = float(np.sum(w * column * column))
+    if not a > 0:
+        return 0.0, math.inf, float(np.sum(w * delta * delta))
+    theta = float(np.sum(w * column * delta)) / a
+    chi2 = float(np.sum(w * (delta - column * theta) ** 2))
+    return theta, 1.0 / math.sqrt(a), chi2
+
+
+def evidence(chi2_null: float, chi2: float, n_cells: int) -> tuple[float, float]:
+    """``(evidence, s²)``: BIC difference of a one-parameter fit against no change, χ² scaled by the fit's
+    reduced χ² s² (at least 1)."""
+    s2 = max(1.0, chi2 / max(1, n_cells - 1))
+    return (chi2_null - chi2) / s2 - math.log(n_cells), s2
+
+
+def fit_hypotheses(hypotheses: Sequence[Hypothesis], J: np.ndarray, delta: np.ndarray,
+                   var: np.ndarray) -> list[HypothesisFit]:
+    """Every hypothesis fitted on the linearised model (``J`` per ln value, ``(n_channels, n_freqs, n_g)``),
+    best evidence first."""
+    n_cells = delta.size
+    chi2_null = float(np.sum(delta ** 2 / var))
+    out = []
+    for h in hypotheses:
+        column = J[..., h.members].sum(axis=-1)
+        theta, sd, chi2 = fit_column(column, delta, var)
+        ev, s2 = evidence(chi2_null, chi2, n_cells)
+        out.append(HypothesisFit(h, theta, sd * math.sqrt(s2), chi2, ev, {"chi2_null": chi2_null, "s2": s2,
+                                                                          "method": "linearised"}))
+    return sorted(out, key=lambda f: -f.evidence)

@@ -1,0 +1,386 @@
+"""Which element groups the sensors separate (``suspid observability``) and which one changed (localisation).
+
+Both work on a run's problem (:func:`suspid.workflows.problem.build_problem`:
+the measurement date's spectra and the reference date's, where w = w0) and on
+the Jacobian of the model's spectra with respect to every element of the
+analysed kinds (:func:`suspid.method.jacobian.spectra_jacobian`, analytic where
+the simulator differentiates), at w0 on the first ``localisation.n_segments``
+segments of the measurement date. The statistics are those of
+:mod:`suspid.method.localisation`.
+
+- :func:`observability`: Fisher information over the elements, its rank and
+  conditioning, the clusters of elements the sensors cannot tell apart (only
+  their sum is seen), which clusters a change of ``localisation.change`` would
+  show at all, and a sensor-placement advice: for each channel the simulator
+  could add (:meth:`suspid.interfaces.ElementSimulator.candidate_channels`),
+  which clusters it would split. Writes ``observability.json``.
+- :func:`localise_problem`: the hypotheses "cluster c deviates", fitted on the
+  linearised model, the best ones refined by Gauss-Newton on simulations,
+  ranked by evidence; the rows of the result's ``localisation`` entry.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from suspid.config import Config, build_simulator
+from suspid.elements import declared_groups, finest_groups, kind_of
+from suspid.errors import ConfigError
+from suspid.infra.files import write_json
+from suspid.infra.lock import open_run_dir
+from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
+from suspid.method.jacobian import spectra_jacobian
+from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
+                                        evidence, fisher_information, fisher_information_unbiased, fit_column, fit_hypotheses, separability)
+from suspid.workflows.problem import Problem, _task, build_problem
+
+__all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",
+           "localisation_wanted", "localisation_markdown", "format_observability"]
+
+Log = Callable[[str], None]
+
+
+@dataclass
+class ElementAnalysis:
+    """The element-level linearisation of a problem.
+
+    :ivar groups: ``(n_g,)`` finest group names (one element each); :ivar kinds: their kinds.
+    :ivar nominal: ``(n_g,)`` SI values at w0.
+    :ivar J: ``(n_channels, n_freqs, n_g)`` dB per unit of ln(value), mean over the Jacobian's segments.
+    :ivar delta, var: observed change of the mean residual between the dates and its variance
+        ``(n_channels, n_freqs)`` dB, dB².
+    :ivar F: ``(n_g, n_g)`` Fisher information; :ivar S: separability χ² (:func:`~suspid.method.localisation.separability`).
+    :ivar hypotheses: one per cluster of not separable elements.
+    """
+
+    groups: list[str]
+    kinds: list[str]
+    nominal: np.ndarray
+    J: np.ndarray
+    delta: np.ndarray
+    var: np.ndarray
+    F: np.ndarray
+    S: np.ndarray
+    hypotheses: list[Hypothesis]
+    options: LocalisationOptions
+    segments: list = field(default_factory=list)
+    y0: np.ndarray | None = None
+
+
+def mirror(segment: TrackSegment) -> TrackSegment:
+    """The segment's mirror image about the track's centre line: alignment and cross-level change sign
+    (longitudinal level and gauge do not), curvature and cant too; named ``<name>~mirror``."""
+    irr = np.array(segment.irregularities, dtype=float, copy=True)
+    irr[IRREGULARITY_CHANNELS.index("lateral")] *= -1.0
+    irr[IRREGULARITY_CHANNELS.index("cross_level")] *= -1.0
+    return replace(segment, name=f"{segment.name}~mirror", irregularities=irr,
+                   curvature=None if segment.curvature is None else -np.asarray(segment.curvature),
+                   cant=None if segment.cant is None else -np.asarray(segment.cant))
+
+
+def mirrored_pairs(segments: Sequence[TrackSegment]) -> list[TrackSegment]:
+    """Each segment followed by its :func:`mirror`.
+
+    A track's statistics are the same seen in a mirror, so a left element and its right twin of a
+    mirror-symmetric vehicle change the *expected* spectra of its centreline sensors alike; over one
+    realisation they do not. Averaging each segment's Jacobian with its mirror's removes that realisation's
+    part exactly for centreline sensors (the left twin on a track acts as the right twin on its mirror), and
+    keeps what off-centre sensors really see.
+    """
+    return [s for seg in segments for s in (seg, mirror(seg))]
+
+
+def _pair_means(a: np.ndarray) -> np.ndarray:
+    """``(2 v, ...)`` of :func:`mirrored_pairs` -> ``(v, ...)``: each segment averaged with its mirror."""
+    return 0.5 * (a[0::2] + a[1::2])
+
+
+def _kinds(config: Config, simulator, problem: Problem | None, options: LocalisationOptions) -> list[str]:
+    if not isinstance(simulator, ElementSimulator):
+        raise ConfigError(f"simulator '{simulator.name}' declares no elements: observability and localisation "
+                          f"need element-level parameters", key="localisation")
+    have = list(dict.fromkeys(e.kind for e in simulator.elements()))
+    if options.kinds is not None:
+        bad = [k for k in options.kinds if k not in have]
+        if bad:
+            raise config.error(f"kind(s) {', '.join(bad)} have no declared elements (kinds with elements: "
+                               f"{', '.join(have)})", "localisation.kinds")
+        return list(options.kinds)
+    names = problem.names if problem is not None else list(config.parameters) or simulator.default_parameters()
+    out = list(dict.fromkeys(kind_of(n) for n in names if kind_of(n) in have))
+    if not out:
+        raise config.error(f"no identified parameter has declared elements; name the kinds (kinds with elements: "
+                           f"{', '.join(have)})", "localisation.kinds")
+    return out
+
+
+def _cluster_name(simulator, members: list[str]) -> str:
+    """The declared group whose elements are exactly those of ``members``, else their names joined by ' + '."""
+    groups = declared_groups(simulator.elements())
+    tags = {groups[m].members[0] for m in members}
+    kind = kind_of(members[0])
+    for g in groups.values():
+        if g.kind == kind and set(g.members) == tags:
+            return g.name
+    return " + ".join(members)
+
+
+def _note(names: list[str]) -> str:
+    if len(names) == 1:
+        return ""
+    return f"{len(names)} elements not separable with these sensors ({', '.join(names)}): only their sum is seen"
+
+
+def element_analysis(problem: Problem, options: LocalisationOptions, *, executor=None,
+                     log: Log = lambda s: None) -> ElementAnalysis:
+    """Jacobian over the finest groups, observed change and its variance, Fisher information, clusters."""
+    config, simulator = problem.config, problem.simulator
+    kinds = _kinds(config, simulator, problem, options)
+    finest = finest_groups(simulator.elements(), kinds)
+    names = [g.name for g in finest]
+    gkinds = [g.kind for g in finest]
+    if not problem.reference:
+        raise config.error("observability and localisation compare the measurement date with the reference date: "
+                           "give noise.reference (measured data) or let the experiment simulate it", "noise")
+    segments = mirrored_pairs(problem.segments[:max(1, options.n_segments // 2)])
+    nominal_all = {p.name: p.nominal for p in simulator.parameters()}
+    w0 = {n: float(v) for n, v in problem.w0.items() if "[" not in n} if problem.w0 else {}
+    nominal = np.array([w0.get(k, nominal_all[k]) for k in gkinds])
+    log(f"element Jacobian: {len(names)} elements of {', '.join(kinds)} on {len(segments)} segment(s)")
+    jac = spectra_jacobian(simulator, w0, names, segments, problem.config.spectra, executor=executor)
+    log("model at w0 on the measurement date's segments")
+    y0, _ = _task(simulator, problem.segments, problem.config.spectra)(w0)
+    delta, var = change_statistics(problem.y_mes - y0, problem.reference["y_mes0"] - problem.reference["y_sim0"],
+                                   options.floor_db)
+    F, J = fisher_information_unbiased(_pair_means(jac.jacobian) * nominal, var)   # J: dB per unit ln(value)
+    S = separability(F, options.change)
+    hyps = []
+    for c in clusters(S, gkinds, options.separation_chi2):
+        members = [names[i] for i in c]
+        hyps.append(Hypothesis(_cluster_name(simulator, members), gkinds[c[0]], c, float(nominal[c[0]]),
+                               _note(members)))
+    return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0)
+
+
+# -------------------------------------------------------------------------------------------- observability
+@dataclass
+class ObservabilityResult:
+    """What :func:`observability` found (``observability.json``).
+
+    :ivar groups: finest groups (one element each), in the order of ``fisher``.
+    :ivar fisher: ``(n_g, n_g)`` Fisher information of ln(values); :ivar eigenvalues: ascending.
+    :ivar rank: eigenvalues above ``separation_chi2 / θ²`` (θ = ln(1 - change)): directions a change of that size
+        shows; :ivar condition: largest / smallest eigenvalue (inf when singular).
+    :ivar clusters: rows ``{name, kind, members, separable, detectable, sd_percent, note}``, one per hypothesis.
+    :ivar advice: rows ``{channel, splits: [cluster name], separates: [[a, b]]}``, best first.
+    """
+
+    groups: list[str]
+    fisher: np.ndarray
+    eigenvalues: np.ndarray
+    rank: int
+    condition: float
+    clusters: list[dict[str, Any]]
+    advice: list[dict[str, Any]]
+    options: dict[str, Any]
+    path: Path | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"groups": self.groups, "fisher": self.fisher.tolist(), "eigenvalues": self.eigenvalues.tolist(),
+                "rank": self.rank, "condition": None if not math.isfinite(self.condition) else self.condition,
+                "clusters": self.clusters, "advice": self.advice, "options": self.options}
+
+    def table(self) -> str:
+        """The readable table ``suspid observability`` prints."""
+        return format_observability(self)
+
+
+def _pairs_separated(S: np.ndarray, kinds: Sequence[str], threshold: float) -> set[tuple[int, int]]:
+    return {(i, j) for i in range(len(kinds)) for j in range(i + 1, len(kinds))
+            if kinds[i] == kinds[j] and min(S[i, j], S[j, i]) >= threshold}
+
+
+def observability_of(analysis: ElementAnalysis, simulator, problem: Problem, *, executor=None,
+                     log: Log = lambda s: None) -> ObservabilityResult:
+    """:class:`ObservabilityResult` of an :class:`ElementAnalysis`, with the sensor-placement advice."""
+    o = analysis.options
+    theta2 = math.log(1.0 - o.change) ** 2
+    F = analysis.F
+    ev = np.linalg.eigvalsh(F)
+    rank = int(np.sum(ev * theta2 >= o.separation_chi2))
+    condition = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
+    rows = []
+    for h in analysis.hypotheses:
+        u = np.zeros(len(analysis.groups))
+        u[h.members] = 1.0
+        info = float(u @ F @ u)
+        rows.append({"name": h.name, "kind": h.kind, "members": [analysis.groups[i] for i in h.members],
+                     "separable": len(h.members) == 1, "detectable": bool(info * theta2 >= o.separation_chi2),
+                     "sd_percent": 100.0 / math.sqrt(info) if info > 0 else None, "note": h.note})
+    advice: list[dict[str, Any]] = []
+    candidates = simulator.candidate_channels() if isinstance(simulator, ElementSimulator) else []
+    inseparable = [h for h in analysis.hypotheses if len(h.members) > 1]
+    if candidates and inseparable:
+        log(f"sensor advice: Jacobian of {len(candidates)} candidate channel(s)")
+        extended = simulator.with_channels(candidates)
+        w0 = {n: float(v) for n, v in (problem.w0 or {}).items() if "[" not in n}
+        jac = spectra_jacobian(extended, w0, analysis.groups, analysis.segments, problem.config.spectra,
+                               executor=executor)
+        n_own = analysis.J.shape[0]
+        Jc = _pair_means(jac.jacobian)[:, n_own:] * analysis.nominal     # (v/2, n_candidates, n_freqs, n_g)
+        var_c = np.median(analysis.var, axis=0)            # per frequency: the own channels' median variance
+        base = _pairs_separated(analysis.S, analysis.kinds, o.separation_chi2)
+        for k, channel in enumerate(candidates):
+            Fc = F + fisher_information_unbiased(Jc[:, k:k + 1], var_c[None, :])[0]
+            new = _pairs_separated(separability(Fc, o.change), analysis.kinds, o.separation_chi2) - base
+            if not new:
+                continue
+            splits = [h.name for h in inseparable if any(i in h.members and j in h.members for i, j in new)]
+            advice.append({"channel": channel, "splits": splits,
+                           "separates": [[analysis.groups[i], analysis.groups[j]] for i, j in sorted(new)]})
+        advice.sort(key=lambda a: (-len(a["splits"]), -len(a["separates"]), a["channel"]))
+    return ObservabilityResult(analysis.groups, F, ev, rank, condition, rows, advice, o.model_dump())
+
+
+def format_observability(result: ObservabilityResult) -> str:
+    """A readable table of the clusters and the advice."""
+    lines = [f"{len(result.groups)} elements; Fisher information rank {result.rank} (changes of "
+             f"{100 * result.options['change']:.0f} % detectable), condition number "
+             f"{'inf' if not math.isfinite(result.condition) else f'{result.condition:.3g}'}", "",
+             f"{'group':<28} {'elements':>8} {'separable':>9} {'detectable':>10} {'sd %':>7}  note"]
+    for r in result.clusters:
+        sd = "-" if r["sd_percent"] is None else f"{r['sd_percent']:.2g}"
+        lines.append(f"{r['name']:<28} {len(r['members']):>8} {('yes' if r['separable'] else 'no'):>9} "
+                     f"{('yes' if r['detectable'] else 'no'):>10} {sd:>7}  {r['note']}")
+    lines.append("")
+    if result.advice:
+        lines.append("sensor-placement advice (one extra channel each):")
+        for a in result.advice[:10]:
+            lines.append(f"  {a['channel']}: splits {', '.join(a['splits'])}")
+    elif any(not r["separable"] for r in result.clusters):
+        lines.append("sensor-placement advice: no single extra channel the simulator offers separates these clusters")
+    return "\n".join(lines)
+
+
+def observability(config: Config, *, log: Log = lambda s: None, executor=None) -> ObservabilityResult:
+    """``suspid observability``: the element groups the configured sensors separate, and where to add one.
+
+    Builds the run's problem (both dates; cached in the run directory's ledger), then
+    :func:`element_analysis` and :func:`observability_of`; writes ``observability.json`` in the run directory.
+    """
+    run_dir = config.run_dir()
+    with open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, log=log) as ledger:
+        problem = build_problem(config, ledger, log, executor)
+        analysis = element_analysis(problem, config.localisation, executor=executor, log=log)
+        result = observability_of(analysis, problem.simulator, problem, executor=executor, log=log)
+        result.path = write_json(run_dir / "observability.json", result.to_dict())
+    return result
+
+
+# -------------------------------------------------------------------------------------------- localisation
+def localisation_wanted(config: Config, result: dict[str, Any], simulator) -> bool:
+    """``localisation.enabled``; for 'auto': an identified kind with declared elements whose interval excludes
+    its nominal value."""
+    enabled = config.localisation.enabled
+    if enabled is True or enabled is False:
+        return enabled
+    if not isinstance(simulator, ElementSimulator):
+        return False
+    have = {e.kind for e in simulator.elements()}
+    nominal = {p.name: p.nominal for p in simulator.parameters()}
+    for n in result.get("parameters", []):
+        lo, hi = result.get("interval", {}).get(n, (None, None))
+        if n in have and lo is not None and not lo <= nominal[n] <= hi:
+            return True
+    return False
+
+
+def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, executor=None) -> HypothesisFit:
+    """Gauss-Newton on simulations: the model's change of the mean spectra over the Jacobian's segments with the
+    hypothesis' elements at nominal × e^θ, against the observed change."""
+    h = fit.hypothesis
+    members = [analysis.groups[i] for i in h.members]
+    w0 = {n: float(v) for n, v in (problem.w0 or {}).items() if "[" not in n}
+    base = analysis.y0[:len(analysis.segments)].mean(axis=0)
+    theta = fit.theta
+    chi2_null = float(np.sum(analysis.delta ** 2 / analysis.var))
+    chi2 = fit.chi2
+    sd = fit.sd
+    for _ in range(analysis.options.gauss_newton_steps):
+        w = {**w0, **{m: h.nominal * math.exp(theta) for m in members}}
+        jac = spectra_jacobian(problem.simulator, w, members, analysis.segments, problem.config.spectra,
+                               executor=executor)
+        model = jac.y.mean(axis=0) - base                          # (n_channels, n_freqs) dB
+        column = (jac.jacobian.mean(axis=0) * h.nominal * math.exp(theta)).sum(axis=-1)
+        step, sd_step, _ = fit_column(column, analysis.delta - model, analysis.var)
+        step = float(np.clip(step, -0.5, 0.5))
+        theta += step
+        chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / analysis.var))
+        sd = sd_step
+        if abs(step) < 1e-3:
+            break
+    ev, s2 = evidence(chi2_null, chi2, analysis.delta.size)
+    return HypothesisFit(h, theta, sd * math.sqrt(s2), chi2, ev, {"chi2_null": chi2_null, "s2": s2,
+                                                                "method": "gauss-newton"})
+
+
+def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis: ElementAnalysis | None = None,
+                     executor=None, log: Log = lambda s: None) -> dict[str, Any]:
+    """The localisation entry of a result: ``{"named": bool, "rows": [...], "hypotheses": [...]}``.
+
+    ``rows``: the named group (none when the best evidence is below ``min_evidence``) as
+    ``{group, kind, value, nominal, interval, evidence, alternatives, members, separable, note}``: ``value`` and
+    ``interval`` in SI units (2 sd), ``alternatives`` the hypotheses within ``near`` of its evidence
+    (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
+    """
+    analysis = analysis or element_analysis(problem, options, executor=executor, log=log)
+    fits = fit_hypotheses(analysis.hypotheses, analysis.J, analysis.delta, analysis.var)
+    log(f"localisation: {len(fits)} hypotheses, refining the best {min(options.refine_top, len(fits))}")
+    refined = [_refine(f, analysis, problem, executor=executor) for f in fits[:options.refine_top]]
+    fits = sorted(refined, key=lambda f: -f.evidence) + fits[options.refine_top:]
+    best = fits[0]
+
+    def row(f: HypothesisFit) -> dict[str, Any]:
+        return {"group": f.hypothesis.name, "kind": f.hypothesis.kind, "value": f.value,
+                "nominal": f.hypothesis.nominal, "interval": list(f.interval()), "evidence": f.evidence,
+                "members": [analysis.groups[i] for i in f.hypothesis.members],
+                "separable": len(f.hypothesis.members) == 1, "note": f.hypothesis.note,
+                "method": f.details.get("method")}
+
+    named = best.evidence >= options.min_evidence
+    rows = []
+    if named:
+        r = row(best)
+        r["alternatives"] = [{"group": f.hypothesis.name, "value": f.value, "evidence": f.evidence}
+                             for f in fits[1:] if f.evidence >= best.evidence - options.near]
+        rows.append(r)
+    return {"named": bool(named), "rows": rows, "hypotheses": [row(f) for f in fits],
+            "options": options.model_dump()}
+
+
+def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = None) -> str:
+    """The short report.md section of a localisation entry."""
+    units = units or {}
+    lines = ["## Localisation: which element group changed", ""]
+    if not entry["rows"]:
+        best = entry["hypotheses"][0] if entry["hypotheses"] else None
+        lines.append("No element group is named: no hypothesis reaches the evidence "
+                     f"{entry['options']['min_evidence']:g}"
+                     + (f" (best: {best['group']}, evidence {best['evidence']:.1f})." if best else "."))
+        return "\n".join(lines) + "\n"
+    for r in entry["rows"]:
+        u = units.get(r["kind"], "")
+        change = 100.0 * (r["value"] / r["nominal"] - 1.0)
+        lo, hi = r["interval"]
+        lines.append(f"- **{r['group']}**: {r['value']:.4g} {u} ({change:+.0f} % of nominal {r['nominal']:.4g}; "
+                     f"interval {lo:.4g} to {hi:.4g}), evidence {r['evidence']:.1f}"
+                     + (f". {r['note']}." if r["note"] else "."))
+        if r["alternatives"]:
+            lines.append("  Fit nearly as well: " + ", ".join(
+                f"{a['group']} ({a['value']:.4g} {u}, evidence {a['evidence']:.1f})" for a in r["alternatives"]))
+    return "\n".join(lines) + "\n"
