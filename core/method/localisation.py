@@ -19,6 +19,11 @@ one bogie act on the carbody and bogie through their sum in a linear model).
 A cluster is *detectable* when a change of its members together gives
 θ² uᵀ F u >= ``separation_chi2`` (u the cluster's indicator).
 
+A flat gain per channel (a calibration drift between the dates, the segments'
+own gains) is fitted with every hypothesis and with the null when
+``channel_gains`` is on (:func:`without_channel_gains`: Δ and J less their
+weighted mean over each channel's frequencies).
+
 **Localisation.** Each cluster c is a hypothesis "the elements of c deviate
 together by θ": fitted by weighted least squares to the observed change Δ,
 θ_c = (u_cᵀ Jᵀ W Δ) / (u_cᵀ F u_c), χ²_c = Σ W (Δ - J u_c θ_c)², then refined by
@@ -44,7 +49,8 @@ from pydantic import Field
 from suspid.options import Section
 
 __all__ = ["LocalisationOptions", "Hypothesis", "HypothesisFit", "fisher_information", "separability",
-           "clusters", "fit_hypotheses", "change_statistics", "fisher_information_unbiased"]
+           "clusters", "fit_hypotheses", "change_statistics", "fisher_information_unbiased",
+           "without_channel_gains", "sandwich_sd"]
 
 
 class LocalisationOptions(Section):
@@ -67,6 +73,8 @@ class LocalisationOptions(Section):
     refine_top: int = Field(default=3, ge=1, description="hypotheses refined by Gauss-Newton on simulations")
     gauss_newton_steps: int = Field(default=3, ge=0, le=10, description="Gauss-Newton steps of each refinement")
     floor_db: float = Field(default=0.05, gt=0.0, description="least standard deviation of a cell's change, dB")
+    channel_gains: bool = Field(default=True, description="fit a flat gain per channel with every hypothesis (and "
+                                "the null): a calibration drift or segment gains are not taken for a change")
 
 
 def change_statistics(residual_mes: np.ndarray, residual_ref: np.ndarray, floor_db: float = 0.05
@@ -84,6 +92,13 @@ def change_statistics(residual_mes: np.ndarray, residual_ref: np.ndarray, floor_
     s_ref = residual_ref.var(axis=0, ddof=1) if v0 > 1 else np.zeros_like(delta)
     var = np.maximum(s_mes / v + s_ref / v0, floor_db ** 2)
     return delta, var
+
+
+def without_channel_gains(x: np.ndarray, var: np.ndarray) -> np.ndarray:
+    """``x (n_channels, n_freqs, ...)`` less its 1/var-weighted mean over the frequencies of each channel: the
+    part a flat gain per channel (a nuisance parameter fitted with every hypothesis) cannot explain."""
+    w = (1.0 / var).reshape(var.shape + (1,) * (x.ndim - 2))
+    return x - np.sum(w * x, axis=1, keepdims=True) / np.sum(w, axis=1, keepdims=True)
 
 
 def fisher_information(J: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -194,24 +209,43 @@ def fit_column(column: np.ndarray, delta: np.ndarray, var: np.ndarray) -> tuple[
     return theta, 1.0 / math.sqrt(a), chi2
 
 
-def evidence(chi2_null: float, chi2: float, n_cells: int) -> tuple[float, float]:
-    """``(evidence, s²)``: BIC difference of a one-parameter fit against no change, χ² scaled by the fit's
-    reduced χ² s² (at least 1)."""
-    s2 = max(1.0, chi2 / max(1, n_cells - 1))
+def sandwich_sd(column: np.ndarray, var: np.ndarray, residuals: Sequence[np.ndarray]) -> float:
+    """Standard deviation of the weighted least-squares θ from the segments themselves: θ = a · Δ with
+    a = W c / (cᵀ W c), Δ the difference of the dates' mean residuals, so var θ = Σ_dates Var_s(a · r_s) / v.
+    It holds whatever the correlation of the cells (smooth gains per segment, overlapping lines).
+
+    :param residuals: per date ``(v, n_channels, n_freqs)`` dB (at least 2 segments each).
+    """
+    w = column / var
+    a = w / float(np.sum(w * column))
+    total = 0.0
+    for r in residuals:
+        t = np.tensordot(r, a, axes=([1, 2], [0, 1]))
+        total += float(np.var(t, ddof=1)) / len(t) if len(t) > 1 else 0.0
+    return math.sqrt(total)
+
+
+def evidence(chi2_null: float, chi2: float, n_cells: int, inflation: float = 1.0) -> tuple[float, float]:
+    """``(evidence, s²)``: BIC difference of a one-parameter fit against no change, the χ² divided by
+    s² = max(1, reduced χ² of the fit, ``inflation``) (``inflation``: (sandwich sd / model sd)² of θ, the
+    correlation of the cells)."""
+    s2 = max(1.0, chi2 / max(1, n_cells - 1), inflation)
     return (chi2_null - chi2) / s2 - math.log(n_cells), s2
 
 
 def fit_hypotheses(hypotheses: Sequence[Hypothesis], J: np.ndarray, delta: np.ndarray,
-                   var: np.ndarray) -> list[HypothesisFit]:
+                   var: np.ndarray, residuals: Sequence[np.ndarray] = ()) -> list[HypothesisFit]:
     """Every hypothesis fitted on the linearised model (``J`` per ln value, ``(n_channels, n_freqs, n_g)``),
-    best evidence first."""
+    best evidence first; ``residuals`` (per date, :func:`sandwich_sd`) widen sd and evidence for correlated
+    cells."""
     n_cells = delta.size
     chi2_null = float(np.sum(delta ** 2 / var))
     out = []
     for h in hypotheses:
         column = J[..., h.members].sum(axis=-1)
         theta, sd, chi2 = fit_column(column, delta, var)
-        ev, s2 = evidence(chi2_null, chi2, n_cells)
+        sw = sandwich_sd(column, var, residuals) if len(residuals) and math.isfinite(sd) else 0.0
+        ev, s2 = evidence(chi2_null, chi2, n_cells, (sw / sd) ** 2 if sd > 0 and math.isfinite(sd) else 1.0)
         out.append(HypothesisFit(h, theta, sd * math.sqrt(s2), chi2, ev, {"chi2_null": chi2_null, "s2": s2,
                                                                           "method": "linearised"}))
     return sorted(out, key=lambda f: -f.evidence)

@@ -36,7 +36,8 @@ from suspid.infra.lock import open_run_dir
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
 from suspid.method.jacobian import spectra_jacobian
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
-                                        evidence, fisher_information, fisher_information_unbiased, fit_column, fit_hypotheses, separability)
+                                        evidence, fisher_information, fisher_information_unbiased, fit_column,
+                                        without_channel_gains, sandwich_sd, fit_hypotheses, separability)
 from suspid.workflows.problem import Problem, _task, build_problem
 
 __all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",
@@ -70,6 +71,9 @@ class ElementAnalysis:
     options: LocalisationOptions
     segments: list = field(default_factory=list)
     y0: np.ndarray | None = None
+    """``(v, n_channels, n_freqs)`` dB: the model at w0 on every measurement segment."""
+    residuals: list = field(default_factory=list)
+    """Per date ``(v, n_channels, n_freqs)`` dB: measured less model at w0 (channel gains removed when fitted)."""
 
 
 def mirror(segment: TrackSegment) -> TrackSegment:
@@ -98,6 +102,18 @@ def mirrored_pairs(segments: Sequence[TrackSegment]) -> list[TrackSegment]:
 def _pair_means(a: np.ndarray) -> np.ndarray:
     """``(2 v, ...)`` of :func:`mirrored_pairs` -> ``(v, ...)``: each segment averaged with its mirror."""
     return 0.5 * (a[0::2] + a[1::2])
+
+
+def _floor(problem: Problem) -> Callable[[np.ndarray], np.ndarray]:
+    """y_sim -> the spectra the sensors would give (the noise model's sensor floor added,
+    :meth:`suspid.method.floor.NoiseFloor.effective`; identity without a floor)."""
+    f = getattr(problem.noise_model, "floor_", None)
+    return (lambda y: y) if f is None else f.effective
+
+
+def _floor_gain(floor: Callable[[np.ndarray], np.ndarray], y: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """d floor(y) / dy (1 without a floor, less where the sensor floor masks the model), same shape as ``y``."""
+    return (floor(y + h) - floor(y - h)) / (2 * h)
 
 
 def _kinds(config: Config, simulator, problem: Problem | None, options: LocalisationOptions) -> list[str]:
@@ -155,16 +171,25 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
     jac = spectra_jacobian(simulator, w0, names, segments, problem.config.spectra, executor=executor)
     log("model at w0 on the measurement date's segments")
     y0, _ = _task(simulator, problem.segments, problem.config.spectra)(w0)
-    delta, var = change_statistics(problem.y_mes - y0, problem.reference["y_mes0"] - problem.reference["y_sim0"],
-                                   options.floor_db)
-    F, J = fisher_information_unbiased(_pair_means(jac.jacobian) * nominal, var)   # J: dB per unit ln(value)
+    floor = _floor(problem)
+    r_mes = problem.y_mes - floor(y0)
+    r_ref = problem.reference["y_mes0"] - floor(problem.reference["y_sim0"])
+    delta, var = change_statistics(r_mes, r_ref, options.floor_db)
+    dy = _pair_means(jac.jacobian * _floor_gain(floor, jac.y)[..., None]) * nominal   # dB per unit ln(value)
+    if options.channel_gains:
+        delta = without_channel_gains(delta, var)
+        r_mes = np.stack([without_channel_gains(r, var) for r in r_mes])
+        r_ref = np.stack([without_channel_gains(r, var) for r in r_ref])
+        dy = np.stack([without_channel_gains(d, var) for d in dy])
+    F, J = fisher_information_unbiased(dy, var)
     S = separability(F, options.change)
     hyps = []
     for c in clusters(S, gkinds, options.separation_chi2):
         members = [names[i] for i in c]
         hyps.append(Hypothesis(_cluster_name(simulator, members), gkinds[c[0]], c, float(nominal[c[0]]),
                                _note(members)))
-    return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0)
+    return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0,
+                           [r_mes, r_ref])
 
 
 # -------------------------------------------------------------------------------------------- observability
@@ -306,25 +331,35 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
     h = fit.hypothesis
     members = [analysis.groups[i] for i in h.members]
     w0 = {n: float(v) for n, v in (problem.w0 or {}).items() if "[" not in n}
-    base = analysis.y0[:len(analysis.segments)].mean(axis=0)
+    floor = _floor(problem)
+    base = floor(analysis.y0).mean(axis=0)
+    simulate = _task(problem.simulator, problem.segments, problem.config.spectra)
     theta = fit.theta
     chi2_null = float(np.sum(analysis.delta ** 2 / analysis.var))
     chi2 = fit.chi2
     sd = fit.sd
+    sw = 0.0
     for _ in range(analysis.options.gauss_newton_steps):
         w = {**w0, **{m: h.nominal * math.exp(theta) for m in members}}
         jac = spectra_jacobian(problem.simulator, w, members, analysis.segments, problem.config.spectra,
                                executor=executor)
-        model = jac.y.mean(axis=0) - base                          # (n_channels, n_freqs) dB
-        column = (jac.jacobian.mean(axis=0) * h.nominal * math.exp(theta)).sum(axis=-1)
+        # the model's change over every measurement segment (those of the observed change); its slope from the
+        # Jacobian's segments
+        model = floor(simulate(w)[0]).mean(axis=0) - base                 # (n_channels, n_freqs) dB
+        dy = jac.jacobian * _floor_gain(floor, jac.y)[..., None]
+        column = (dy.mean(axis=0) * h.nominal * math.exp(theta)).sum(axis=-1)
+        if analysis.options.channel_gains:
+            model = without_channel_gains(model, analysis.var)
+            column = without_channel_gains(column, analysis.var)
         step, sd_step, _ = fit_column(column, analysis.delta - model, analysis.var)
         step = float(np.clip(step, -0.5, 0.5))
         theta += step
         chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / analysis.var))
         sd = sd_step
+        sw = sandwich_sd(column, analysis.var, analysis.residuals)
         if abs(step) < 1e-3:
             break
-    ev, s2 = evidence(chi2_null, chi2, analysis.delta.size)
+    ev, s2 = evidence(chi2_null, chi2, analysis.delta.size, (sw / sd) ** 2 if sd > 0 else 1.0)
     return HypothesisFit(h, theta, sd * math.sqrt(s2), chi2, ev, {"chi2_null": chi2_null, "s2": s2,
                                                                 "method": "gauss-newton"})
 
@@ -339,7 +374,7 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
     (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
     """
     analysis = analysis or element_analysis(problem, options, executor=executor, log=log)
-    fits = fit_hypotheses(analysis.hypotheses, analysis.J, analysis.delta, analysis.var)
+    fits = fit_hypotheses(analysis.hypotheses, analysis.J, analysis.delta, analysis.var, analysis.residuals)
     log(f"localisation: {len(fits)} hypotheses, refining the best {min(options.refine_top, len(fits))}")
     refined = [_refine(f, analysis, problem, executor=executor) for f in fits[:options.refine_top]]
     fits = sorted(refined, key=lambda f: -f.evidence) + fits[options.refine_top:]
