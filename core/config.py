@@ -43,6 +43,7 @@ from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, Execu
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
 from suspid.elements import check_groups, declared_parameters
+from suspid.interfaces import ElementSimulator
 from suspid.method.localisation import LocalisationOptions
 
 
@@ -445,6 +446,15 @@ def check_parameters(config: Config, simulator) -> None:
                     + (" and element groups kind[tag,...] (see `suspid observability`)" if len(known) > len(
                         [n for n in known if '[' not in n]) else ""),
                     file=file, key=f"{group}.{name}", line=lines.get(tuple(group.split(".")) + (name,)))
+    kinds = config.localisation.kinds
+    if kinds is not None:
+        have = list(dict.fromkeys(e.kind for e in simulator.elements())) if isinstance(simulator, ElementSimulator) \
+            else []
+        bad = [k for k in kinds if k not in have]
+        if bad:
+            raise ConfigError(f"kind(s) {', '.join(bad)} have no elements declared by simulator "
+                              f"'{config.simulator.plugin}' (kinds with elements: {', '.join(have) or 'none'})",
+                              file=file, key="localisation.kinds", line=lines.get(("localisation", "kinds")))
     bounds = identified_bounds(config, simulator)
     for name in config.parameters:
         lower, upper = bounds[name]

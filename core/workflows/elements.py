@@ -184,10 +184,25 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
     F, J = fisher_information_unbiased(dy, var)
     S = separability(F, options.change)
     hyps = []
-    for c in clusters(S, gkinds, options.separation_chi2):
+    found = clusters(S, gkinds, options.separation_chi2)
+    for c in found:
         members = [names[i] for i in c]
         hyps.append(Hypothesis(_cluster_name(simulator, members), gkinds[c[0]], c, float(nominal[c[0]]),
                                _note(members)))
+    # coarser declared groups made of whole clusters (a bogie's elements, a side's, the whole kind): a change of
+    # several clusters together is one hypothesis too
+    index = {(g.kind, g.members[0]): i for i, g in enumerate(finest)}
+    seen = {frozenset(c) for c in found}
+    for g in declared_groups(simulator.elements()).values():
+        if g.kind not in kinds:
+            continue
+        idx = frozenset(index[(g.kind, m)] for m in g.members)
+        if idx in seen or not all(set(c) <= idx or not set(c) & idx for c in found):
+            continue
+        seen.add(idx)
+        parts = [h.name for h in hyps[:len(found)] if set(h.members) <= idx]
+        hyps.append(Hypothesis(g.name, g.kind, sorted(idx), float(nominal[min(idx)]),
+                               f"together: {', '.join(parts)}" if len(parts) > 1 else ""))
     return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0,
                            [r_mes, r_ref])
 
