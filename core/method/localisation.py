@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Literal, Sequence
 
 import numpy as np
 from pydantic import Field
@@ -73,6 +73,9 @@ class LocalisationOptions(Section):
     refine_top: int = Field(default=3, ge=1, description="hypotheses refined by Gauss-Newton on simulations")
     gauss_newton_steps: int = Field(default=3, ge=0, le=10, description="Gauss-Newton steps of each refinement")
     floor_db: float = Field(default=0.05, gt=0.0, description="least standard deviation of a cell's change, dB")
+    direction: Literal["any", "decrease"] = Field(
+        default="any", description="'decrease': only a loss (value below nominal) is named, as wear, a leaking "
+        "damper or a deflated air spring gives; 'any': a rise too")
     channel_gains: bool = Field(default=True, description="fit a flat gain per channel with every hypothesis (and "
                                 "the null): a calibration drift or segment gains are not taken for a change")
 

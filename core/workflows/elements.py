@@ -393,6 +393,8 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
     log(f"localisation: {len(fits)} hypotheses, refining the best {min(options.refine_top, len(fits))}")
     refined = [_refine(f, analysis, problem, executor=executor) for f in fits[:options.refine_top]]
     fits = sorted(refined, key=lambda f: -f.evidence) + fits[options.refine_top:]
+    if options.direction == "decrease":   # a loss only: a fitted rise is listed, never named
+        fits = [f for f in fits if f.theta < 0] + [f for f in fits if f.theta >= 0]
     best = fits[0]
 
     def row(f: HypothesisFit) -> dict[str, Any]:
@@ -402,7 +404,7 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
                 "separable": len(f.hypothesis.members) == 1, "note": f.hypothesis.note,
                 "method": f.details.get("method")}
 
-    named = best.evidence >= options.min_evidence
+    named = best.evidence >= options.min_evidence and (options.direction == "any" or best.theta < 0)
     rows = []
     if named:
         r = row(best)
