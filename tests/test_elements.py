@@ -177,3 +177,16 @@ def test_localisation_on_the_independent_generator(tmp_path):
         out, _, widths = B.run_case(B.config_for(tmp_path / case, ref, 1, 12))
         s = B.score(case, out, widths.get((B.EXPECTED[case][0] or "").split("[")[0]))
         assert s["right"], (case, s)
+
+
+def test_localisation_runs_after_an_identification_when_a_kind_with_elements_moved(tmp_path):
+    from suspid.workflows.elements import localisation_wanted
+
+    sim = ExudynTrain(solver="frequency")
+    cfg = _config(tmp_path, "auto", {})
+    moved = {"parameters": ["c_yaw", "k_sec_z"], "interval": {"c_yaw": [190e3, 230e3], "k_sec_z": [340e3, 360e3]}}
+    still = {"parameters": ["c_yaw"], "interval": {"c_yaw": [280e3, 320e3]}}
+    assert localisation_wanted(cfg, moved, sim) and not localisation_wanted(cfg, still, sim)
+    off = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": False})})
+    on = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": True})})
+    assert not localisation_wanted(off, moved, sim) and localisation_wanted(on, still, sim)

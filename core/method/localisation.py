@@ -12,8 +12,8 @@ F = Jᵀ diag(1/var) J ``(n_g, n_g)``. A change of relative size ``change`` of
 element i (θ_i = ln(1 - change)) is told apart from the best-fitting change of
 element j when the χ² the fit of j leaves, θ_i² (F_ii - F_ij² / F_jj), exceeds
 ``separation_chi2``; i and j are *separable* when that holds both ways.
-Elements of one kind that are not separable form a cluster (connected
-components): the cluster is the finest level the sensors resolve, identifiable
+Elements of one kind that are pairwise not separable form a cluster (complete
+linkage): the cluster is the finest level the sensors resolve, identifiable
 only through the sum of its members' changes (a left and a right yaw damper of
 one bogie act on the carbody and bogie through their sum in a linear model).
 A cluster is *detectable* when a change of its members together gives
@@ -144,24 +144,25 @@ def separability(F: np.ndarray, change: float) -> np.ndarray:
 
 
 def clusters(S: np.ndarray, kinds: Sequence[str], threshold: float) -> list[list[int]]:
-    """Connected components, within each kind, of "not separable" (min(S_ij, S_ji) < ``threshold``)."""
+    """Groups, within each kind, of elements that are pairwise not separable (min(S_ij, S_ji) < ``threshold``).
+
+    Complete linkage: two groups merge, closest pair first, only when every element of one is inseparable from
+    every element of the other, so that a weakly seen element does not chain separable ones together.
+    """
     n = len(kinds)
-    parent = list(range(n))
-
-    def find(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i in range(n):
-        for j in range(i + 1, n):
-            if kinds[i] == kinds[j] and min(S[i, j], S[j, i]) < threshold:
-                parent[find(i)] = find(j)
-    out: dict[int, list[int]] = {}
-    for i in range(n):
-        out.setdefault(find(i), []).append(i)
-    return list(out.values())
+    groups: list[list[int]] = [[i] for i in range(n)]
+    close = lambda i, j: kinds[i] == kinds[j] and min(S[i, j], S[j, i]) < threshold  # noqa: E731
+    order = sorted(((min(S[i, j], S[j, i]), i, j) for i in range(n) for j in range(i + 1, n) if close(i, j)))
+    where = list(range(n))
+    for _, i, j in order:
+        a, b = where[i], where[j]
+        if a == b or not all(close(x, y) for x in groups[a] for y in groups[b]):
+            continue
+        groups[a] += groups[b]
+        for x in groups[b]:
+            where[x] = a
+        groups[b] = []
+    return [sorted(g) for g in groups if g]
 
 
 @dataclass

@@ -74,6 +74,8 @@ class ElementAnalysis:
     """``(v, n_channels, n_freqs)`` dB: the model at w0 on every measurement segment."""
     residuals: list = field(default_factory=list)
     """Per date ``(v, n_channels, n_freqs)`` dB: measured less model at w0 (channel gains removed when fitted)."""
+    n_clusters: int = 0
+    """The first ``n_clusters`` hypotheses are the clusters; the others coarser groups made of whole clusters."""
 
 
 def mirror(segment: TrackSegment) -> TrackSegment:
@@ -143,7 +145,12 @@ def _cluster_name(simulator, members: list[str]) -> str:
     for g in groups.values():
         if g.kind == kind and set(g.members) == tags:
             return g.name
-    return " + ".join(members)
+    parts, left = [], set(tags)      # else the fewest declared groups that make it up, largest first
+    for g in sorted(groups.values(), key=lambda g: -len(g.members)):
+        if g.kind == kind and set(g.members) <= left:
+            parts.append(g.name)
+            left -= set(g.members)
+    return " + ".join(parts)
 
 
 def _note(names: list[str]) -> str:
@@ -184,7 +191,7 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
     F, J = fisher_information_unbiased(dy, var)
     S = separability(F, options.change)
     hyps = []
-    found = clusters(S, gkinds, options.separation_chi2)
+    found = clusters(S, gkinds, options.separation_chi2)   # the first len(found) hypotheses are the clusters
     for c in found:
         members = [names[i] for i in c]
         hyps.append(Hypothesis(_cluster_name(simulator, members), gkinds[c[0]], c, float(nominal[c[0]]),
@@ -204,7 +211,7 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
         hyps.append(Hypothesis(g.name, g.kind, sorted(idx), float(nominal[min(idx)]),
                                f"together: {', '.join(parts)}" if len(parts) > 1 else ""))
     return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0,
-                           [r_mes, r_ref])
+                           [r_mes, r_ref], len(found))
 
 
 # -------------------------------------------------------------------------------------------- observability
@@ -255,7 +262,8 @@ def observability_of(analysis: ElementAnalysis, simulator, problem: Problem, *, 
     rank = int(np.sum(ev * theta2 >= o.separation_chi2))
     condition = float(ev[-1] / ev[0]) if ev[0] > 0 else math.inf
     rows = []
-    for h in analysis.hypotheses:
+    cluster_hyps = analysis.hypotheses[:analysis.n_clusters]
+    for h in cluster_hyps:
         u = np.zeros(len(analysis.groups))
         u[h.members] = 1.0
         info = float(u @ F @ u)
@@ -264,7 +272,7 @@ def observability_of(analysis: ElementAnalysis, simulator, problem: Problem, *, 
                      "sd_percent": 100.0 / math.sqrt(info) if info > 0 else None, "note": h.note})
     advice: list[dict[str, Any]] = []
     candidates = simulator.candidate_channels() if isinstance(simulator, ElementSimulator) else []
-    inseparable = [h for h in analysis.hypotheses if len(h.members) > 1]
+    inseparable = [h for h in cluster_hyps if len(h.members) > 1]
     if candidates and inseparable:
         log(f"sensor advice: Jacobian of {len(candidates)} candidate channel(s)")
         extended = simulator.with_channels(candidates)
