@@ -145,6 +145,9 @@ def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
     as_loss = localise_problem(problem, problem.config.localisation.model_copy(update={"direction": "decrease"}),
                                analysis=analysis)
     assert as_loss["rows"][0]["group"] == "c_yaw[bogie1]"
+    # after an identification in which two kinds moved: each localised with the other's kind-level change fitted
+    both = localise_problem(problem, problem.config.localisation, analysis=analysis, moved=["c_yaw", "k_sec_z"])
+    assert [r["group"] for r in both["rows"]] == ["c_yaw[bogie1]"] and both["moved"] == ["c_yaw", "k_sec_z"]
 
 
 def test_nothing_is_named_when_nothing_changed(tmp_path):

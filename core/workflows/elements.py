@@ -41,7 +41,7 @@ from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationO
 from suspid.workflows.problem import Problem, _task, build_problem
 
 __all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",
-           "localisation_wanted", "localisation_markdown", "format_observability"]
+           "localisation_wanted", "moved_kinds", "with_nuisance", "localisation_markdown", "format_observability"]
 
 Log = Callable[[str], None]
 
@@ -76,6 +76,32 @@ class ElementAnalysis:
     """Per date ``(v, n_channels, n_freqs)`` dB: measured less model at w0 (channel gains removed when fitted)."""
     n_clusters: int = 0
     """The first ``n_clusters`` hypotheses are the clusters; the others coarser groups made of whole clusters."""
+    nuisance: np.ndarray | None = None
+    """``(n_channels, n_freqs, k)`` columns fitted with every hypothesis (kind-level changes of other kinds that
+    moved), already removed from ``delta``, ``J`` and ``residuals`` (:func:`with_nuisance`)."""
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """``x (n_channels, n_freqs)`` less its weighted least-squares fit by the nuisance columns."""
+        if self.nuisance is None:
+            return x
+        N = self.nuisance.reshape(-1, self.nuisance.shape[-1]) / np.sqrt(self.var.reshape(-1))[:, None]
+        y = x.reshape(-1) / np.sqrt(self.var.reshape(-1))
+        coef, *_ = np.linalg.lstsq(N, y, rcond=None)
+        return x - (self.nuisance.reshape(-1, N.shape[1]) @ coef).reshape(x.shape)
+
+
+def with_nuisance(analysis: ElementAnalysis, kinds: Sequence[str]) -> ElementAnalysis:
+    """The analysis with a kind-level change of each of ``kinds`` fitted along with every hypothesis: those
+    kinds' columns (the sum of their elements') removed from the observed change, the Jacobian and the
+    residuals by weighted least squares."""
+    if not kinds:
+        return analysis
+    cols = np.stack([analysis.J[..., [i for i, k in enumerate(analysis.kinds) if k == kind]].sum(axis=-1)
+                     for kind in kinds], axis=-1)
+    out = replace(analysis, nuisance=cols)
+    J = np.stack([out.project(analysis.J[..., i]) for i in range(analysis.J.shape[-1])], axis=-1)
+    residuals = [np.stack([out.project(r) for r in rs]) for rs in analysis.residuals]
+    return replace(out, delta=out.project(analysis.delta), J=J, residuals=residuals)
 
 
 def mirror(segment: TrackSegment) -> TrackSegment:
@@ -331,21 +357,27 @@ def observability(config: Config, *, log: Log = lambda s: None, executor=None) -
 
 
 # -------------------------------------------------------------------------------------------- localisation
-def localisation_wanted(config: Config, result: dict[str, Any], simulator) -> bool:
-    """``localisation.enabled``; for 'auto': an identified kind with declared elements whose interval excludes
-    its nominal value."""
-    enabled = config.localisation.enabled
-    if enabled is True or enabled is False:
-        return enabled
+def moved_kinds(result: dict[str, Any], simulator) -> list[str]:
+    """The identified kinds with declared elements whose interval in ``result`` excludes the nominal value."""
     if not isinstance(simulator, ElementSimulator):
-        return False
+        return []
     have = {e.kind for e in simulator.elements()}
     nominal = {p.name: p.nominal for p in simulator.parameters()}
+    out = []
     for n in result.get("parameters", []):
         lo, hi = result.get("interval", {}).get(n, (None, None))
         if n in have and lo is not None and not lo <= nominal[n] <= hi:
-            return True
-    return False
+            out.append(n)
+    return out
+
+
+def localisation_wanted(config: Config, result: dict[str, Any], simulator) -> bool:
+    """``localisation.enabled``; for 'auto': an identified kind with declared elements whose interval excludes
+    its nominal value (:func:`moved_kinds`)."""
+    enabled = config.localisation.enabled
+    if enabled is True or enabled is False:
+        return enabled
+    return bool(moved_kinds(result, simulator))
 
 
 def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, executor=None) -> HypothesisFit:
@@ -374,6 +406,7 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
         if analysis.options.channel_gains:
             model = without_channel_gains(model, analysis.var)
             column = without_channel_gains(column, analysis.var)
+        model, column = analysis.project(model), analysis.project(column)
         step, sd_step, _ = fit_column(column, analysis.delta - model, analysis.var)
         step = float(np.clip(step, -0.5, 0.5))
         theta += step
@@ -388,7 +421,7 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
 
 
 def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis: ElementAnalysis | None = None,
-                     executor=None, log: Log = lambda s: None) -> dict[str, Any]:
+                     moved: Sequence[str] | None = None, executor=None, log: Log = lambda s: None) -> dict[str, Any]:
     """The localisation entry of a result: ``{"named": bool, "rows": [...], "hypotheses": [...]}``.
 
     ``rows``: the named group (none when the best evidence is below ``min_evidence``) as
@@ -397,30 +430,50 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
     (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
     """
     analysis = analysis or element_analysis(problem, options, executor=executor, log=log)
-    fits = fit_hypotheses(analysis.hypotheses, analysis.J, analysis.delta, analysis.var, analysis.residuals)
+    moved = [k for k in (moved or []) if k in analysis.kinds]
+    rows: list[dict[str, Any]] = []
+    every: list[HypothesisFit] = []
+    for focus in (moved or [None]):
+        # after an identification in which several kinds moved: one kind at a time, the others' kind-level
+        # changes fitted along (nuisance); on request: every hypothesis of every kind against every other
+        part = with_nuisance(analysis, [k for k in moved if k != focus]) if focus else analysis
+        hyps = [h for h in part.hypotheses if focus is None or h.kind == focus]
+        found = _localise_one(problem, options, part, hyps, executor, log)
+        rows += found[0]
+        every += found[1]
+    every.sort(key=lambda f: -f.evidence)
+    return {"named": bool(rows), "rows": rows, "hypotheses": [_row(f, analysis) for f in every],
+            "moved": moved, "options": options.model_dump()}
+
+
+def _row(f: HypothesisFit, analysis: ElementAnalysis) -> dict[str, Any]:
+    return {"group": f.hypothesis.name, "kind": f.hypothesis.kind, "value": f.value,
+            "nominal": f.hypothesis.nominal, "interval": list(f.interval()), "evidence": f.evidence,
+            "members": [analysis.groups[i] for i in f.hypothesis.members],
+            "separable": len(f.hypothesis.members) == 1, "note": f.hypothesis.note,
+            "method": f.details.get("method")}
+
+
+def _localise_one(problem: Problem, options: LocalisationOptions, analysis: ElementAnalysis, hypotheses,
+                  executor, log) -> tuple[list[dict[str, Any]], list[HypothesisFit]]:
+    """The named row (or none) among ``hypotheses`` and every fit, best first."""
+    fits = fit_hypotheses(hypotheses, analysis.J, analysis.delta, analysis.var, analysis.residuals)
     log(f"localisation: {len(fits)} hypotheses, refining the best {min(options.refine_top, len(fits))}")
     refined = [_refine(f, analysis, problem, executor=executor) for f in fits[:options.refine_top]]
     fits = sorted(refined, key=lambda f: -f.evidence) + fits[options.refine_top:]
     if options.direction == "decrease":   # a loss only: a fitted rise is listed, never named
         fits = [f for f in fits if f.theta < 0] + [f for f in fits if f.theta >= 0]
+    if not fits:
+        return [], []
     best = fits[0]
 
-    def row(f: HypothesisFit) -> dict[str, Any]:
-        return {"group": f.hypothesis.name, "kind": f.hypothesis.kind, "value": f.value,
-                "nominal": f.hypothesis.nominal, "interval": list(f.interval()), "evidence": f.evidence,
-                "members": [analysis.groups[i] for i in f.hypothesis.members],
-                "separable": len(f.hypothesis.members) == 1, "note": f.hypothesis.note,
-                "method": f.details.get("method")}
-
     named = best.evidence >= options.min_evidence and (options.direction == "any" or best.theta < 0)
-    rows = []
-    if named:
-        r = row(best)
-        r["alternatives"] = [{"group": f.hypothesis.name, "value": f.value, "evidence": f.evidence}
-                             for f in fits[1:] if f.evidence >= best.evidence - options.near]
-        rows.append(r)
-    return {"named": bool(named), "rows": rows, "hypotheses": [row(f) for f in fits],
-            "options": options.model_dump()}
+    if not named:
+        return [], fits
+    r = _row(best, analysis)
+    r["alternatives"] = [{"group": f.hypothesis.name, "value": f.value, "evidence": f.evidence}
+                         for f in fits[1:] if f.evidence >= best.evidence - options.near]
+    return [r], fits
 
 
 def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = None) -> str:

@@ -46,7 +46,7 @@ from suspid.workflows.analysis import analyse
 from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.gradient import ProblemSpectraModel
-from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem
+from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem, moved_kinds
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import trust_word, write_report
 
@@ -294,7 +294,8 @@ def _localise(config: Config, problem: Problem, result: dict[str, Any], executor
     if not localisation_wanted(config, result, problem.simulator):
         return None
     try:
-        return localise_problem(problem, config.localisation, executor=executor, log=log)
+        return localise_problem(problem, config.localisation, moved=moved_kinds(result, problem.simulator),
+                                executor=executor, log=log)
     except ConfigError as exc:
         if config.localisation.enabled is True:
             raise
