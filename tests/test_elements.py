@@ -187,6 +187,8 @@ def test_localisation_runs_after_an_identification_when_a_kind_with_elements_mov
 
     sim = ExudynTrain(solver="frequency")
     cfg = _config(tmp_path, "auto", {})
+    assert cfg.localisation.enabled is False                       # default: a kind-level run stays as it was
+    cfg = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": "auto"})})
     moved = {"parameters": ["c_yaw", "k_sec_z"], "interval": {"c_yaw": [190e3, 230e3], "k_sec_z": [340e3, 360e3]}}
     still = {"parameters": ["c_yaw"], "interval": {"c_yaw": [280e3, 320e3]}}
     assert localisation_wanted(cfg, moved, sim) and not localisation_wanted(cfg, still, sim)

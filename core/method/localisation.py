@@ -56,9 +56,10 @@ __all__ = ["LocalisationOptions", "Hypothesis", "HypothesisFit", "fisher_informa
 class LocalisationOptions(Section):
     """The ``localisation:`` section: observability of element groups and localisation of a change."""
 
-    enabled: bool | str = Field(
-        default="auto", description="localise after an identification: true, false or 'auto' (when an identified "
-        "kind with declared elements moved out of its nominal value by more than its interval)")
+    enabled: bool | Literal["auto"] = Field(
+        default=False, description="localise after an identification: true, 'auto' (when an identified kind with "
+        "declared elements moved: its interval excludes the nominal value) or false (the default: a kind-level run "
+        "stays as it was, in results and run time)")
     kinds: list[str] | None = Field(default=None, description="kinds whose elements are hypotheses (default: the "
                                     "identified parameters' kinds that have declared elements)")
     change: float = Field(default=0.3, gt=0.0, lt=1.0, description="relative change at which separability is "
