@@ -12,7 +12,7 @@ from suspid.elements import check_groups, declared_groups, declared_parameters, 
 from suspid.errors import ConfigError
 from suspid.infra.lock import open_run_dir
 from suspid.plugins.simulators.exudyn_train.simulator import ExudynTrain
-from suspid.testing import check_differentiable, sample_segments
+from suspid.testing import check_differentiable, check_elements, sample_segments
 from suspid.workflows.elements import (element_analysis, localise_problem, mirror, observability_of)
 from suspid.workflows.problem import build_problem
 
@@ -82,6 +82,11 @@ def test_group_derivatives_are_analytic_and_sum_to_the_kind_derivative():
     errors = check_differentiable(ExudynTrain, {"solver": "frequency"}, names=["c_yaw[bogie1,left]",
                                                                                "c_prim_z[ws3,right]"])
     assert max(errors.values()) < 1e-4
+
+
+def test_conformance_kit_accepts_exudyn_train_elements():
+    check_elements(ExudynTrain, {"solver": "frequency"}, kind="c_sec_y")
+    check_elements(ExudynTrain, {"solver": "frequency", "vehicle": "tgv-articulated"}, kind="k_sec_z")
 
 
 def test_mirror_changes_the_sign_of_alignment_and_cross_level_only():
