@@ -480,6 +480,8 @@ def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = 
     """The short report.md section of a localisation entry."""
     units = units or {}
     lines = ["## Localisation: which element group changed", ""]
+    if entry.get("not_assessed"):
+        return "\n".join(lines + [f"Not assessed: {entry['not_assessed']}"]) + "\n"
     if not entry["rows"]:
         best = entry["hypotheses"][0] if entry["hypotheses"] else None
         lines.append("No element group is named: no hypothesis reaches the evidence "
@@ -491,9 +493,12 @@ def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = 
         change = 100.0 * (r["value"] / r["nominal"] - 1.0)
         lo, hi = r["interval"]
         lines.append(f"- **{r['group']}**: {r['value']:.4g} {u} ({change:+.0f} % of nominal {r['nominal']:.4g}; "
-                     f"interval {lo:.4g} to {hi:.4g}), evidence {r['evidence']:.1f}"
+                     f"statistical interval {lo:.4g} to {hi:.4g}), evidence {r['evidence']:.1f}"
                      + (f". {r['note']}." if r["note"] else "."))
         if r["alternatives"]:
             lines.append("  Fit nearly as well: " + ", ".join(
                 f"{a['group']} ({a['value']:.4g} {u}, evidence {a['evidence']:.1f})" for a in r["alternatives"]))
+    lines += ["", "Intervals: 2 standard deviations of the segments' statistics; they do not include model-form "
+              "error (how differently model and vehicle respond to an element's change): read the value as about, the "
+              "group as the finding (docs/elements.md)."]
     return "\n".join(lines) + "\n"
