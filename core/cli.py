@@ -18,6 +18,7 @@ from typing import List, Optional
 import click
 import typer
 from rich.console import Console
+from rich.markup import escape  # element groups (c_yaw[bogie1]) are not markup
 from rich.table import Table
 
 import suspid
@@ -238,7 +239,7 @@ def _print_result(result: dict, run_dir: Path) -> None:
     style = {"yes": "yes", "no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]"}
     for n in result["parameters"]:
         lo, hi = result["interval"][n]
-        table.add_row(n, f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
+        table.add_row(escape(n), f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
                       f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
                       f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
                       "yes" if result["identifiable"][n] else "[red]no[/red]",
