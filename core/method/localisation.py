@@ -69,8 +69,8 @@ class LocalisationOptions(Section):
     min_evidence: float = Field(default=10.0, ge=0.0, description="evidence (BIC difference against no change) to "
                                 "name a group")
     near: float = Field(default=6.0, ge=0.0, description="alternatives: hypotheses within this evidence of the best")
-    n_segments: int = Field(default=8, ge=2, description="measurement-date segments the Jacobians are computed on (their "
-                            "spread removes the track realisations' part from the Fisher information)")
+    n_segments: int = Field(default=8, ge=2, description="segments the Jacobians are computed on: half of them "
+                            "measurement-date segments, half their mirror images")
     refine_top: int = Field(default=3, ge=1, description="hypotheses refined by Gauss-Newton on simulations")
     gauss_newton_steps: int = Field(default=3, ge=0, le=10, description="Gauss-Newton steps of each refinement")
     floor_db: float = Field(default=0.05, gt=0.0, description="least standard deviation of a cell's change, dB")

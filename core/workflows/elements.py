@@ -28,7 +28,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from suspid.config import Config, build_simulator
+from suspid.config import Config
 from suspid.elements import declared_groups, finest_groups, kind_of
 from suspid.errors import ConfigError
 from suspid.infra.files import write_json
@@ -36,8 +36,8 @@ from suspid.infra.lock import open_run_dir
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
 from suspid.method.jacobian import spectra_jacobian
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
-                                        evidence, fisher_information, fisher_information_unbiased, fit_column,
-                                        without_channel_gains, sandwich_sd, fit_hypotheses, separability)
+                                        evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
+                                        sandwich_sd, separability, without_channel_gains)
 from suspid.workflows.problem import Problem, _task, build_problem
 
 __all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",
@@ -55,7 +55,8 @@ class ElementAnalysis:
     :ivar J: ``(n_channels, n_freqs, n_g)`` dB per unit of ln(value), mean over the Jacobian's segments.
     :ivar delta, var: observed change of the mean residual between the dates and its variance
         ``(n_channels, n_freqs)`` dB, dB².
-    :ivar F: ``(n_g, n_g)`` Fisher information; :ivar S: separability χ² (:func:`~suspid.method.localisation.separability`).
+    :ivar F: ``(n_g, n_g)`` Fisher information.
+    :ivar S: separability χ² (:func:`~suspid.method.localisation.separability`).
     :ivar hypotheses: one per cluster of not separable elements.
     """
 
@@ -243,7 +244,7 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
 # -------------------------------------------------------------------------------------------- observability
 @dataclass
 class ObservabilityResult:
-    """What :func:`observability` found (``observability.json``).
+    """What :func:`observability` found (``observability.json``); ``path`` is that file.
 
     :ivar groups: finest groups (one element each), in the order of ``fisher``.
     :ivar fisher: ``(n_g, n_g)`` Fisher information of ln(values); :ivar eigenvalues: ascending.
