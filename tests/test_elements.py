@@ -137,6 +137,11 @@ def test_default_sensors_cannot_separate_left_and_right_but_bogies_and_an_extra_
     # an accelerometer off the centre line breaks the mirror symmetry: it splits the air springs left/right
     assert any("k_sec_z[bogie1]" in s for c, s in splits.items() if "left" in c or "right" in c)
     assert "rank" in result.table() and "sensor-placement advice" in result.table()
+    import json
+
+    written = api.observability(problem.config)                    # the command's API: observability.json
+    data = json.loads(written.path.read_text())
+    assert {r["name"] for r in data["clusters"]} == set(rows) and data["rank"] == result.rank
 
 
 def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
