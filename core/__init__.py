@@ -22,26 +22,34 @@ Plugin authors import :data:`hookimpl` from here::
         register(MySimulator)
 """
 
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version as _version
 
-import pluggy
-
-PROJECT_NAME = "suspid"
-"""The pluggy project name; it builds both markers and names the entry-point group."""
-
-hookspec = pluggy.HookspecMarker(PROJECT_NAME)
-hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
+# Only the markers are imported eagerly: a plugin's ``from suspid import
+# hookimpl`` costs pluggy, not the workflows (numpy, scipy, GPy). The API is
+# loaded on first use of one of its names (PEP 562).
+from suspid.hookspecs import PROJECT_NAME, hookimpl, hookspec
 
 try:
     __version__ = _version(PROJECT_NAME)
 except PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0+unknown"
 
-# The API comes last: its modules import the markers above.
-from suspid.api import (Validation, diagnose, identify, ingest, load_config, modes, monitor,  # noqa: E402
-                        segments, simulate, stability, study, validate)
-from suspid.workflows.identify import IdentificationResult  # noqa: E402
+_LAZY = {name: "suspid.api" for name in ("Validation", "diagnose", "identify", "ingest", "load_config", "modes",
+                                          "monitor", "segments", "simulate", "stability", "study", "validate")}
+_LAZY["IdentificationResult"] = "suspid.workflows.identify"
 
-__all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", "IdentificationResult", "Validation",
-           "diagnose", "identify", "ingest", "load_config", "modes", "monitor", "segments", "simulate", "stability",
-           "study", "validate"]
+__all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", *_LAZY]
+
+
+def __getattr__(name: str):
+    """The API's names, imported when first asked for (``suspid.identify``)."""
+    if name in _LAZY:
+        value = getattr(import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'suspid' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))

@@ -9,10 +9,12 @@ has none, says that the output folder keeps the previous ingest).
 from __future__ import annotations
 
 import errno
+import importlib.util
 import sqlite3
 import sys
 import warnings
 from pathlib import Path
+from types import ModuleType
 from typing import List, Optional
 
 import click
@@ -22,10 +24,30 @@ from rich.markup import escape  # element groups (c_yaw[bogie1]) are not markup
 from rich.table import Table
 
 import suspid
-from suspid import api, registry
+from suspid import registry
 from suspid.errors import ConfigError, SuspidError
-from suspid.workflows.report import checks_lines, trust_word
-from suspid.workflows.simulate import format_modes, format_stability
+
+
+def _lazy(name: str) -> ModuleType:
+    """The module ``name``, executed on its first attribute access (importlib's ``LazyLoader``).
+
+    The workflows import numpy, scipy, GPy and matplotlib (seconds); a command
+    pays for them when it runs, ``suspid --help`` and ``--version`` do not.
+    """
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+api = _lazy("suspid.api")
+_report = _lazy("suspid.workflows.report")
+_simulate = _lazy("suspid.workflows.simulate")
+_verdict = _lazy("suspid.workflows.verdict")
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Identify train suspension parameters from on-track accelerations.")
@@ -176,7 +198,7 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
     report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6, out_dir=out)
-    console.print(format_modes(report, max_hz), markup=False, highlight=False)
+    console.print(_simulate.format_modes(report, max_hz), markup=False, highlight=False)
     where = out if out is not None else api.load_config(config, set_ or []).run_dir()
     console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")
 
@@ -188,7 +210,7 @@ def stability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
               ) -> None:
     """Linear critical speed of the train model, against conicity and each identified parameter over its bounds."""
     report = api.stability(config, set_ or [], n_points=n_points, out_dir=out)
-    console.print(format_stability(report), markup=False, highlight=False)
+    console.print(_simulate.format_stability(report), markup=False, highlight=False)
 
 
 @app.command()
@@ -234,18 +256,19 @@ def _print_result(result: dict, run_dir: Path) -> None:
         console.width = 200  # keep rows whole when piped
     table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
                         f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
-    for col in ("parameter", "w_opt", "interval", "w_ref", "error %", "identifiable", "trustworthy"):
+    rows = _verdict.rows_of(result)
+    header, cells = _verdict.table(rows, with_reference="w_ref" in result)
+    for col in header:
         table.add_column(col)
-    style = {"yes": "yes", "no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]"}
-    for n in result["parameters"]:
-        lo, hi = result["interval"][n]
-        table.add_row(escape(n), f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
-                      f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
-                      f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
-                      "yes" if result["identifiable"][n] else "[red]no[/red]",
-                      style[trust_word(result.get("trustworthy", {}).get(n))])
+    style = {"no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]", "warning": "[yellow]warning[/yellow]",
+             "alarm": "[bold red]alarm[/bold red]", "not assessable": "[dim]not assessable[/dim]"}
+    for row in cells:
+        table.add_row(*[style.get(c, escape(c)) if h in ("identifiable", "trustworthy", "verdict") else escape(c)
+                        for h, c in zip(header, row)])
     console.print(table)
-    for line in checks_lines(result):
+    for r in rows:
+        console.print(_verdict.summary_line(r, markdown=False), markup=False, highlight=False)
+    for line in _report.checks_lines(result):
         console.print(line.strip(), markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
     console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")

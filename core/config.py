@@ -39,10 +39,10 @@ from suspid.method.spectra import SpectraOptions
 from suspid.optimize.design import DesignOptions, default_n_initial
 from suspid.optimize.ego import EGOOptions
 from suspid.options import Section, against, key_error, raise_validation_error
-from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, ExecutorSection, MonitorOptions, NoiseSection,
+from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, ExecutorSection, Limits, MonitorOptions, NoiseSection,
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
-from suspid.elements import check_groups, declared_parameters
+from suspid.elements import check_groups, declared_parameters, kind_of  # kind_of: also for suspid.workflows.verdict
 from suspid.interfaces import ElementSimulator
 from suspid.method.localisation import LocalisationOptions
 
@@ -74,6 +74,8 @@ class Config(Section):
     study: StudyOptions | None = None
     monitor: MonitorOptions | None = None
     diagnose: DiagnoseOptions = Field(default_factory=DiagnoseOptions)
+    limits: dict[str, Limits] = Field(default_factory=dict, description="acceptable domain per identified "
+                                      "parameter or element group, for the maintenance verdict")
     localisation: LocalisationOptions = Field(default_factory=LocalisationOptions)
     output: OutputSection = Field(default_factory=OutputSection)
 
@@ -359,6 +361,7 @@ def check_config_plugins(config: Config) -> None:
     if config.data.source == "measured" and config.data.w_ref:   # measured data have no known truth to use
         raise config.error(W_REF_MEASURED, "data.w_ref")
     check_nuisance(config, simulator)
+    check_limits(config, simulator)
     channels = simulator.channels()
     channel_weights(config, channels)
     figure_channel(config, channels)
@@ -495,6 +498,30 @@ def check_nuisance(config: Config, simulator) -> None:
                                   file=config.file, key=key, line=line)
             if ends is not None:
                 _check_range(name, ends, known[name], key, line, config)
+
+
+def check_limits(config: Config, simulator) -> None:
+    """``limits:`` keys name a parameter of the simulator or an element group of one (``c_yaw[bogie2]``);
+    a nominal override keeps the sign of the simulator's nominal value (a change in % must mean the same)."""
+    known = {p.name: p for p in simulator.parameters()}
+    for name, limits in config.limits.items():
+        key = f"limits.{name}"
+        line = config._lines.get(("limits", name))
+        if name not in known and kind_of(name) not in known:
+            raise ConfigError(f"unknown parameter '{name}' for simulator '{config.simulator.plugin}' (a parameter "
+                              f"or a group such as {kind_of(name)}[bogie1]); known: {', '.join(sorted(known))}",
+                              file=config.file, key=key, line=line)
+        if not re.fullmatch(r"[A-Za-z_][\w.\-/]*(\[[\w.\-]+(,[\w.\-]+)*\])?", name):
+            raise ConfigError(f"'{name}' is not a parameter or group name (kind or kind[group,side])",
+                              file=config.file, key=key, line=line)
+        if "[" in name and isinstance(simulator, ElementSimulator):   # a group the simulator declares
+            for _, message in check_groups(simulator, [name], where="limits"):
+                raise ConfigError(message, file=config.file, key=key, line=line)
+        p = known.get(name) or known[kind_of(name)]
+        if limits.nominal is not None and p.nominal != 0 and (limits.nominal > 0) != (p.nominal > 0):
+            raise ConfigError(f"nominal {limits.nominal:g} has the opposite sign of the simulator's "
+                              f"{p.nominal:g} {p.unit}", file=config.file, key=f"{key}.nominal",
+                              line=config._lines.get(("limits", name, "nominal"), line))
 
 
 def _check_range(name: str, ends: tuple[float, float], parameter, key: str, line: int | None, config: Config) -> None:

@@ -16,7 +16,16 @@ from __future__ import annotations
 
 from typing import Callable
 
-from suspid import hookspec
+import pluggy
+
+PROJECT_NAME = "suspid"
+"""The pluggy project name; it builds both markers and names the entry-point group."""
+
+hookspec = pluggy.HookspecMarker(PROJECT_NAME)
+"""Marks the specifications below."""
+
+hookimpl = pluggy.HookimplMarker(PROJECT_NAME)
+"""Marks a plugin's implementations; re-exported as ``suspid.hookimpl``."""
 
 Register = Callable[[type], None]
 """``register(cls)``: add one class to the registry of the hook's kind."""

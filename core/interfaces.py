@@ -44,6 +44,15 @@ class Parameter:
 
     ``nominal`` is w0's value; ``lower`` and ``upper`` bound the admissible
     interval C_w (paper §3). All values in SI units named by ``unit``.
+
+    ``nominal`` is also what the maintenance verdict measures the change from
+    (:mod:`suspid.workflows.verdict`): a simulator provides its nominal values
+    here (a preset's table, the user's ``vehicle:`` overrides, a template's
+    declared values); an element group named ``kind[group]`` that the
+    simulator does not declare takes its kind's, and a config's
+    ``limits.<name>.nominal`` replaces it for the verdict. The head of
+    ``description`` (up to its first ``;`` or ``(``) names the element in the
+    verdict's plain-language line.
     """
 
     name: str

@@ -76,6 +76,72 @@ class ParameterBounds(Section):
     upper: float | None = None
 
 
+Levels = tuple[float | None, float | None]
+"""A pair of levels in % of nominal: (lower, upper); None leaves a side open."""
+
+
+def _levels(value: Any) -> Any:
+    """``-25`` -> ``(-25, None)``, ``30`` -> ``(None, 30)``, ``[-25, 30]`` as it is: a lone number is one side."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return (value, None) if value < 0 else (None, value)
+    return value
+
+
+class Limits(Section):
+    """``limits.<parameter or group>``: the acceptable domain of one identified parameter for the verdict.
+
+    Levels are changes from the nominal value in % of it: ``warning: -25`` warns at 25 % below nominal,
+    ``alarm: [-40, 30]`` alarms at 40 % below or 30 % above (either side may be null, a lone number is the
+    side of its sign). A change at or beyond a level has that level's state; the alarm lies beyond the warning
+    on each side. ``nominal`` (SI) replaces the simulator's nominal value as the verdict's reference;
+    ``label`` the plain-language name of the element in the summary.
+    """
+
+    warning: Levels | None = Field(default=None, description="warning levels, % of nominal: a number or [lower, upper]")
+    alarm: Levels | None = Field(default=None, description="alarm levels, % of nominal: a number or [lower, upper]")
+    nominal: float | None = Field(default=None, description="the nominal value the change is measured from, SI "
+                                  "units (default: the simulator's nominal value)")
+    label: str | None = Field(default=None, min_length=1, description="plain-language name of the element(s)")
+
+    @field_validator("warning", "alarm", mode="before")
+    @classmethod
+    def _one_side(cls, value: Any) -> Any:
+        return _levels(value)
+
+    @field_validator("warning", "alarm")
+    @classmethod
+    def _sides(cls, value: Levels | None, info: ValidationInfo) -> Levels | None:
+        if value is None:
+            return value
+        lower, upper = value
+        if lower is None and upper is None:
+            raise ValueError("give at least one level, e.g. -25 or [-25, 25] (% of nominal)")
+        if lower is not None and not -100.0 < lower < 0.0:
+            raise ValueError(f"the lower {info.field_name} level must lie between -100 and 0 % of nominal")
+        if upper is not None and not 0.0 < upper < 1e6:
+            raise ValueError(f"the upper {info.field_name} level must be above 0 % of nominal")
+        return value
+
+    @field_validator("nominal")
+    @classmethod
+    def _nonzero(cls, value: float | None) -> float | None:
+        if value is not None and not (value != 0.0 and abs(value) < float("inf")):
+            raise ValueError("the nominal value must be a finite number other than 0")
+        return value
+
+    @model_validator(mode="after")
+    def _alarm_beyond_warning(self) -> "Limits":
+        if self.warning is None and self.alarm is None:
+            raise ValueError("give warning and/or alarm levels (% of nominal), e.g. {warning: -25, alarm: -40}")
+        if self.warning is not None and self.alarm is not None:
+            (wl, wu), (al, au) = self.warning, self.alarm
+            if wl is not None and al is not None and not al < wl:
+                raise ValueError(f"the lower alarm level ({al:g} %) must lie below the lower warning level ({wl:g} %)")
+            if wu is not None and au is not None and not au > wu:
+                raise ValueError(f"the upper alarm level ({au:g} %) must lie above the upper warning level ({wu:g} %)")
+        return self
+
+
 class SensorCorrection(Section):
     """One item of ``data.corrections``: a tilted lateral accelerometer rotated back (:mod:`suspid.data.corrections`)."""
 

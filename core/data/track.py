@@ -26,7 +26,7 @@ the US Federal Railroad Administration):
   k A_v Omega_c^2 / (Omega^2 (Omega^2 + Omega_c^2)) cm^2/(rad/m), k = 0.25,
   Omega_c = 0.8245, A_v = 1.2107, 1.0181, 0.6816, 0.5376, 0.2095, 0.0339
   cm^2 rad/m for classes 1-6. The FRA constants of the other channels could
-  not be confirmed (railway-data.md §2), so alignment, cross-level and gauge
+  not be confirmed from public sources, so alignment, cross-level and gauge
   of an FRA track **fall back to the German spectra**: ``german-high`` for
   classes 1-4, ``german-low`` for classes 5 and 6.
 
@@ -63,10 +63,12 @@ GERMAN_A = {
     "german-low": {"vertical": 4.032e-7, "lateral": 2.119e-7, "gauge": 0.532e-7},
     "german-high": {"vertical": 1.080e-6, "lateral": 6.125e-7, "gauge": 1.032e-7},
 }
-"""A_v, A_a, A_g in m rad (railway-data.md §2)."""
+"""A_v, A_a, A_g in m rad: the German high-speed track spectra, low and high disturbance, as tabulated in
+the vehicle-dynamics literature."""
 
 FRA = {"k": 0.25, "omega_c": 0.8245, "A_v": (1.2107, 1.0181, 0.6816, 0.5376, 0.2095, 0.0339)}
-"""FRA vertical constants, A_v in cm^2 rad/m for classes 1-6 (railway-data.md §2)."""
+"""FRA vertical constants, A_v in cm^2 rad/m for classes 1-6 (US Federal Railroad Administration track
+classes, e.g. V. K. Garg and R. V. Dukkipati, Dynamics of Railway Vehicle Systems, Academic Press 1984)."""
 
 SPECTRA = ("german-low", "german-high", "fra-1", "fra-2", "fra-3", "fra-4", "fra-5", "fra-6")
 """Names of the available spectra."""
@@ -109,6 +111,39 @@ def psd(spectrum: str, channel: str, omega: np.ndarray | float) -> np.ndarray:
     return (2 * b) ** 2 * (a["vertical"] / b ** 2) * shape   # cross-level: roll angle PSD x (2b)^2
 
 
+class CurveOptions(BaseModel):
+    """A curve laid on every synthetic segment: straight, entry transition, circular arc, exit transition,
+    straight (distances from the segment's start). In the transitions (clothoids) the curvature and the
+    cant ramp linearly between zero and their values in the arc."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    radius_m: PositiveFloat = Field(description="radius of the circular arc, m")
+    direction: Literal["left", "right"] = Field(default="left", description="direction of the curve in the "
+                                                "direction of travel")
+    cant_m: float = Field(default=0.0, ge=0.0, le=0.2, description="cant in the arc, m (height of the outer "
+                          "rail above the inner one; EN 13803 allows at most 0.18-0.20 m)")
+    start_m: float = Field(default=0.0, ge=0.0, description="where the entry transition begins, m")
+    transition_m: float = Field(default=0.0, ge=0.0, description="length of each transition, m")
+    arc_m: PositiveFloat | None = Field(default=None, description="length of the circular arc, m (default: "
+                                        "to the end of the segment)")
+
+
+def curve_geometry(distance: np.ndarray, curve: CurveOptions | Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray]:
+    """Design curvature (1/m, positive to the left) and cant (m, right rail above the left) of ``curve`` at
+    ``distance`` ``(n_x,)`` m from the segment start (see :class:`CurveOptions`); each ``(n_x,)``."""
+    c = parse_options(CurveOptions, curve, "data.track.curve")
+    s = np.asarray(distance, dtype=float) - float(distance[0]) - c.start_m
+    L = c.transition_m
+    end_arc = L + (c.arc_m if c.arc_m is not None else math.inf)
+    if L > 0:
+        ramp = np.clip(s / L, 0.0, 1.0) - np.clip((s - end_arc) / L, 0.0, 1.0)
+    else:
+        ramp = ((s >= 0) & (s <= end_arc)).astype(float)
+    sign = 1.0 if c.direction == "left" else -1.0
+    return sign * ramp / c.radius_m, sign * ramp * c.cant_m
+
+
 class TrackOptions(BaseModel):
     """A synthetic track section: ``n_segments`` independent segments of one spectrum.
 
@@ -129,6 +164,8 @@ class TrackOptions(BaseModel):
         default=None, description="longest wavelength realised, m (default: the segment length)")
     seed: int = Field(default=0, ge=0, description="seed of numpy.random.default_rng")
     name_prefix: str = Field(default="seg", min_length=1, description="segment names are <prefix>-001, ...")
+    curve: CurveOptions | None = Field(default=None, description="a curve with transitions on every segment "
+                                       "(default: straight track)")
 
     @model_validator(mode="after")
     def _speed(self) -> "TrackOptions":
@@ -191,6 +228,8 @@ def synthetic_segments(options: TrackOptions | Mapping[str, Any] | None = None,
     out = []
     for i in range(opt.n_segments):
         irr = realise(opt.spectrum, n, opt.dx_m, rng, (opt.min_wavelength_m, opt.max_wavelength_m))
+        curvature, cant = curve_geometry(x, opt.curve) if opt.curve is not None else (None, None)
         out.append(TrackSegment(f"{opt.name_prefix}-{i + 1:0{width}d}", x.copy(), irr, opt.speed,
-                                meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i}))
+                                meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i},
+                                curvature=curvature, cant=cant))
     return out

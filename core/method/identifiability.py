@@ -29,9 +29,8 @@ finite reference date moves w_opt too)
 (:func:`suspid.workflows.analysis.gradient_noise`). Segments are resampled as pairs:
 segment i's measured spectra and its simulated spectra come from the same
 track, so they vary together. Resampling the two sets independently
-(``bootstrap: independent``) miscalibrates the intervals: over 16 seeds of
-the quickstart experiment, 100 % (likelihood) and 85 % (overlap) of the ± 2σ
-intervals held w_ref, against 96 % and 94 % paired (``benchmarks/RESULTS.md``). The interval of component k is
+(``bootstrap: independent``) miscalibrates the intervals (coverage over seeds of
+the quickstart experiment: ``benchmarks/RESULTS.md``, "Interval coverage over seeds"). The interval of component k is
 w_opt,k ± ``n_sigmas`` σ_k, clipped to the box. Directions where H is not
 negative definite (flat or rising) get an unbounded spread, hence the whole
 interval.

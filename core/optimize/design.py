@@ -69,9 +69,8 @@ def default_n_initial(q: int) -> int:
     learns the function quickly from EI points, and each initial point spent is
     an EI point lost: Branin (q = 2) and Hartmann 3 need the fewest evaluations
     with 4 and 8 initial points. In higher dimension a sparse design can miss
-    the basin of the global optimum altogether and EGO then refines a local one:
-    on Hartmann 6, m0 = 14 found the global minimum in 4 runs of 10, m0 = 60
-    (Jones et al.'s 10 q) in 5 of 6 (see ``benchmarks/RESULTS.md``). The
+    the basin of the global optimum altogether and EGO then refines a local one
+    (Hartmann 6 with m0 = 14 did so in most runs; Jones et al.'s 10 q in few). The
     paper's railway case used m0 = 500 for q = 7; set ``design.n_initial``
     when the budget allows more.
     """

@@ -294,8 +294,8 @@ class EIProposer:
     of the basin it has explored, so it predicts other basins with confidence
     and wrongly; EI against the global J_max never follows up a second basin
     whose points are below the incumbent. Against the best J outside, it
-    does, and climbs it (Hartmann 6, m0 = 30: 5 seeds in 5 reach 1 % instead
-    of 2; ``benchmarks/RESULTS.md``). ``explore = "random"`` evaluates a
+    does, and climbs it (on Hartmann 6, whose local maximum traps EI otherwise:
+    ``benchmarks/RESULTS.md``, "EGO"). ``explore = "random"`` evaluates a
     uniformly random point instead, which did not help there.
 
     Budget mode also changes the step itself, for a run that must get close
@@ -315,17 +315,14 @@ class EIProposer:
       CORS-RBF (J. Global Optim., 2005) balances the two.
     - An exploitation step of the cycle that misses J_max by less than
       ``explore_tol`` * (max J - min J) (:meth:`near_miss`) is followed by a
-      second one, on the data with its point. On Branin the mean's maximiser
-      near the top of a basin missed the incumbent by 1.6 % of f* (seed 0:
-      f = 0.4224 against 0.4160, f* = 0.3979); the maximiser on the data with
-      that point is within 1 % (0.3987), where the fixed cycle made two EI
-      steps in other basins first.
+      second one, on the data with its point. A point next to the maximum
+      that misses it by a hair shows the model's curvature there wrong, not
+      its basin: refitted with that point, the mean's maximiser is usually at
+      the top, where the fixed cycle would spend EI steps in other basins first.
 
-    Evaluations to 1 %, mean over seeds 0-9 (``benchmarks/RESULTS.md``), with
-    the set-aside rule only / the warped J / the exploitation steps / both /
-    both and the second exploitation step after a near miss: Branin 29.4 /
-    26.0 / 24.5 / 23.2 / 22.3, Goldstein-Price (log f) 55.8 / 32.8 / 25.7 /
-    27.3 / 27.0, Hartmann 3 17.6 / 16.3 / 18.1 / 16.7 / 16.7.
+    What these rules achieve (evaluations to reach 1 % on standard test
+    functions, against peer optimisers) is measured by ``benchmarks/bench_ego.py``:
+    ``benchmarks/RESULTS.md``, "EGO".
 
     The records of a budget-mode step carry EI and eps of the warped J.
 
@@ -391,10 +388,9 @@ class EIProposer:
         tol = ``explore_tol``); or ``u`` is within ``explore_distance`` (in each
         unit coordinate) of an evaluated point of ``U (n_points, q)``. In both
         cases EI keeps returning to the incumbent, whose value is already known,
-        and the model, unchanged, proposes the same again: on Hartmann 6 (m0 =
-        30, tol = 0) EI fell below 1e-4 of the range after ~70 evaluations and
-        three seeds in five then re-evaluated the local maximum or sampled
-        corners until the budget of 200 was spent.
+        and the model, unchanged, proposes the same again (on Hartmann 6 with
+        tol = 0 such a loop re-evaluated its local maximum or sampled corners
+        until the budget was spent).
         """
         opts = self.opts
         threshold = opts.explore_tol * float(y.max() - y.min())

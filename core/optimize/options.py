@@ -22,9 +22,8 @@ class RefineOptions(BaseModel):
     Why. The paper's loop fits one Kriging model on every point. After a
     large space-filling design (m0 = 500) that global model cannot resolve J
     near its maximum to the tolerance: its EI falls below eps while w_opt is
-    still a few % of the admissible interval from the maximiser of J. On the
-    Table 1 analogue the paper's loop stops 0.1 below the maximum of the
-    likelihood J, with errors up to 3.6 % (``benchmarks/RESULTS.md``).
+    still a few % of the admissible interval from the maximiser of J (measured
+    on the Table 1 analogue: ``benchmarks/RESULTS.md``, "Table 1 analogue").
 
     What. A model-based trust-region search (Conn, Scheinberg and Vicente,
     *Introduction to Derivative-Free Optimization*, 2009, ch. 10) whose model

@@ -27,6 +27,7 @@ from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.nuisance import nuisance_shifts
+from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import calibration_result, linearised_model_error
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
@@ -170,25 +171,30 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
 def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
             failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
-            executor: Executor | None = None) -> dict[str, Any]:
+            executor: Executor | None = None, phases: Phases | None = None) -> dict[str, Any]:
     """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict.
 
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
+    :param phases: shows each phase while it runs (:mod:`suspid.workflows.phases`; default: nowhere).
     """
+    phases = phases or Phases()
     failed = list(failed or [])
     opts = config.identifiability
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
     x_opt = np.asarray(ego.x_opt, float)
     u_opt = problem.to_unit(x_opt)
+    phases.start(f"intervals ({2 * problem.q} simulations)")
     sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
                                                  paired=opts.bootstrap == "paired", failed=failed,
                                                  retry_failed=retry_failed, executor=executor,
                                                  reference=opts.bootstrap_reference)
     rng = named_rng(config.seed, "identifiability")
+    phases.start("identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
     sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
-    trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor)
+    trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor, phases)
+    phases.done()
     interval_unit = verdict.interval_unit
     if opts.model_error.widen and trust["bias_bound"] is not None:
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)
@@ -327,7 +333,7 @@ def biased(bias: np.ndarray, se: np.ndarray, max_bias: float) -> np.ndarray:
 
 def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, options: ModelErrorOptions,
                 retry_failed: bool = False, sd: np.ndarray | None = None,
-                executor: Executor | None = None) -> dict[str, Any]:
+                executor: Executor | None = None, phases: Phases | None = None) -> dict[str, Any]:
     """Trust under model error: the reference-date self-check and the adequacy test at w_opt.
 
     A component is **not trustworthy under model error** when
@@ -357,6 +363,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     otherwise *not assessed* (:func:`suspid.workflows.trust.trust_states`); ``report["checks"]`` says which ran and why not.
 
     :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
+    :param phases: shows each check while it runs (default: nowhere).
     :returns: ``{"trustworthy": name -> True | False | None (not assessed), "reasons": name -> [str],
         "not_assessed": name -> [str] (the checks that did not run), "bias_bound": (q,) or None,
         that bound in [0, 1] (:func:`suspid.method.identifiability.bias_aware_half_width` widens the
@@ -364,6 +371,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     """
     names = problem.names
     q = problem.q
+    phases = phases or Phases()
     reasons: list[list[str]] = [[] for _ in range(q)]
     if options.run == "never" or (options.run == "measured" and problem.config.data.source != "measured"):
         why = (f"not run (identifiability.model_error.run: {options.run}, data.source: "
@@ -372,6 +380,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         return {**trust_states(names, reasons, checks), "bias_bound": None,
                 "report": {"status": why, "checks": checks_report(checks)}}
     if options.method == "linearised":  # the checks by linearisation, within budget (suspid.workflows.linearised)
+        phases.start("model error (linearised)")
         return linearised_model_error(problem, ledger, u_opt, h, options, retry_failed, sd, executor, model_error)
     report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
     checks: dict[str, str] = {}
@@ -380,7 +389,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     if not sc_opt.enabled:
         report["self_check"] = {"status": "disabled (identifiability.model_error.self_check.enabled: false)"}
     else:
-        check = self_check(problem, ledger, sc_opt, executor=executor)
+        phases.start(f"self-check ({sc_opt.n_splits} splits)")
+        check = self_check(problem, ledger, sc_opt, log=phases.status, executor=executor)
         if check is None:
             if not problem.reference or not problem.reference_segments:
                 why = "the reference date's data are not part of this run" + (
@@ -411,6 +421,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         report["adequacy"] = {"status": "disabled (identifiability.model_error.adequacy.enabled: false)"}
         checks["groups"] = "not run: the adequacy test is disabled"
     else:
+        phases.start(f"adequacy ({problem.q} simulations)")
         y_opt, S = local_sensitivity(problem, ledger, u_opt, h, retry_failed, executor)
         bands = frequency_bands(problem.freqs, ad_opt.bands_per_octave)
         res = band_residuals(problem.y_mes, y_opt, problem.noise_model, bands, ad_opt.z_threshold, ad_opt.min_db,
@@ -439,6 +450,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
             checks["groups"] = "disabled (identifiability.model_error.adequacy.groups: false)"
         else:
             checks["groups"] = "done"
+            phases.start("data groups")
             ge = group_estimates(problem, u_opt, S, ad_opt.min_group_share, ad_opt.group_evaluations,
                                  options.self_check.initial_step, ledger, executor)
             informed = np.isfinite(ge.u)
@@ -467,6 +479,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     if not nu_opt.parameters:
         checks["nuisance"] = "not run: no nuisance parameters declared (identifiability.model_error.nuisance)"
     else:
+        phases.start(f"nuisance parameters ({len(nu_opt.parameters)})")
         check = nuisance_shifts(problem, ledger, u_opt, nu_opt, options.self_check.initial_step, executor=executor)
         if check is None:
             report["nuisance"] = {"status": "not run: the reference date's data are not part of this run "

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import json
+from html import escape
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,13 +43,15 @@ from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Executor, OptimizerResult
 from suspid.optimize.design import min_distance
 from suspid.optimize.ego import EGOResult
-from suspid.workflows.analysis import analyse
+from suspid.workflows.analysis import analyse, cached_y_sim
 from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem, moved_kinds
+from suspid.workflows.phases import ProgressPhases
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import trust_word, write_report
+from suspid.workflows.verdict import VerdictRow, rows_of, summary_line, table, verdict_block, verdict_rows
 
 
 def make_progress(enabled: bool):
@@ -81,6 +84,9 @@ class IdentificationResult:
     :ivar J_max: J(w_opt).
     :ivar n_initial, n_iterations, n_simulator_calls: m0, EGO iterations, evaluations of J.
     :ivar stop_reason, refine_stop_reason: why the EGO loop (and the refinement) stopped.
+    :ivar nominal: ``name -> nominal value`` (SI) the verdict measures the change from.
+    :ivar verdict: the maintenance verdict, one :class:`~suspid.workflows.verdict.VerdictRow` per identified
+        parameter and per localised element group (:meth:`summary`, :meth:`verdict_table`, :meth:`to_dataframe`).
     :ivar run_dir: the run directory (``result.json``, ``report.md``, ``ledger.sqlite``, ``noise_model.npz``):
         they are the latest finished run's; this run's own are in ``history/<run_id>/`` (``result["run_id"]``).
     """
@@ -106,6 +112,8 @@ class IdentificationResult:
     trustworthy: dict[str, bool | None] | None = None
     untrustworthy_reasons: dict[str, list[str]] = field(default_factory=dict)
     not_assessed_reasons: dict[str, list[str]] = field(default_factory=dict)
+    nominal: dict[str, float | None] = field(default_factory=dict)
+    verdict: list[VerdictRow] = field(default_factory=list)
     problem: Problem | None = field(default=None, repr=False, compare=False)
     ego: EGOResult | None = field(default=None, repr=False, compare=False)
     _data: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -126,7 +134,7 @@ class IdentificationResult:
                    errors_percent=data.get("errors_percent"), trustworthy=data.get("trustworthy"),
                    untrustworthy_reasons=dict(data.get("untrustworthy_reasons", {})),
                    not_assessed_reasons=dict(data.get("not_assessed_reasons", {})),
-                   problem=problem, ego=ego, _data=data)
+                   nominal=dict(data.get("nominal", {})), verdict=rows_of(data), problem=problem, ego=ego, _data=data)
 
     @classmethod
     def load(cls, run_dir: str | Path) -> "IdentificationResult":
@@ -147,6 +155,58 @@ class IdentificationResult:
     def trust(self) -> dict[str, str]:
         """``name -> "yes" | "no" | "not assessed"``: :attr:`trustworthy` in words."""
         return {n: trust_word((self.trustworthy or {}).get(n)) for n in self.parameters}
+
+    def verdict_table(self) -> list[dict[str, Any]]:
+        """The verdict as plain rows (no pandas needed): one dict per parameter or group, SI values and units,
+        change and interval in % of nominal, identifiable, trust, verdict and its rule."""
+        return [r.to_dict() for r in self.verdict]
+
+    def to_dataframe(self):
+        """The verdict table as a pandas DataFrame, one row per parameter or group (pandas is imported here,
+        only when asked for: suspid does not depend on it).
+
+        :raises ImportError: pandas is not installed (``verdict_table()`` gives the same rows without it).
+        """
+        try:
+            import pandas as pd   # optional: only this method needs it
+        except ImportError:
+            raise ImportError("to_dataframe() needs pandas (pip install pandas); verdict_table() gives the same "
+                              "rows as plain dicts") from None
+        return pd.DataFrame(self.verdict_table()).set_index("name")
+
+    def _table(self) -> tuple[list[str], list[list[str]]]:
+        return table(self.verdict, with_reference=self.w_ref is not None)
+
+    def summary(self) -> str:
+        """A plain-text table: per parameter (and localised group) nominal, identified value with units, change
+        and interval in % of nominal, identifiable, trust and verdict; then one plain-language line each."""
+        header, cells = self._table()
+        widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h) for i, h in enumerate(header)]
+        line = lambda row: "  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip()  # noqa: E731
+        title = (f"{self._data.get('name', 'identification')}: J_max = {self.J_max:.6g}, "
+                 f"{self.n_simulator_calls} simulations, {self.wall_time_s:.0f} s")
+        out = [title, line(header), line(["-" * w for w in widths]), *map(line, cells), ""]
+        out += [summary_line(r, markdown=False) for r in self.verdict]
+        return "\n".join(out)
+
+    def _repr_html_(self) -> str:
+        """The verdict table in a notebook (HTML), with the plain-language lines below it."""
+        header, cells = self._table()
+        colour = {"ok": "#1a7f37", "warning": "#b35900", "alarm": "#c62828", "not assessable": "#666"}
+        k = header.index("verdict")
+        body = "".join("<tr>" + "".join(
+            f'<td style="color:{colour.get(c, "inherit")}">{escape(c)}</td>' if i == k else f"<td>{escape(c)}</td>"
+            for i, c in enumerate(row)) + "</tr>" for row in cells)
+        lines = "".join(f"<li>{escape(summary_line(r, markdown=False))}</li>" for r in self.verdict)
+        return (f"<p><b>{escape(str(self._data.get('name', 'identification')))}</b>: J_max = {self.J_max:.6g}, "
+                f"{self.n_simulator_calls} simulations, run directory <code>{escape(str(self.run_dir))}</code></p>"
+                f"<table><thead><tr>{''.join(f'<th>{escape(h)}</th>' for h in header)}</tr></thead>"
+                f"<tbody>{body}</tbody></table><ul>{lines}</ul>")
+
+    def __repr__(self) -> str:
+        states = ", ".join(f"{r.name} {r.verdict}" for r in self.verdict)
+        return (f"IdentificationResult({self._data.get('name', '?')!r}, {len(self.parameters)} parameters, "
+                f"J_max={self.J_max:.6g}, verdict: {states or 'none'}, run_dir={str(self.run_dir)!r})")
 
     @property
     def max_error_percent(self) -> float | None:
@@ -252,8 +312,8 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         as_ego_result(opt_result, surrogate_for(config), problem)
     ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
-    with single_blas_thread():
-        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor)
+    with make_progress(progress) as bars, single_blas_thread():   # minutes on measured data: shown phase by phase
+        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor, ProgressPhases(bars))
     result.update({
         "run_id": run_id,
         "n_initial": int(ego.n_initial), "n_iterations": int(ego.n_iterations),
@@ -278,8 +338,14 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     localisation = _localise(config, problem, result, executor, log)
     if localisation is not None:
         result["localisation"] = localisation
+    add_verdict(result, problem, config)   # after every other finding (a localisation's groups included)
     write_json(run_dir / "result.json", result)
-    write_report(run_dir, problem, ego, result, ei_history, executor)
+    with make_progress(progress) as bars:
+        phases = ProgressPhases(bars)
+        phases.start("figures and report")
+        y_opt = cached_y_sim(problem, ledger, problem.to_unit(np.asarray(ego.x_opt, float)), executor=executor)
+        write_report(run_dir, problem, ego, result, ei_history, executor, y_opt=y_opt)
+        phases.done()
     if localisation is not None:   # a short section after the report (suspid.workflows.elements)
         report = run_dir / "report.md"
         text = report.read_text(encoding="utf-8") if report.exists() else ""
@@ -301,6 +367,15 @@ def _localise(config: Config, problem: Problem, result: dict[str, Any], executor
             raise
         return {"named": False, "rows": [], "hypotheses": [], "not_assessed": str(exc),
                 "options": config.localisation.model_dump()}
+
+
+def add_verdict(result: dict[str, Any], problem: Problem, config: Config) -> None:
+    """``result["nominal"]`` (SI, per identified parameter) and ``result["verdict"]``
+    (:func:`suspid.workflows.verdict.verdict_block`): the maintenance verdict per parameter and localised group."""
+    parameters = problem.simulator.parameters()
+    rows = verdict_rows(result, parameters, config.limits)
+    result["nominal"] = {r.name: r.nominal for r in rows if r.source == "identification"}
+    result["verdict"] = verdict_block(rows, config.limits)
 
 
 def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_failed: bool = False

@@ -56,11 +56,14 @@ def array_digest(*arrays: np.ndarray) -> str:
 
 
 def segments_digest(segments: Sequence[TrackSegment]) -> str:
-    """A content hash of track segments (geometry, distance and speed)."""
+    """A content hash of track segments (geometry, distance and speed; the design curvature and cant when a
+    segment has them, so that straight track keeps its digest)."""
     parts = []
     for s in segments:
+        design = [part for k, a in enumerate((s.curvature, s.cant)) if a is not None
+                  for part in (np.array([k], float), np.asarray(a, float))]      # tagged: which record it is
         parts.append(array_digest(np.asarray(s.distance, float), np.asarray(s.irregularities, float),
-                                  np.atleast_1d(np.asarray(s.speed, float))))
+                                  np.atleast_1d(np.asarray(s.speed, float)), *design))
     return stable_hash(parts)
 
 

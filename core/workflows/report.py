@@ -18,35 +18,151 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
 from suspid.optimize.ego import EGOResult
-from suspid.workflows.trust import CHECK_LABELS
+from suspid.workflows.trust import CHECK_LABELS, trust_word  # trust_word: importers take it from here too
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
 from suspid.workflows.tasks import SpectraTask, run_one
+from suspid.workflows.verdict import VerdictRow, format_value, rows_of, verdict_markdown
 
 
-def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_sim: np.ndarray, y_mod: np.ndarray,
-                   channel: int, channel_name: str, quantiles: tuple[float, float] = (0.05, 0.95)) -> Path:
-    """Figure 1 analogue: mean and quantiles of Y_mes against Y_sim(w0) (top) and Y_mod(w0) (bottom).
+Y_LABEL = "Y (dB re 1 m s⁻¹·⁵)"
+"""Y is 10 log10 of the amplitude |Â| of an acceleration in m/s² (paper eq. 1, :mod:`suspid.method.spectra`):
+its reference quantity is 1 m s⁻¹·⁵."""
+
+HZ_TICKS = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0)
+"""Frequency ticks of the spectra figures, Hz (those inside the grid are shown)."""
+
+
+def hz_axis(ax: Any, freqs: np.ndarray) -> None:
+    """A frequency axis in Hz: logarithmic with plain ticks 0.5-1-2-5-10-20 where the grid spans over a
+    decade, linear otherwise."""
+    f0, f1 = float(freqs[0]), float(freqs[-1])
+    if f1 / max(f0, 1e-9) > 5:
+        ax.set_xscale("log")
+        ticks = [t for t in HZ_TICKS if f0 * 0.999 <= t <= f1 * 1.001]
+        ax.set_xticks(ticks, [f"{t:g}" for t in ticks])
+        ax.tick_params(axis="x", which="minor", labelbottom=False)
+    ax.set_xlim(f0, f1)
+
+
+def figure_spectra(path: Path, freqs: np.ndarray, y_mes: np.ndarray, y_model: np.ndarray, channels: Sequence[str],
+                   *, title: str, measured: str = "measured", model: str = "model at w_opt with B",
+                   quantiles: tuple[float, float] = (0.05, 0.95), first: int = 0) -> Path:
+    """Figure 1: every channel in small multiples, the measured spectra against the modelled ones.
+
+    Each panel draws the mean over segments and the ``quantiles`` band of the measured spectra and of the
+    modelled spectra Y_mod = Y_sim(w) + B (eq. 4; B's band is the model's expected spread): where the measured
+    mean leaves the model's band, the model at w does not reproduce the measurements.
 
     :param freqs: ``(n_freqs,)`` Hz.
-    :param y_mes, y_sim, y_mod: ``(n_samples, n_channels, n_freqs)`` dB.
+    :param y_mes: ``(n_samples, n_channels, n_freqs)`` dB; :param y_model: ``(n_paths, n_channels, n_freqs)`` dB.
+    :param channels: ``(n_channels,)`` names; :param first: the channel drawn first (``output.figure_channel``).
     """
     plt = pyplot()
-    fig, axes = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    for ax, other, label, color in ((axes[0], y_sim, "Y_sim(w0)", "tab:red"),
-                                    (axes[1], y_mod, "Y_mod(w0)", "tab:blue")):
-        for y, lab, col in ((y_mes, "Y_mes", "black"), (other, label, color)):
-            q_lo, q_hi = np.quantile(y[:, channel], quantiles, axis=0)
-            ax.fill_between(freqs, q_lo, q_hi, color=col, alpha=0.18, lw=0)
-            ax.plot(freqs, y[:, channel].mean(axis=0), color=col, lw=1.4,
-                    label=f"{lab} mean, {int(quantiles[0] * 100)}-{int(quantiles[1] * 100)} % band")
-        ax.set_ylabel("Y (dB)")
-        ax.legend(loc="best", fontsize=8)
+    n = len(channels)
+    order = [first] + [c for c in range(n) if c != first]
+    ncols = 1 if n == 1 else 2 if n <= 6 else 3
+    nrows = -(-n // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.4 * ncols, 2.5 * nrows + 0.7), sharex=True, squeeze=False)
+    band = f"{int(quantiles[0] * 100)}-{int(quantiles[1] * 100)} %"
+    for ax, c in zip(axes.flat, order):
+        lo, hi = np.quantile(y_model[:, c], quantiles, axis=0)
+        ax.fill_between(freqs, lo, hi, color="tab:blue", alpha=0.25, lw=0, label=f"{model}, {band} band")
+        ax.plot(freqs, y_model[:, c].mean(axis=0), color="tab:blue", lw=1.3, label=f"{model}, mean")
+        lo, hi = np.quantile(y_mes[:, c], quantiles, axis=0)
+        ax.plot(freqs, lo, color="black", lw=0.7, ls="--", label=f"{measured}, {band} band")
+        ax.plot(freqs, hi, color="black", lw=0.7, ls="--")
+        ax.plot(freqs, y_mes[:, c].mean(axis=0), color="black", lw=1.3, label=f"{measured}, mean")
+        ax.set_title(channels[c], fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0].set_title(f"Channel {channel_name}: measured against simulated (top) and modelled (bottom)")
-    axes[1].set_xlabel("frequency (Hz)")
-    if freqs[-1] / max(freqs[0], 1e-9) > 20:
-        axes[1].set_xscale("log")
+        hz_axis(ax, freqs)
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    for ax in axes[:, 0]:
+        ax.set_ylabel(Y_LABEL, fontsize=8)
+    for ax in axes.flat[:n]:   # every panel keeps its Hz ticks (a hidden panel leaves the one above it last)
+        ax.xaxis.set_tick_params(labelbottom=True)
+    for ax in axes.flat[max(n - ncols, 0):n]:
+        ax.set_xlabel("frequency (Hz)")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=4, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 1.0))
+    fig.suptitle(title, fontsize=10, y=1.0 - 0.3 / fig.get_figheight())
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.55 / fig.get_figheight()))
+    return save_figure(fig, path)
+
+
+VERDICT_COLOURS = {"ok": "tab:green", "warning": "tab:orange", "alarm": "tab:red", "not assessable": "0.45"}
+
+
+def _style(row: VerdictRow) -> tuple[str, dict[str, Any], str]:
+    """The marker, its keywords and the bar's line style of a verdict row: trusted (filled), trust not assessed
+    (hollow), not trustworthy (a grey cross), not identifiable (a light grey hollow square, dotted bar)."""
+    colour = VERDICT_COLOURS[row.verdict]
+    if not row.identifiable:
+        return "s", {"facecolors": "none", "edgecolors": "0.6"}, ":"
+    if row.trust == "no":
+        return "X", {"color": "0.45"}, ":"
+    if row.trust == "not assessed":
+        return "o", {"facecolors": "white", "edgecolors": colour, "linewidths": 1.6}, "-"
+    return "o", {"color": colour}, "-"
+
+
+STYLE_LABELS = {"trusted": "trustworthy (filled)", "not assessed": "trust not assessed (hollow)",
+                "untrustworthy": "not trustworthy (grey cross)", "not identifiable": "not identifiable (grey square)"}
+
+
+def figure_verdict(path: Path, rows: Sequence[VerdictRow]) -> Path:
+    """Figure 2: each identified parameter (and localised group) as its change in % of its nominal value.
+
+    The interval as a bar, the identified value as a marker coloured by the verdict, the nominal value as the
+    zero line, the warning and alarm levels of ``limits:`` as short lines at each parameter; the marker says the
+    trust (filled: trustworthy, hollow: not assessed, grey cross: not trustworthy, grey square: not
+    identifiable); the known w_ref of a numerical experiment as a black diamond.
+
+    :param rows: the verdict rows; those without a nominal value are left out.
+    """
+    plt = pyplot()
+    rows = [r for r in rows if r.change_percent is not None]
+    q = max(len(rows), 1)
+    fig, ax = plt.subplots(figsize=(max(6.5, 1.25 * q + 4.0), 4.6))
+    seen: dict[str, Any] = {}
+    ax.axhline(0.0, color="black", lw=1.0)
+    seen["nominal"] = plt.Line2D([], [], color="black", lw=1.0, label="nominal value (0 %)")
+    for i, r in enumerate(rows):
+        for state, levels, ls in (("warning", r.warning, "--"), ("alarm", r.alarm, "-")):
+            for level in levels or ():
+                if level is not None:
+                    ax.hlines(level, i - 0.38, i + 0.38, colors=VERDICT_COLOURS[state], linestyles=ls, lw=1.6)
+                    seen[f"{state} level"] = plt.Line2D([], [], color=VERDICT_COLOURS[state], ls=ls, lw=1.6,
+                                                        label=f"{state} level")
+        marker, kw, bar = _style(r)
+        colour = "0.6" if not r.identifiable or r.trust == "no" else VERDICT_COLOURS[r.verdict]
+        lo, hi = r.interval_percent
+        ax.vlines(i, lo, hi, colors=colour, lw=6, alpha=0.45, linestyles=bar)
+        ax.hlines([lo, hi], i - 0.12, i + 0.12, colors=colour, lw=1.4)
+        ax.scatter([i], [r.change_percent], marker=marker, s=70, zorder=4, **kw)
+        key = ("not identifiable" if not r.identifiable else "untrustworthy" if r.trust == "no"
+               else "not assessed" if r.trust == "not assessed" else "trusted")
+        seen[key] = plt.Line2D([], [], ls="", marker=marker, ms=8, color="0.3",
+                               markerfacecolor="white" if key in ("not assessed", "not identifiable") else "0.3",
+                               label=STYLE_LABELS[key])
+        seen[f"verdict {r.verdict}"] = plt.Line2D([], [], color=VERDICT_COLOURS[r.verdict], lw=6, alpha=0.6,
+                                                  label=f"interval, verdict {r.verdict}")
+        if r.w_ref is not None and r.nominal:
+            ax.scatter([i + 0.2], [100 * (r.w_ref / r.nominal - 1)], marker="D", s=28, color="black", zorder=5)
+            seen["w_ref"] = plt.Line2D([], [], ls="", marker="D", ms=5, color="black",
+                                       label="w_ref (the experiment's truth)")
+        ax.text(i, 1.01, r.verdict, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=8,
+                color=VERDICT_COLOURS[r.verdict], fontweight="bold")
+    ax.set_xticks(range(len(rows)), [f"{r.name}\n{format_value(r.nominal, r.unit)}" for r in rows], fontsize=8)
+    ax.set_xlim(-0.6, len(rows) - 0.4)
+    ax.set_ylabel("change from nominal (% of nominal)")
+    ax.set_title("Identified parameters against their nominal values and limits (nominal value under each name)",
+                 fontsize=9, pad=18)
+    ax.grid(alpha=0.3, axis="y")
+    order = ["nominal", "warning level", "alarm level", *(f"verdict {v}" for v in VERDICT_COLOURS), *STYLE_LABELS,
+             "w_ref"]
+    ax.legend(handles=[seen[k] for k in order if k in seen], fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -127,11 +243,6 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(fmt(v) for v in row) + " |" for row in rows]
     return "\n".join(lines)
-
-
-def trust_word(trustworthy: bool | None) -> str:
-    """A component's trust under model error in words: True "yes", False "no", None (or absent) "not assessed"."""
-    return "yes" if trustworthy is True else "no" if trustworthy is False else "not assessed"
 
 
 def trust_cell(result: dict[str, Any], name: str) -> str:
@@ -251,29 +362,35 @@ def search_line(result: dict[str, Any]) -> str:
 
 
 def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
-                 ei_history: list[float], executor: Executor | None = None) -> Path:
-    """``report.md`` with the parameter table and Figures 1-2 analogues and the convergence plot.
+                 ei_history: list[float], executor: Executor | None = None, y_opt: np.ndarray | None = None) -> Path:
+    """``report.md``: the maintenance verdict first, then the parameter table, the model-error checks,
+    Figures 1-2 and the convergence plot.
 
-    :param executor: runs Figure 1's simulation at w0 when the run has no reference date
-        (entered; in this process without one).
+    :param y_opt: ``(v, n_channels, n_freqs)`` dB, the model's spectra at w_opt on the measurement date's
+        segments (Figure 1); simulated on ``executor`` (entered; in this process without one) when not given.
     """
     config = problem.config
     names = problem.names
     k = figure_channel(config, problem.channels)
+    if y_opt is None:
+        y_opt = run_one(executor, SpectraTask.of(problem.simulator, problem.segments, config.spectra),
+                        dict(result["w_opt"]))
+    noise, floor = problem.noise_model, problem.noise_model.floor_
+    y_mod = modelled_spectra(y_opt, noise.sample(y_opt.shape[0], named_rng(config.seed, "figure-1")), floor)
+    figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, problem.y_mes, y_mod, problem.channels,
+                   title="Measurement date: measured spectra against the model at w_opt with the noise model B",
+                   first=k)
+    reference_figure = ""
     if problem.reference:
-        y_mes0, y_sim0 = problem.reference["y_mes0"], problem.reference["y_sim0"]
-        date = "reference date (where B is identified)"
-    else:
-        y_mes0 = problem.y_mes
-        y_sim0 = run_one(executor, SpectraTask.of(problem.simulator, problem.segments, config.spectra), {})
-        date = "measurement date"
-    y_mod0 = modelled_spectra(y_sim0, problem.noise_model.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1")),
-                              problem.noise_model.floor_)
-    figure_spectra(run_dir / "figure1_spectra.png", problem.freqs, y_mes0, y_sim0, y_mod0, k, problem.channels[k])
-    w_ref_n = np.array([result["w_ref_normalized"][n] for n in names]) if "w_ref" in result else None
-    figure_parameters(run_dir / "figure2_parameters.png", names,
-                      {config.objective.plugin: np.array([result["w_opt_normalized"][n] for n in names])},
-                      w_ref_n, {config.objective.plugin: np.array([result["interval_normalized"][n] for n in names])})
+        y_sim0 = problem.reference["y_sim0"]
+        y_mod0 = modelled_spectra(y_sim0, noise.sample(y_sim0.shape[0], named_rng(config.seed, "figure-1-reference")),
+                                  floor)
+        figure_spectra(run_dir / "figure1_reference.png", problem.freqs, problem.reference["y_mes0"], y_mod0,
+                       problem.channels, model="model at w0 with B", first=k,
+                       title="Reference date (where B is identified): measured spectra against the model at w0 with B")
+        reference_figure = ("\nThe reference date, where B is identified at the nominal parameters w0 (the "
+                            "paper's Figure 1):\n\n![figure 1, reference date](figure1_reference.png)\n")
+    figure_verdict(run_dir / "figure2_parameters.png", rows_of(result))
     figure_convergence(run_dir / "convergence.png", np.asarray(ego.y), ego.n_initial, ei_history, ego.n_refine)
 
     rows = []
@@ -301,6 +418,9 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
                       if result.get("interval_method", {}).get("bootstrap_reference") else "")
     text = f"""# suspid run `{config.name}`
 
+{verdict_markdown(rows_of(result), markdown_table, with_reference="w_ref" in result)}
+## Identification
+
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
 seed {config.seed}. {search_line(result)}{refine},
 J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
@@ -317,11 +437,19 @@ bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn 
 admissible box.
 {model_error_section(result)}
 {calibration_markdown(result)}
-## Figure 1: measured, simulated and modelled spectra ({date}), channel `{problem.channels[k]}`
+## Figure 1: measured spectra against the model at w_opt, every channel
+
+Measurement date: mean and 5-95 % band over the segments of the measured spectra (black) and of the modelled
+ones Y_mod = Y_sim(w_opt) + B (blue, B the noise model): a measured mean outside the blue band is a misfit.
+Y = 10 log10 |Â| in dB re 1 m s⁻¹·⁵ (paper eq. 1).
 
 ![figure 1](figure1_spectra.png)
+{reference_figure}
+## Figure 2: identified parameters in % of their nominal values, with the limits
 
-## Figure 2: identified parameters, normalised
+Bars: intervals; markers: identified values, coloured by the verdict (filled: trustworthy, hollow: trust not
+assessed, grey cross: not trustworthy, grey square: not identifiable); lines: warning (dashed) and alarm (solid)
+levels of `limits:`.
 
 ![figure 2](figure2_parameters.png)
 

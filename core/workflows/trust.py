@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "checks_report", "trust_states"]
+__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "checks_report", "trust_states", "trust_word"]
 
 REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 """The checks that must all have run for a component to be called trustworthy: the reference-date self-check
@@ -18,6 +18,11 @@ vehicle's). The nuisance sweep is opt-in: it runs where the user declares uncert
 
 CHECK_LABELS = {"self_check": "reference-date self-check", "adequacy": "adequacy at w_opt",
                 "groups": "data groups", "nuisance": "nuisance parameters"}
+
+
+def trust_word(trustworthy: bool | None) -> str:
+    """A component's trust under model error in words: True "yes", False "no", None (or absent) "not assessed"."""
+    return "yes" if trustworthy is True else "no" if trustworthy is False else "not assessed"
 
 
 def checks_report(checks: dict[str, str]) -> dict[str, dict[str, Any]]:

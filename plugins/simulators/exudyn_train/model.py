@@ -264,6 +264,8 @@ class TimeFeatures:
     :ivar bump_stops: lateral bump stops with ``bump_gap`` (m) and ``bump_stiffness`` (N/m).
     :ivar yaw_blow_off: yaw dampers with blow-off: the damper force c_yaw v up to the stroke velocity
         ``blow_off_velocity`` (m/s), then growing at ``blow_off_rate`` (N s/m).
+    :ivar curve_capacity: number of samples of the curve force tables (0: no curves;
+        :class:`.curving.CurveTables`, added by the simulator).
     """
 
     track_capacity: int = 0
@@ -277,11 +279,12 @@ class TimeFeatures:
     yaw_blow_off: bool = False
     blow_off_velocity: float = 0.01
     blow_off_rate: float = 20e3
+    curve_capacity: int = 0
 
     def key(self) -> tuple:
         return (self.track_capacity, self.variable_speed, self.speed_capacity, self.saturation,
                 self.friction, self.bump_stops, self.bump_gap, self.bump_stiffness, self.yaw_blow_off,
-                self.blow_off_velocity, self.blow_off_rate)
+                self.blow_off_velocity, self.blow_off_rate, self.curve_capacity)
 
     @property
     def creep_in_user_function(self) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Literal, Mapping, Sequence
 
@@ -21,8 +22,11 @@ from .layout import layout_of
 from .model import FLOOR_HEIGHT, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
-from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed,
+from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed, output_samples,
                       simulate_frequency, simulate_time)
+from .variable_speed import SpeedFamily, car_distance, quantised_speed, simulate_variable_speed
+from .curving import (CURVE_DT, CurveModel, CurveTables, DesignTrack, check_curve, curve_forces, curve_response,
+                      forced_rows, frame_outputs, has_curve, static_coordinates)
 
 
 MODEL_VERSION = 2
@@ -76,14 +80,19 @@ class YawDamperOptions(BaseModel):
         default=20e3, description="damping rate above the blow-off velocity, N s/m (same source: 20 kN s/m)")
 
 
+DIFFERENCE_STEP = 1e-4
+"""Relative step of the central differences :meth:`ExudynTrain.simulate_jacobian` takes on segments with a speed
+record or a curve (their derivatives are not analytic)."""
+
+
 class Options(BaseModel):
     """The ``simulator.options`` of ``exudyn-train``."""
 
     model_config = ConfigDict(extra="forbid")
 
     solver: Literal["time", "frequency"] = Field(
-        default="frequency", description="'frequency': linearised model, constant speed, fast; "
-        "'time': exudyn generalised-alpha, nonlinear options, variable speed")
+        default="frequency", description="'frequency': linearised model, fast (a speed record: "
+        "short-time constant speed with overlap-add); 'time': exudyn generalised-alpha, nonlinear options")
     fs_hz: PositiveFloat = Field(default=100.0, description="output sampling rate, Hz")
     step_s: PositiveFloat = Field(default=0.002, le=0.01,
                                   description="largest time step of the time solver, s (used: 1/(k fs))")
@@ -262,6 +271,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         self._models: dict = {}
         self._spectra = InputSpectra()
         self._frf: dict = {}
+        self._blocks: dict = {}
         self._checked: dict = {}
 
     # ------------------------------------------------------------------ options and parameters
@@ -464,6 +474,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
             key = InputSpectra._fingerprint(s)
             if key not in self._checked:
                 check_segment(s)
+                check_curve(s)
                 self._checked[key] = (s.irregularities, s.distance)   # keep the arrays: ids stay unique
                 if len(self._checked) > 1024:
                     self._checked.pop(next(iter(self._checked)))
@@ -508,15 +519,14 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
             return []
         self._check_segments(segments)
         values = self.values(w)
+        special = [i for i, s in enumerate(segments) if not is_constant_speed(s) or has_curve(s)]
+        if special:
+            return self._jacobian_by_differences(w, segments, names, special)
         groups = self._groups() if any("[" in n for n in names) else {}
         # a group not in w is differentiated at its elements' value (its kind's, or a wider group's), that
         # group alone added to the values: a kind asked with it keeps acting on its other elements
         at = {n: {**values, n: self._element_value(values, groups[_canonical(n, groups)])}
               for n in names if "[" in n and n not in values}
-        varying = [s.name for s in segments if not is_constant_speed(s)]
-        if varying:
-            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
-                                 f"constant speed per segment; use solver: time")
         o = self.opts
         channels = tuple(s.name for s in self.sensors(values))
         out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
@@ -547,9 +557,40 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         placement = next(pl for pl, kinds in P.ELEMENT_KINDS.items() if group.kind in kinds)
         return float(P.element_view(values, P.ELEMENT_KINDS[placement], group.members[0])[group.kind])
 
+    def _jacobian_by_differences(self, w: Mapping[str, float], segments: list[TrackSegment], names: list[str],
+                                 special: list[int]) -> list[tuple[Response, np.ndarray]]:
+        """:meth:`simulate_jacobian` when some segments have a speed record or a curve: the others
+        analytically, these by central differences of :meth:`simulate` (relative step
+        :data:`DIFFERENCE_STEP`; the records are smooth in the parameters)."""
+        plain = [i for i in range(len(segments)) if i not in special]
+        out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
+        if plain:
+            for i, pair in zip(plain, self.simulate_jacobian(w, [segments[i] for i in plain], names)):
+                out[i] = pair
+        group = [segments[i] for i in special]
+        base = self.simulate(w, group)
+        values = self.values(w)
+        grads = [np.zeros((len(names),) + r.accelerations.shape) for r in base]
+        groups = self._groups() if any("[" in n for n in names) else {}
+        for k, name in enumerate(names):
+            x = values[name] if name in values else self._element_value(values, groups[_canonical(name, groups)])
+            h = DIFFERENCE_STEP * max(abs(x), 1e-12)
+            up = self.simulate({**w, name: x + h}, group)
+            down = self.simulate({**w, name: x - h}, group)
+            for g, a, b in zip(grads, up, down):
+                g[k] = (a.accelerations - b.accelerations) / (2 * h)
+        for i, r, g in zip(special, base, grads):
+            out[i] = (r, g)
+        return out  # type: ignore[return-value]
+
     def _simulate_time(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
         features = self._features(segments)
+        if any(has_curve(s) for s in segments):
+            ahead = max(15.0, float(np.max(o.layout.wheelset_x(self._nominal()))) + 2.0)
+            longest = max(s.duration() + ahead / float(np.min(s.speed)) + 1.0 for s in segments)
+            features = dataclasses.replace(
+                features, curve_capacity=1 << max(6, int(math.ceil(math.log2(longest / CURVE_DT + 60)))))
         settings = TimeSettings(fs=o.fs_hz, step=o.step_s, spectral_radius=o.spectral_radius, taper_m=o.taper_m,
                                 # a speed record puts the creep forces (f/v, v the odometer's velocity) into a
                                 # symbolic function: a single linear solve would keep the step matrix of the
@@ -559,36 +600,142 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         out = []
         for seg in segments:
             speed = float(seg.mean_speed)
+            frame = self._time_curve(values, seg, features, settings) if features.curve_capacity else None
             model = self._model(values, speed, features)
-            out.append(simulate_time(model, seg, settings))
+            record = simulate_time(model, seg, settings)
+            if frame is not None and has_curve(seg):
+                record = Response(record.channels, record.fs, record.accelerations + frame, record.segment)
+            out.append(record)
         return out
+
+    def _time_curve(self, values: dict[str, float], segment: TrackSegment, features: TimeFeatures,
+                    settings: TimeSettings) -> np.ndarray:
+        """Fill the time model's curve force tables for ``segment`` (zero for straight track) and its initial
+        state (the static equilibrium of the curve at the start); returns the sensors' frame terms
+        ``(n_sensors, n_t)`` (:mod:`.curving`)."""
+        fs = settings.fs
+        speed = float(segment.mean_speed)
+        lin = self._model(values, speed, TimeFeatures()).linear_system()      # M, G, labels: the same coordinates
+        model = self._model(values, speed, features)
+        if getattr(model, "curve_tables", None) is None:
+            cm0 = CurveModel.of(values, self.opts.layout, self.sensors(values), self.opts.gravity_roll)
+            model.curve_tables = CurveTables(model, forced_rows(cm0, lin), features.curve_capacity)
+        cm = CurveModel.of(values, self.opts.layout, self.sensors(values), self.opts.gravity_roll)
+        # the time solver's run-in: the car starts n_pre samples before the record (see simulate_time)
+        v_start = float(np.atleast_1d(segment.speed)[0])
+        t_pre = (int(math.ceil(float(np.max(lin.wheelset_x)) / v_start * fs)) + 1) / fs
+        n_t = output_samples(segment, fs)
+        tau = np.arange(features.curve_capacity) * CURVE_DT
+        tau = tau[: int(math.ceil((t_pre + n_t / fs + 0.1 + 12.0 / fs) / CURVE_DT)) + 2]
+        if has_curve(segment):
+            design = DesignTrack(segment)
+            s, v = car_distance(segment, tau - t_pre)
+            F = curve_forces(cm, lin, design, s, v)
+            static = static_coordinates(lin, F[:, :1])
+            q0 = {lin.labels.index(k): float(val[0]) for k, val in static.items()}
+            t = np.arange(n_t) / fs
+            s_r, v_r = car_distance(segment, t)
+            frame = frame_outputs(cm, design, s_r, v_r)
+        else:
+            F, q0, frame = np.zeros((lin.M.shape[0], tau.size)), {}, np.zeros((len(cm.sensors), n_t))
+        model.curve_tables.set(F, q0)
+        return frame
 
     def _simulate_frequency(self, values: dict[str, float], segments: list[TrackSegment]) -> list[Response]:
         o = self.opts
-        varying = [s.name for s in segments if not is_constant_speed(s)]
-        if varying:
-            raise SimulatorError(f"segment '{varying[0]}' has a variable speed: the frequency solver needs a "
-                                 f"constant speed per segment; use solver: time")
         groups: dict[float, list[int]] = {}
+        varying: list[int] = []
         for i, s in enumerate(segments):
-            groups.setdefault(float(s.mean_speed), []).append(i)
+            if is_constant_speed(s):
+                groups.setdefault(float(s.mean_speed), []).append(i)
+            else:
+                varying.append(i)
         out: list[Response | None] = [None] * len(segments)
         channels = tuple(s.name for s in self.sensors(values))
+        for i in varying:      # short-time constant speed with overlap-add (:mod:`.variable_speed`)
+            out[i] = simulate_variable_speed(lambda v0, n_fft: self._speed_family(values, v0, n_fft), segments[i],
+                                             o.fs_hz, o.taper_m, o.settle_s, channels)
         for speed, idx in groups.items():
-            model = self._model(values, speed, TimeFeatures())
-            key = tuple(sorted(values.items()))
-            cached = self._frf.get(speed)
-            if cached is not None and cached[0] == key:
-                response, frf_cache = cached[1], cached[2]
-            else:   # once per parameter vector and speed, reused for every segment
-                response = FrequencyResponse(model.linear_system())
-                frf_cache = {}
-                self._frf[speed] = (key, response, frf_cache)
+            response, frf_cache = self._frequency_response(values, speed)
             results = simulate_frequency(response, [segments[i] for i in idx], o.fs_hz, o.taper_m, o.settle_s,
                                          self._spectra, channels, frf_cache)
             for i, r in zip(idx, results):
                 out[i] = r
+        for i, seg in enumerate(segments):     # curves and cant: superposed on the track's response
+            if has_curve(seg):
+                out[i] = self._add_curve(values, seg, out[i])
         return out  # type: ignore[return-value]
+
+    def _add_curve(self, values: dict[str, float], segment: TrackSegment, record: Response) -> Response:
+        """``record`` plus the response to the segment's curvature and cant (:mod:`.curving`), with the
+        linear model at the segment's (mean) speed."""
+        o = self.opts
+        if is_constant_speed(segment):
+            v = float(segment.mean_speed)
+            response = self._frequency_response(values, v)[0]
+            x0 = float(segment.distance[0])
+
+            def s_of_t(t):
+                return x0 + v * t
+
+            def v_of_t(t):
+                return np.full_like(t, v)
+        else:
+            v0 = quantised_speed(segment.length / segment.duration())
+            self._speed_family(values, v0, 0)             # the model about v0 (cached with the blocks)
+            response = self._frf_blocks(values)[("response", v0)]
+
+            def s_of_t(t):
+                return car_distance(segment, t)[0]
+
+            def v_of_t(t):
+                return car_distance(segment, t)[1]
+        cm = CurveModel.of(values, o.layout, self.sensors(values), o.gravity_roll)
+        y = curve_response(response, cm, segment, o.fs_hz, record.accelerations.shape[1], o.settle_s,
+                           s_of_t, v_of_t)
+        return Response(record.channels, record.fs, record.accelerations + y, record.segment)
+
+    def _frequency_response(self, values: dict[str, float], speed: float) -> tuple[FrequencyResponse, dict]:
+        """The linear model's frequency response at ``speed`` and its FRF cache, once per parameter vector
+        and speed, reused for every segment."""
+        key = tuple(sorted(values.items()))
+        cached = self._frf.get(speed)
+        if cached is not None and cached[0] == key:
+            return cached[1], cached[2]
+        model = self._model(values, speed, TimeFeatures())
+        response = FrequencyResponse(model.linear_system())
+        self._frf[speed] = (key, response, {})
+        return response, self._frf[speed][2]
+
+    def _speed_family(self, values: dict[str, float], v0: float, n_fft: int) -> SpeedFamily:
+        """The per-wheelset responses about ``v0`` (m/s) on the lines k fs / n_fft, for any speed
+        (:class:`.variable_speed.SpeedFamily`): only the creep damping depends on the speed
+        (D = D_inf + D_creep / v, as in :class:`.modes.SpeedDependentSystem`), separated from two
+        linearisations; one eigen-decomposition per parameter vector and ``v0``."""
+        blocks = self._frf_blocks(values)
+        hit = blocks.get((v0, n_fft))
+        if hit is not None:
+            return hit
+        if "d_creep" not in blocks:
+            a = self._model(values, 50.0, TimeFeatures()).linear_system()
+            b = self._model(values, 100.0, TimeFeatures()).linear_system()
+            d_creep = (a.D - b.D) * 100.0        # D(50) - D(100) = D_creep (1/50 - 1/100)
+            blocks["d_creep"] = (b, b.D - d_creep / 100.0, d_creep)
+        base, d_inf, d_creep = blocks["d_creep"]
+        if ("response", v0) not in blocks:
+            blocks[("response", v0)] = FrequencyResponse(dataclasses.replace(base, D=d_inf + d_creep / v0,
+                                                                              speed=float(v0)))
+        freqs = np.arange(n_fft // 2 + 1) * self.opts.fs_hz / n_fft if n_fft else np.zeros(0)
+        family = blocks[(v0, n_fft)] = SpeedFamily(blocks[("response", v0)], d_creep, freqs)
+        return family
+
+    def _frf_blocks(self, values: dict[str, float]) -> dict:
+        """Per-wheelset responses of the variable-speed blocks for ``values``, keyed by (speed, FFT length)."""
+        key = tuple(sorted(values.items()))
+        if self._blocks.get("values") != key:
+            self._blocks.clear()
+            self._blocks["values"] = key
+        return self._blocks
 
     # ------------------------------------------------------------------ modes
     def linear_system(self, w: Mapping[str, float] | None = None, speed: float | None = None):
@@ -631,5 +778,6 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         state["_effects"] = None
         state["_spectra"] = InputSpectra()
         state["_frf"] = {}
+        state["_blocks"] = {}
         state["_checked"] = {}
         return state

@@ -22,7 +22,8 @@ from suspid.errors import SimulatorError
 from suspid.interfaces import Parameter, Response, Simulator, TrackSegment
 
 # Masses and nominal rates: a quarter of a 40 t high-speed carbody with its
-# bogie share (values of the order of railway-data.md, section 1).
+# bogie share (values of the order of the Manchester Benchmark vehicle: Iwnicki,
+# Vehicle System Dynamics 30 (1998) 295-313).
 PARAMETERS = [
     Parameter("k_secondary", "N/m", 0.4e6, 0.2e6, 0.8e6, "secondary vertical stiffness"),
     Parameter("c_secondary", "N s/m", 15e3, 5e3, 40e3, "secondary vertical damping"),

@@ -1,0 +1,257 @@
+"""Re-run the benchmarks and write their printed tables into ``benchmarks/RESULTS.md``.
+
+One command re-measures what a model or method change affects::
+
+    python benchmarks/run_all.py            # every benchmark, full size
+    python benchmarks/run_all.py --quick    # the reduced sizes (heavy benchmarks skipped)
+    python benchmarks/run_all.py --only objectives startup
+    python benchmarks/run_all.py --list     # the table below
+
+Each benchmark of :data:`BENCHMARKS` runs as its own process (the same Python,
+from the repository root, one at a time: the figures of one never share the
+machine with another), its output is echoed line by line as it comes (the
+progress), and what it printed is written into RESULTS.md between the markers
+``<!-- run_all:NAME begin -->`` and ``<!-- run_all:NAME end -->`` with the
+command, the date, the commit and the load average. A block with no markers
+yet is appended at the end of the file. RESULTS.md is rewritten atomically
+after each benchmark, so an interrupt (Ctrl-C) keeps every table finished so
+far. A benchmark that fails (non-zero exit) is reported and its old block is
+kept unchanged; the exit status is then 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "RESULTS.md"
+WORK = "runs/run_all"  # output folders of the benchmarks that write runs (relative to ROOT)
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """One entry of the table: ``argv`` after the interpreter, for a full and a quick run.
+
+    ``quick`` is None for a benchmark too heavy for ``--quick`` (it is skipped there, with a note).
+    """
+
+    name: str
+    argv: tuple[str, ...]
+    quick: tuple[str, ...] | None
+    measures: str
+
+
+def _b(name: str, argv: str, quick: str | None, measures: str) -> Benchmark:
+    return Benchmark(name, tuple(argv.split()), None if quick is None else tuple(quick.split()), measures)
+
+
+BENCHMARKS: tuple[Benchmark, ...] = (
+    _b("startup", "benchmarks/bench_startup.py --runs 15", "benchmarks/bench_startup.py --runs 5",
+       "wall time of `suspid --help` against a bare interpreter"),
+    _b("objectives", "benchmarks/bench_objectives.py --repeat 5", "benchmarks/bench_objectives.py --repeat 3",
+       "one evaluation of J, likelihood (numba kernel vs numpy) and overlap"),
+    _b("baseline_objectives", "benchmarks/bench_baseline_objectives.py --repeat 5",
+       "benchmarks/bench_baseline_objectives.py --repeat 3", "one evaluation of J, mean-spectrum and wasserstein"),
+    _b("exudyn_train", "benchmarks/bench_exudyn_train.py --repeat 7 --vectors 30",
+       "benchmarks/bench_exudyn_train.py --repeat 2 --vectors 5",
+       "speed of the time and frequency solvers (conventional-hs), and their agreement"),
+    _b("exudyn_train_articulated",
+       "benchmarks/bench_exudyn_train.py --frequency-only --vehicle tgv-articulated --vectors 20",
+       "benchmarks/bench_exudyn_train.py --frequency-only --vehicle tgv-articulated --vectors 5",
+       "speed of the frequency solver on the articulated section"),
+    _b("variable_speed", "benchmarks/bench_variable_speed.py --seeds 3", "benchmarks/bench_variable_speed.py --seeds 1",
+       "frequency solver on a speed record against the time solver"),
+    _b("curve_spectra", "benchmarks/bench_curve_spectra.py --seed 3", "benchmarks/bench_curve_spectra.py --seed 3",
+       "what a curve does to the spectra"),
+    _b("ego", "benchmarks/bench_ego.py --seeds 5 --jobs 1",
+       "benchmarks/bench_ego.py --seeds 2 --functions branin,hartmann3 --jobs 1",
+       "EGO against peer Bayesian optimisers: evaluations to reach 1 %"),
+    _b("ego_sklearn", "benchmarks/bench_ego.py --functions branin --tools suspid,suspid-sklearn --seeds 5 --jobs 1",
+       None, "EGO with the sklearn-gp surrogate against gpy-kriging"),
+    _b("executors", "benchmarks/bench_executors.py --points 8", "benchmarks/bench_executors.py --quick",
+       "design evaluation by serial, processes and dask; batch EGO"),
+    _b("executors_whole_run", "benchmarks/bench_executors.py --whole-run", None,
+       "a whole run per executor, asynchronous EGO"),
+    _b("dask_scheduler_memory", "benchmarks/bench_executors.py --scheduler-memory --tasks 500 --tasks-before 30",
+       None, "dask scheduler memory, track sent once per worker"),
+    _b("ingest", "benchmarks/bench_ingest.py", "benchmarks/bench_ingest.py --hours 0.25",
+       "speed and memory of `suspid ingest` on a one-hour recording"),
+    _b("quickstart", f"-m suspid run configs/quickstart.yaml --fresh --set output.dir={WORK}/quickstart",
+       f"-m suspid run configs/quickstart.yaml --fresh --set output.dir={WORK}/quickstart",
+       "the README's quickstart identification"),
+    _b("table1", f"-m suspid study configs/table1.yaml --fresh --set output.dir={WORK}/table1", None,
+       "the Table 1 analogue (tgv-articulated)"),
+    _b("methods", f"-m suspid study configs/methods.yaml --fresh --set output.dir={WORK}/methods", None,
+       "six optimisers and three objectives on the Table 1 problem"),
+    _b("coverage", f"benchmarks/bench_coverage.py --seeds 20 --out {WORK}/coverage", None,
+       "interval coverage over seeds (quickstart)"),
+    _b("gradient_jacobian", "benchmarks/bench_gradient.py jacobian", None,
+       "analytic Jacobian against finite differences, and its cost"),
+    _b("gradient_identify", f"benchmarks/bench_gradient.py identify --out {WORK}/gradient", None,
+       "gauss-newton against the paper's EGO"),
+    _b("diagnose", "benchmarks/bench_diagnose.py", None, "discrepancy workflow on hidden-effect experiments"),
+    _b("diagnose_independent", "benchmarks/bench_diagnose.py --independent", None,
+       "discrepancy workflow on the independent train"),
+    _b("floor", "benchmarks/bench_floor.py", None, "sensor-noise floor on equal data"),
+    _b("objective_bias", "benchmarks/bench_objective_bias.py", None,
+       "where each objective puts the suspension on the independent train"),
+    _b("model_form", f"benchmarks/bench_model_form.py {WORK}/model_form", None,
+       "trust flags on the independent train"),
+    _b("model_form_independent2",
+       f"benchmarks/bench_model_form.py {WORK}/model_form2 --generator independent2", None,
+       "trust flags on the second independent train"),
+    _b("trust_budget", f"benchmarks/bench_trust_budget.py {WORK}/trust_budget", None,
+       "linearised against full model-error checks"),
+)
+
+MARK = "<!-- run_all:{name} {end} -->"
+
+
+def markers(name: str) -> tuple[str, str]:
+    """The begin and end marker lines of benchmark ``name``'s block in RESULTS.md."""
+    return MARK.format(name=name, end="begin"), MARK.format(name=name, end="end")
+
+
+def render_block(bench: Benchmark, argv: tuple[str, ...], output: str, *, date: str, commit: str,
+                 load: str) -> str:
+    """The block written into RESULTS.md (markers included): command, date, commit, load, then the output."""
+    begin, end = markers(bench.name)
+    command = " ".join(("python", *argv))
+    fence = "````" if "```" in output else "```"
+    return (f"{begin}\n"
+            f"Command: `{command}` · date {date} · commit {commit} · load average {load} "
+            f"(written by `benchmarks/run_all.py`)\n\n"
+            f"{fence}text\n{output.rstrip()}\n{fence}\n{end}")
+
+
+def replace_block(text: str, name: str, block: str) -> str:
+    """``text`` with benchmark ``name``'s block replaced by ``block``, or ``block`` appended under a heading."""
+    begin, end = markers(name)
+    pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
+    if pattern.search(text):
+        return pattern.sub(lambda _m: block, text, count=1)
+    return f"{text.rstrip()}\n\n## {name} (benchmarks/run_all.py)\n\n{block}\n"
+
+
+def git_commit() -> str:
+    """The short hash of HEAD, ``+dirty`` when tracked files other than RESULTS.md differ from it; ``unknown``
+    outside git (RESULTS.md itself is what this script rewrites, so its changes do not count)."""
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                              text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ".",
+                                ":(exclude)benchmarks/RESULTS.md"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + ("+dirty" if dirty else "")
+
+
+def load_average() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
+
+
+def run_one(argv: tuple[str, ...], *, python: str = sys.executable, prefix: str = "") -> tuple[int, str]:
+    """Run ``python *argv`` from the repository root, echoing its lines; returns (exit status, stdout).
+
+    Its stderr goes to ours (progress bars and warnings are not part of the table). On Ctrl-C (or a
+    SIGINT to this process alone) the child is sent SIGINT too, given 10 s to stop, then killed, and the
+    interrupt re-raised.
+    """
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([python, *argv], cwd=ROOT, stdout=subprocess.PIPE, text=True, env=env)
+    lines = []
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            lines.append(line)
+            print(prefix + line, end="", flush=True)
+        return proc.wait(), "".join(lines)
+    except KeyboardInterrupt:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        raise
+
+
+def update_results(results: Path, benches: list[Benchmark], *, quick: bool,
+                   python: str = sys.executable) -> list[str]:
+    """Run ``benches`` one by one, rewriting ``results`` after each success; returns the names that failed."""
+    failed = []
+    commit = git_commit()
+    for i, bench in enumerate(benches, 1):
+        argv = bench.quick if quick else bench.argv
+        if argv is None:
+            print(f"[{i}/{len(benches)}] {bench.name}: skipped in --quick (run it without --quick)", flush=True)
+            continue
+        print(f"[{i}/{len(benches)}] {bench.name}: python {' '.join(argv)}", flush=True)
+        load = load_average()
+        t0 = time.perf_counter()
+        status, output = run_one(argv, python=python, prefix=f"  {bench.name}| ")
+        wall = time.perf_counter() - t0
+        if status != 0 or not output.strip():
+            why = f"exit status {status}" if status != 0 else "no output"
+            print(f"[{i}/{len(benches)}] {bench.name}: FAILED ({why}, {wall:.0f} s); its old block is kept",
+                  flush=True)
+            failed.append(bench.name)
+            continue
+        date = datetime.date.today().isoformat()
+        block = render_block(bench, argv, output, date=date, commit=commit, load=load)
+        from suspid.infra.files import write_text  # atomic: an interrupt leaves the previous file
+
+        write_text(results, replace_block(results.read_text(encoding="utf-8"), bench.name, block))
+        print(f"[{i}/{len(benches)}] {bench.name}: done in {wall:.0f} s, written to {results.name}", flush=True)
+    return failed
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="reduced sizes; heavy benchmarks skipped")
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="these benchmarks only (see --list)")
+    ap.add_argument("--list", action="store_true", help="print the benchmarks and exit")
+    ap.add_argument("--results", type=Path, default=RESULTS, help="the file to update (default: RESULTS.md)")
+    args = ap.parse_args(argv)
+    if args.list:
+        for b in BENCHMARKS:
+            quick = "skipped" if b.quick is None else "python " + " ".join(b.quick)
+            print(f"{b.name}: {b.measures}\n  full:  python {' '.join(b.argv)}\n  quick: {quick}")
+        return 0
+    by_name = {b.name: b for b in BENCHMARKS}
+    unknown = [n for n in args.only or [] if n not in by_name]
+    if unknown:
+        print(f"run_all: unknown benchmark {', '.join(unknown)}; expected one of {', '.join(by_name)}",
+              file=sys.stderr)
+        return 2
+    if not args.results.is_file():
+        print(f"run_all: {args.results}: no such file (expected RESULTS.md)", file=sys.stderr)
+        return 2
+    benches = [by_name[n] for n in args.only] if args.only else list(BENCHMARKS)
+    try:
+        failed = update_results(args.results, benches, quick=args.quick)
+    except KeyboardInterrupt:
+        print("run_all: interrupted; the tables finished so far are written", file=sys.stderr)
+        return 130
+    if failed:
+        print(f"run_all: failed: {', '.join(failed)} (their old blocks kept)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
