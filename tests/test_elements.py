@@ -150,6 +150,12 @@ def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
     assert out["named"]
     row, = out["rows"]
     assert row["group"] == "c_yaw[bogie1]" and not row["separable"]
+    assert row["not_separated"] == "left/right not separable with these sensors"
+    from suspid.workflows.verdict import verdict_rows
+
+    empty = {"parameters": [], "w_opt": {}, "interval": {}, "identifiable": {}, "localisation": out}
+    vrow, = verdict_rows(empty, problem.simulator.parameters(), {})
+    assert vrow.name == "c_yaw[bogie1]" and vrow.label.endswith("(left/right not separable with these sensors)")
     assert row["interval"][0] <= 150e3 <= row["interval"][1] or abs(row["value"] / 150e3 - 1) < 0.05
     assert all(a["group"] != "c_yaw[bogie1,left]" for a in row["alternatives"])   # never one of the pair alone
     as_loss = localise_problem(problem, problem.config.localisation.model_copy(update={"direction": "decrease"}),

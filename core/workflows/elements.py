@@ -29,7 +29,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from suspid.config import Config
-from suspid.elements import declared_groups, finest_groups, kind_of
+from suspid.elements import declared_groups, finest_groups, kind_of, split_name
 from suspid.errors import ConfigError
 from suspid.infra.files import write_json
 from suspid.infra.lock import open_run_dir
@@ -448,11 +448,20 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
 
 
 def _row(f: HypothesisFit, analysis: ElementAnalysis) -> dict[str, Any]:
+    members = [analysis.groups[i] for i in f.hypothesis.members]
     return {"group": f.hypothesis.name, "kind": f.hypothesis.kind, "value": f.value,
             "nominal": f.hypothesis.nominal, "interval": list(f.interval()), "evidence": f.evidence,
-            "members": [analysis.groups[i] for i in f.hypothesis.members],
-            "separable": len(f.hypothesis.members) == 1, "note": f.hypothesis.note,
+            "members": members, "separable": len(members) == 1, "note": f.hypothesis.note,
+            "not_separated": not_separated(members) if "not separable" in f.hypothesis.note else "",
             "method": f.details.get("method")}
+
+
+def not_separated(members: Sequence[str]) -> str:
+    """``"left/right not separable with these sensors"``: the tags in which the members of a cluster differ."""
+    tags = [split_name(m)[1] for m in members]
+    varying = ["/".join(dict.fromkeys(t[i] for t in tags)) for i in range(min(map(len, tags)))
+               if len({t[i] for t in tags}) > 1]
+    return f"{', '.join(varying)} not separable with these sensors" if varying else ""
 
 
 def _localise_one(problem: Problem, options: LocalisationOptions, analysis: ElementAnalysis, hypotheses,
