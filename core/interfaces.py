@@ -204,7 +204,7 @@ class DifferentiableSimulator(ABC):
     (``class MySim(Simulator, DifferentiableSimulator)``); the core tests
     ``isinstance(sim, DifferentiableSimulator)`` and falls back to finite
     differences through the run's executor otherwise, and for every name that
-    :meth:`differentiable` leaves out (:func:`suspid.method.jacobian.spectra_jacobian`).
+    :meth:`differentiable` leaves out (:func:`suspid.workflows.jacobian.spectra_jacobian`).
     Parameters are any the simulator declares in :meth:`Simulator.parameters`:
     the identified ones and model parameters that are only calibrated (a damper
     mount's stiffness, a creep scale, the conicity).

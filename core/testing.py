@@ -172,7 +172,8 @@ def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
     """Check a :class:`suspid.interfaces.DifferentiableSimulator` against central finite differences.
 
     Checks: ``differentiable`` returns a subset of the names asked, in their order;
-    ``simulate_jacobian`` returns, per segment, the records ``simulate`` returns and
+    ``simulate_jacobian`` (called first at another point, so that whatever it keeps between calls is
+    exercised) returns, per segment, the records ``simulate`` returns and
     derivatives ``(n_p, n_channels, n_t)``; for every parameter p and segment,
     ||dA_p - (A(w + h e_p) - A(w - h e_p)) / 2h|| <= ``rtol`` ||(A(w + h e_p) - A(w - h e_p)) / 2h||
     (2-norm over channels and samples), h = ``rel_step`` |w_p|: the difference's error is
@@ -195,6 +196,10 @@ def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
     assert offered, f"{cls.__name__} differentiates none of {asked}"
     segments = segments or sample_segments()
     point = {n: float(declared[n]) for n in declared} | dict(w or {})
+    # a first call elsewhere: what a simulator keeps between calls (caches, sparsity patterns) must not change
+    # the derivatives at the point checked
+    sim.simulate_jacobian({n: point[n] * 1.05 for n in offered} | {n: v for n, v in point.items() if n not in offered},
+                          segments, offered)
     pairs = sim.simulate_jacobian(point, segments, offered)
     plain = sim.simulate(point, segments)
     assert isinstance(pairs, list) and len(pairs) == len(segments), "simulate_jacobian() must return one pair per segment"

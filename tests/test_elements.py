@@ -78,7 +78,8 @@ def test_group_derivatives_are_analytic_and_sum_to_the_kind_derivative():
     names = ["k_sec_z", "k_sec_z[bogie1,left]", "k_sec_z[bogie1,right]", "k_sec_z[bogie2]"]
     assert sim.differentiable(names) == names
     (_, g), = sim.simulate_jacobian({}, segs, names)
-    assert np.allclose(g[1] + g[2] + g[3], g[0], rtol=1e-9, atol=1e-12 * np.abs(g[0]).max())
+    # the records' derivatives are single precision (about 1e-6 of each record)
+    assert np.abs(g[1] + g[2] + g[3] - g[0]).max() < 1e-5 * np.abs(g[0]).max()
     errors = check_differentiable(ExudynTrain, {"solver": "frequency"}, names=["c_yaw[bogie1,left]",
                                                                                "c_prim_z[ws3,right]"])
     assert max(errors.values()) < 1e-4

@@ -10,7 +10,8 @@ import pytest
 from conftest import ROOT
 from suspid import registry
 from suspid.interfaces import DifferentiableSimulator
-from suspid.method.jacobian import gauss_newton_information, linearised_shift, spectra_jacobian
+from suspid.method.jacobian import gauss_newton_information, linearised_shift
+from suspid.workflows.jacobian import spectra_jacobian
 from suspid.testing import check_differentiable, sample_segments
 
 SPECTRA = {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 60}
@@ -141,6 +142,29 @@ def test_every_parameter_of_the_presets_matches_central_differences(train, prese
     errors = check_differentiable(train, {"solver": "frequency", "vehicle": preset}, segments, names=names,
                                   rtol=1e-4)
     assert set(errors) == set(names)
+
+
+def test_grouped_matrix_derivatives_equal_the_one_by_one_ones(train):
+    """After the first call, parameters with disjoint sparsity patterns share a linearisation: the same
+    matrices, bit for bit, at another point, for a fraction of the linearisations."""
+    from suspid.plugins.simulators.exudyn_train import sensitivity as S
+    from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
+
+    sim = train(solver="frequency")
+    names = sim.differentiable([p.name for p in sim.parameters()])
+    v0 = sim.values({})
+    model = sim._model(v0, 83.3, TimeFeatures())
+    S.matrix_derivatives(model, v0, 83.3, names, model.linear_system())            # learns the patterns
+    groups = S._groups(names, S._PATTERNS[model][tuple(names)])
+    assert len(groups) <= len(names) // 2
+    values = sim.values({"k_sec_z": 2.8e5, "c_sec_z": 1.4e4, "c_yaw": 2.1e5, "m_car": 5.0e4, "conicity": 0.2})
+    model.update(values, 83.3)
+    base = model.linear_system()
+    grouped = S.matrix_derivatives(model, values, 83.3, names, base)
+    single = [S._single(model, values, 83.3, n, base) for n in names]
+    for n, a, b in zip(names, grouped, single):
+        for f in ("dM", "dK", "dD", "dG"):
+            np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f"{n} {f}")
 
 
 def test_linearised_shift_is_the_refit_of_a_linear_model():

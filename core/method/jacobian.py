@@ -1,46 +1,40 @@
-"""Derivatives of the simulated spectra y_sim(w) with respect to named parameters.
+"""Derivatives of the simulated spectra y_sim(w) with respect to named parameters: the mathematics.
 
 The objective J (eq. 5-8) reads the model only through the spectra y_sim_i(w)
 ``(v, n_channels, n_freqs)`` dB of eq. 1-2; their Jacobian
 ``(v, n_channels, n_freqs, n_p)`` dB per SI unit of each parameter is what a
 gradient-based search, a Fisher information or a linearised model-error check
-needs. :func:`spectra_jacobian` gives it for any simulator:
+needs. This module holds what does not run a simulation:
 
-- **analytic** where the simulator offers it (:class:`~suspid.interfaces.DifferentiableSimulator`):
-  the derivatives dA of its records are carried through eq. 1-2 exactly. With
-  Â the record's Fourier amplitude (detrend and window are linear, so dÂ is
-  the amplitude of dA) and P_j the mean of |Â|² over the lines of cell j,
-  y_j = 5 log10 P_j and ∂y_j = (5 / ln 10) ∂P_j / P_j, ∂P_j the cell mean of
-  2 Re(conj(Â) dÂ) (0 where P_j sits at the amplitude floor);
-- **finite differences** otherwise, and for the names the simulator leaves out:
-  central (2 simulations per parameter, error O(h²)) or forward (1 per
-  parameter and one at w, error O(h)) with steps h = ``rel_step`` |w_p|, every
-  simulation a task of the caller's executor, so that they run in parallel.
+- :func:`spectra_derivatives`: the derivatives dA of a simulator's records
+  (:class:`~suspid.interfaces.DifferentiableSimulator`) carried through eq. 1-2
+  exactly. With Â the record's Fourier amplitude (detrend and window are
+  linear, so dÂ is the amplitude of dA) and P_j the mean of |Â|² over the
+  lines of cell j, y_j = 5 log10 P_j and ∂y_j = (5 / ln 10) ∂P_j / P_j, ∂P_j
+  the cell mean of 2 Re(conj(Â) dÂ) (0 where P_j sits at the amplitude floor);
+- :class:`SpectraJacobian`: y_sim, its Jacobian and how each column was obtained;
+- helpers for the checks that work from Jacobians: the Fisher information
+  (:func:`gauss_newton_information`), the identifiability it implies
+  (:func:`fisher_identifiability`) and the first-order shift of the estimate
+  with a model parameter held at a wrong value (:func:`linearised_shift`).
 
-The result says which parameter took which method and how many plain
-simulations the finite differences cost, so that callers count simulations
-honestly. Helpers for the trust checks work from the same Jacobians: the
-Fisher information (:func:`gauss_newton_information`) and the first-order shift of
-the estimate with a model parameter held at a wrong value (:func:`linearised_shift`).
+Running the simulations (analytic where offered, finite differences through
+the run's executor otherwise) is a workflow: :func:`suspid.workflows.jacobian.spectra_jacobian`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
-from typing import Any, Literal, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from suspid import registry
-from suspid.errors import PluginBugError, SimulatorError, SuspidError
-from suspid.interfaces import DifferentiableSimulator, Executor, Response, Simulator, TrackSegment
+from suspid.interfaces import Response
 from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
 from suspid.options import parse_options
-from suspid.elements import declared_parameters
 
-__all__ = ["SpectraJacobian", "JacobianTask", "spectra_jacobian", "spectra_derivatives",
-           "gauss_newton_information", "linearised_shift", "DEFAULT_REL_STEP"]
+__all__ = ["SpectraJacobian", "spectra_derivatives", "gauss_newton_information", "linearised_shift",
+           "fisher_information", "fisher_identifiability", "FisherVerdict", "DEFAULT_REL_STEP"]
 
 DEFAULT_REL_STEP = 1e-4
 """Relative step of the finite differences: below it the simulators' own rounding (an exudyn linearisation is
@@ -64,45 +58,6 @@ def spectra_derivatives(responses: Sequence[Response], d_accelerations: Sequence
         ys.append(y)
         dys.append(np.moveaxis(dy, 0, -1))
     return np.stack(ys), np.stack(dys)
-
-
-@dataclass(frozen=True)
-class JacobianTask:
-    """Worker side of an analytic Jacobian: ``task(w) -> (y, dy, freqs)`` on fixed segments and names.
-
-    Picklable like :class:`suspid.workflows.tasks.SpectraTask` (the simulator is built once per process).
-    """
-
-    simulator_cls: type
-    options: dict
-    segments: list
-    spectra: Any
-    names: tuple[str, ...]
-
-    def __call__(self, w: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        from suspid.method.spectra import frequency_grid
-        from suspid.workflows.tasks import _simulator
-
-        sim = _simulator(self.simulator_cls, self.options)
-        try:
-            pairs = sim.simulate_jacobian(w, self.segments, list(self.names))
-        except SuspidError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - not one of suspid's errors: a bug of the plugin
-            raise PluginBugError(f"{registry.describe('simulator', sim.name)} failed to differentiate at "
-                                 f"w = {dict(w)}: {type(exc).__name__}: {exc}") from exc
-        responses = [r for r, _ in pairs]
-        grads = [np.asarray(g, dtype=float) for _, g in pairs]
-        for r, g in zip(responses, grads):
-            if g.shape != (len(self.names),) + np.shape(r.accelerations):
-                raise PluginBugError(f"{registry.describe('simulator', sim.name)}: simulate_jacobian returned "
-                                     f"derivatives of shape {g.shape} for segment '{r.segment}', expected "
-                                     f"{(len(self.names),) + np.shape(r.accelerations)}")
-            if not (np.all(np.isfinite(g)) and np.all(np.isfinite(r.accelerations))):
-                raise SimulatorError(f"simulator '{sim.name}' returned non-finite derivatives for segment "
-                                     f"'{r.segment}' at w = {dict(w)}")
-        y, dy = spectra_derivatives(responses, grads, self.spectra)
-        return y, dy, frequency_grid(self.spectra)[0]
 
 
 @dataclass
@@ -134,93 +89,6 @@ class SpectraJacobian:
         """The Jacobian per unit of ``scales`` ``(n_p,)`` (e.g. the widths of the admissible intervals:
         derivatives with respect to the normalised parameters in [0, 1]^q): ``(v, n_channels, n_freqs, n_p)``."""
         return self.jacobian * np.asarray(scales, dtype=float)
-
-
-def _steps(w: Mapping[str, float], names: Sequence[str], rel_step: float) -> np.ndarray:
-    return np.array([rel_step * abs(w[n]) if w[n] != 0 else rel_step for n in names], dtype=float)
-
-
-def spectra_jacobian(simulator: Simulator, w: Mapping[str, float], names: Sequence[str],
-                     segments: Sequence[TrackSegment], spectra: SpectraOptions | Mapping[str, Any] | None = None,
-                     *, executor: Executor | None = None,
-                     method: Literal["auto", "central", "forward"] = "auto",
-                     fallback: Literal["central", "forward"] = "central",
-                     rel_step: float = DEFAULT_REL_STEP) -> SpectraJacobian:
-    """y_sim(w) and ∂y_sim/∂w for ``names`` on ``segments`` (see the module docstring).
-
-    :param simulator: any simulator; analytic derivatives are used where it is a
-        :class:`~suspid.interfaces.DifferentiableSimulator` and ``method`` is ``"auto"``.
-    :param w: parameter name -> SI value; parameters not named keep their nominal values.
-    :param names: the parameters to differentiate (identified ones or model parameters).
-    :param executor: where the simulations run (entered; in this process without one).
-    :param method: ``"auto"``: analytic where offered, ``fallback`` for the rest; ``"central"`` or
-        ``"forward"``: finite differences for every parameter.
-    :param rel_step: relative step of the finite differences.
-    :raises SimulatorError: a simulation failed (the first failure's error).
-    :raises SuspidError: an unknown method or a parameter the simulator does not declare (one line).
-    """
-    from suspid.workflows.tasks import SpectraTask, run_one, run_tasks
-
-    if method not in ("auto", "central", "forward") or fallback not in ("central", "forward"):
-        raise SuspidError(f"unknown differentiation method {method!r} / {fallback!r}: expected method auto, central "
-                          f"or forward and fallback central or forward")
-    t0 = time.perf_counter()
-    names = list(names)
-    declared = {p.name: p.nominal for p in declared_parameters(simulator)}
-    unknown = [n for n in names if n not in declared]
-    if unknown:
-        raise SuspidError(f"parameter(s) {', '.join(unknown)} not declared by simulator '{simulator.name}' "
-                          f"(declared: {', '.join(declared)})")
-    point = {n: float(w[n]) if n in w else float(declared[n]) for n in names}
-    full = {**{k: float(v) for k, v in w.items()}, **point}
-    opt = parse_options(SpectraOptions, spectra, "spectra")
-    analytic: list[str] = []
-    if method == "auto" and isinstance(simulator, DifferentiableSimulator):
-        analytic = [n for n in simulator.differentiable(names) if n in names]
-    scheme = fallback if method == "auto" else method
-    y = None
-    jac: dict[str, np.ndarray] = {}
-    freqs = None
-    n_analytic = 0
-    if analytic:
-        task = JacobianTask(type(simulator), dict(simulator.options), list(segments), opt, tuple(analytic))
-        try:
-            y, dy, freqs = run_one(executor, task, full)
-        except SimulatorError:
-            # the analytic route can fail where a plain solve does not (e.g. ill-conditioned modes, which the
-            # plain solve bridges by a direct solve): every name is then differenced instead of ending the run
-            analytic = []
-        else:
-            n_analytic = 1
-            for k, n in enumerate(analytic):
-                jac[n] = dy[..., k]
-    rest = [n for n in names if n not in analytic]
-    methods = {n: ("analytic" if n in analytic else scheme) for n in names}
-    jobs: list[dict[str, float]] = []
-    h = _steps(point, rest, rel_step)
-    for n, step in zip(rest, h):
-        jobs.append({**full, n: point[n] + step})
-        if scheme == "central":
-            jobs.append({**full, n: point[n] - step})
-    need_base = y is None
-    if need_base:
-        jobs.append(dict(full))
-    task = SpectraTask.of(simulator, segments, opt, with_freqs=True)
-    outcomes = run_tasks(executor, [(task, job) for job in jobs])
-    for outcome in outcomes:
-        if isinstance(outcome, BaseException):
-            raise outcome
-    if need_base:
-        y, freqs = outcomes[-1]
-    for k, (n, step) in enumerate(zip(rest, h)):
-        if scheme == "central":
-            jac[n] = (outcomes[2 * k][0] - outcomes[2 * k + 1][0]) / (2 * step)
-        else:
-            jac[n] = (outcomes[k][0] - y) / step
-    J = np.stack([jac[n] for n in names], axis=-1) if names else np.zeros(np.shape(y) + (0,))
-    return SpectraJacobian(names=names, w=point, y=np.asarray(y), freqs=np.asarray(freqs), jacobian=J,
-                           methods=methods, n_simulations=len(jobs), n_analytic_calls=n_analytic,
-                           wall_time_s=time.perf_counter() - t0)
 
 
 def gauss_newton_information(jacobian: np.ndarray, variance: np.ndarray) -> np.ndarray:
@@ -261,3 +129,130 @@ def linearised_shift(jacobian_w: np.ndarray, jacobian_theta: np.ndarray, varianc
     A = Jw.reshape(-1, Jw.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
     B = Jt.reshape(-1, Jt.shape[-1]) * np.sqrt(inv.reshape(-1))[:, None]
     return -np.linalg.lstsq(A, B, rcond=None)[0]
+
+
+def fisher_information(y_sim: np.ndarray, jacobian: np.ndarray, noise_model, rel_floor: float = 1.0) -> np.ndarray:
+    """The Fisher information ``(n_p, n_p)`` of the parameters in the modelled spectra, with B's own covariance.
+
+    With y_mod_i = f(y_sim_i(w)) + b_i (eq. 4; f the sensor-noise floor's
+    5 log10(10^{(y + m)/5} + N) - m, the identity without a floor) and the noise
+    paths b_i independent over segments, each Gaussian with the noise model's
+    covariance C (low rank plus diagonal, :class:`~suspid.method.noise.NoiseModel`),
+    F = Σ_i G_iᵀ C⁻¹ G_i, G_i = f'(y_sim_i) ∂y_sim_i/∂w ``(D, n_p)``. C⁻¹ is applied
+    by the Woodbury identity (never formed); unlike
+    :func:`gauss_newton_information` the correlations of B over channels and
+    frequencies are kept, so that 200 frequencies that a smooth gain moves
+    together do not count as 200 independent readings. The diagonal part is
+    kept at ``rel_floor`` of B's marginal variance at least. The default, 1,
+    is conservative: B's v0 paths span at most v0 - 1 of the D directions, and
+    in the others the fitted remainder (1 % of the variance with
+    ``variance_fraction`` 0.99) would count a reading as nearly noise-free
+    (on the quickstart it put the Cramér-Rao spread near 0.01 % of the
+    interval); with the whole marginal variance on the diagonal as well, the
+    information is no larger than that of independent readings of B's full
+    variance. Where the floor N dominates, f' = P / (P + N) → 0: a
+    parameter that moves the spectra only below the sensors' floor carries no
+    information.
+
+    :param y_sim: ``(v, n_channels, n_freqs)`` dB at the point.
+    :param jacobian: ``(v, n_channels, n_freqs, n_p)`` dB per unit of each parameter (SI, or scaled).
+    :param noise_model: a fitted :class:`~suspid.method.noise.NoiseModel`.
+    :returns: F in the inverse square units of the Jacobian's parameters.
+    """
+    y = np.asarray(y_sim, dtype=float)
+    Jm = np.asarray(jacobian, dtype=float)
+    floor = getattr(noise_model, "floor_", None)
+    if floor is not None:
+        power = 10.0 ** ((y + floor.gain_db) / 5.0)
+        Jm = Jm * (power / (power + floor.power))[..., None]
+    v, n_p = Jm.shape[0], Jm.shape[-1]
+    G = Jm.reshape(v, -1, n_p)                                                          # (v, D, n_p)
+    d = np.maximum(np.asarray(noise_model.residual_variance_, dtype=float).ravel(),
+                   rel_floor * np.asarray(noise_model.variance_, dtype=float).ravel())
+    d = np.maximum(d, 1e-300)
+    U = np.asarray(noise_model.components_, dtype=float).T                              # (D, r)
+    s = (1.0 - float(noise_model.shrinkage_)) * np.asarray(noise_model.eigenvalues_, dtype=float)
+    GD = G / d[None, :, None]                                                           # D⁻¹ G_i
+    F = np.einsum("vdp,vdq->pq", G, GD)
+    keep = s > 0
+    if np.any(keep):
+        U, s = U[:, keep], s[keep]
+        inner = np.diag(1.0 / s) + (U / d[:, None]).T @ U                              # S⁻¹ + Uᵀ D⁻¹ U
+        W = np.einsum("dr,vdp->vrp", U, GD)                                             # Uᵀ D⁻¹ G_i
+        r = W.shape[1]
+        X = np.linalg.solve(inner, np.moveaxis(W, 0, 1).reshape(r, -1)).reshape(r, v, n_p)
+        F -= np.einsum("vrp,rvq->pq", W, X)
+    return 0.5 * (F + F.T)
+
+
+@dataclass
+class FisherVerdict:
+    """Identifiability from the Fisher information, per component (arrays ``(q,)``, units of the information's
+    parameters, e.g. [0, 1]^q).
+
+    :ivar sd_alone: the Cramér-Rao standard deviation with every other component known, 1/√F_kk.
+    :ivar sd: the Cramér-Rao standard deviation with the others estimated too, √(F⁻¹)_kk (inf on a null direction).
+    :ivar partner: per component, the component it is most correlated with under F⁻¹ and that correlation.
+    """
+
+    identifiable: np.ndarray
+    reasons: list[list[str]]
+    sd_alone: np.ndarray
+    sd: np.ndarray
+    partner: list[tuple[str, float] | None]
+
+
+def fisher_identifiability(information: np.ndarray, names: Sequence[str], n_sigmas: float,
+                           max_width: float) -> FisherVerdict:
+    """Which components the data pin down, from the Fisher information ``(q, q)`` in [0, 1]^q units.
+
+    A component is **not identifiable** when its ± ``n_sigmas`` Cramér-Rao interval spans more than
+    ``max_width`` of the admissible interval: *no influence on the spectra* when it does so even with
+    every other component known (2 n / √F_kk > max_width: the spectra hardly move with it, against
+    the noise B), a *flat direction* when only together with the others (a combination of components
+    moves the spectra as little). The bound is the best any unbiased estimator from these spectra can
+    do without model error; the run's objective may do worse and model error adds a bias, which its
+    sandwich intervals and the model-error checks say (on the quickstart the bound is a fraction of a per
+    cent of the interval where the errors are a few per cent): the verdict says whether the spectra move
+    with a component at all, not how precisely it is known.
+    """
+    F = 0.5 * (np.asarray(information, dtype=float) + np.asarray(information, dtype=float).T)
+    q = F.shape[0]
+    diag = np.diag(F)
+    with np.errstate(divide="ignore"):
+        sd_alone = np.where(diag > 0, 1.0 / np.sqrt(np.maximum(diag, 1e-300)), np.inf)
+    lam, V = np.linalg.eigh(F)
+    scale = max(float(np.max(np.abs(lam))) if lam.size else 0.0, 1e-300)
+    live = lam > 1e-12 * scale
+    cov = (V[:, live] / lam[live]) @ V[:, live].T
+    null = np.sum(V[:, ~live] ** 2, axis=1) > 1e-6          # the component has a share of a null direction
+    sd = np.where(null, np.inf, np.sqrt(np.clip(np.diag(cov), 0, None)))
+    identifiable = np.ones(q, dtype=bool)
+    reasons: list[list[str]] = [[] for _ in range(q)]
+    partner: list[tuple[str, float] | None] = [None] * q
+    def spread(s: float) -> str:
+        return f"± {100 * n_sigmas * s:.0f} %" if n_sigmas * s < 1 else "more than the whole"
+
+    null_vectors = V[:, ~live]
+    for k in range(q):
+        if null[k]:     # on a null direction n the errors move together as n does: r = sign(n_k n_j)
+            share = np.abs(null_vectors[k][None, :] * null_vectors).sum(axis=1)
+            share[k] = 0.0
+            j = int(np.argmax(share))
+            if j != k and share[j] > 1e-6:
+                partner[k] = (names[j], float(np.sign(null_vectors[k] @ null_vectors[j])))
+        else:
+            others = [j for j in range(q) if j != k and np.isfinite(sd[j]) and sd[j] > 0]
+            if sd[k] > 0 and others:
+                r = [cov[k, j] / (sd[k] * sd[j]) for j in others]
+                best = int(np.argmax(np.abs(r)))
+                partner[k] = (names[others[best]], float(r[best]))
+        if 2 * n_sigmas * sd_alone[k] > max_width:
+            reasons[k].append(f"no influence on the spectra (Fisher information: ± {n_sigmas:g} σ = "
+                              f"{spread(sd_alone[k])} of the interval even with the others known)")
+        elif 2 * n_sigmas * sd[k] > max_width:
+            what = f", mostly with {partner[k][0]} (r = {partner[k][1]:+.2f})" if partner[k] else ""
+            reasons[k].append(f"flat direction (Fisher information: ± {n_sigmas:g} σ = {spread(sd[k])} of the "
+                              f"interval with the others estimated{what})")
+        identifiable[k] = not reasons[k]
+    return FisherVerdict(identifiable, reasons, sd_alone, sd, partner)

@@ -270,8 +270,15 @@ def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.n
     what = f"record '{name}'" if name else "record"
     a = _checked(accelerations, fs, what)
     y, mean, a_hat, start, stop = _record_power(a, fs, opt, what)
-    _, da_hat = fourier_amplitude(np.asarray(d_accelerations, dtype=float), fs, opt)
-    dmean = cell_means(2.0 * np.real(np.conj(a_hat)[None] * da_hat), start, stop)
+    d = np.asarray(d_accelerations, dtype=float)
+    if opt.detrend == "mean" and opt.window == "boxcar":
+        # removing a constant moves line 0 alone, which no cell of Ω holds: the transform of d as it is
+        da_hat = np.fft.rfft(d, axis=-1) / (fs * math.sqrt(d.shape[-1] / fs))
+    else:
+        da_hat = fourier_amplitude(d, fs, opt)[1]
+    top = int(np.max(stop)) + 1                   # lines above the grid's last cell are not read
+    a_top, da_top = a_hat[:, :top], da_hat[..., :top]
+    dmean = cell_means(2.0 * (a_top.real[None] * da_top.real + a_top.imag[None] * da_top.imag), start, stop)
     live = mean > AMPLITUDE_FLOOR ** 2
     dy = np.where(live[None], (5.0 / math.log(10.0)) * dmean / np.where(live, mean, 1.0)[None], 0.0)
     return y, dy

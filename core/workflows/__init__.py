@@ -9,5 +9,8 @@
 - :mod:`~suspid.workflows.monitor`: one identification per measurement date (``suspid monitor``);
 - :mod:`~suspid.workflows.diagnose`: the discrepancy workflow (``suspid diagnose``);
 - :mod:`~suspid.workflows.simulate`: simulations and modes (``suspid simulate``, ``suspid modes``);
-- :mod:`~suspid.workflows.report`: figures and markdown.
+- :mod:`~suspid.workflows.report`: figures and markdown;
+- :mod:`~suspid.workflows.jacobian`: y_sim with its Jacobian (analytic where the simulator offers it,
+  finite differences through the executor otherwise), which :mod:`~suspid.workflows.gradient` gives a
+  gradient-based optimiser.
 """

@@ -9,6 +9,7 @@ in the gradient of J at w_opt (:func:`gradient_noise`).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -17,9 +18,10 @@ from suspid.config import Config
 from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
-from suspid.interfaces import Executor
+from suspid.interfaces import Executor, SpectraModel
 from suspid.method.adequacy import band_residuals, frequency_bands, information_share
-from suspid.method.identifiability import ModelErrorOptions, assess, bias_aware_half_width
+from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bias_aware_half_width
+from suspid.method.jacobian import fisher_identifiability, fisher_information
 from suspid.method.noise import refit_gaussian, reference_paths
 from suspid.optimize.ego import EGOResult
 from suspid.workflows.evaluation import j_of_spectra
@@ -171,12 +173,16 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
 def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
             failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
-            executor: Executor | None = None, phases: Phases | None = None) -> dict[str, Any]:
+            executor: Executor | None = None, phases: Phases | None = None,
+            spectra_model: SpectraModel | None = None) -> dict[str, Any]:
     """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict.
 
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
     :param phases: shows each phase while it runs (:mod:`suspid.workflows.phases`; default: nowhere).
+    :param spectra_model: the spectra with their Jacobian (a gradient-based optimiser's): the identifiability
+        verdict then comes from the Fisher information at w_opt (:func:`fisher_verdict`) instead of the
+        metamodel's Sobol indices, which a few points near the optimum do not support.
     """
     phases = phases or Phases()
     failed = list(failed or [])
@@ -192,6 +198,12 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     rng = named_rng(config.seed, "identifiability")
     phases.start("identifiability")
     verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
+    fisher = None
+    if spectra_model is not None:
+        try:
+            verdict, fisher = fisher_verdict(problem, spectra_model, x_opt, verdict, config)
+        except SimulatorError as exc:   # no Jacobian at w_opt: the metamodel's verdict stays, and says so
+            fisher = {"kind": "sobol", "fisher_not_assessed": f"no Jacobian at w_opt: {exc}"}
     sd = np.sqrt(np.clip(np.diag(verdict.covariance), 0, None))
     trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor, phases)
     phases.done()
@@ -251,7 +263,49 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         result["errors_percent"] = errors_percent(problem, x_opt)
     if ego.n_refine:
         result["paper_loop"] = paper_loop(problem, ego)
+    if fisher is not None:
+        result["identifiability_method"] = fisher
     return result
+
+
+def fisher_verdict(problem: Problem, spectra_model: SpectraModel, x_opt: np.ndarray, verdict: Verdict,
+                   config: Config) -> tuple[Verdict, dict[str, Any]]:
+    """The identifiability verdict from the Jacobian of the spectra at w_opt, for a gradient-based run.
+
+    No influence and flat directions come from the Fisher information of the modelled spectra under the
+    noise model B (:func:`suspid.method.jacobian.fisher_information`, [0, 1]^q units); *stuck on a bound*
+    from the gradient of J on the spectra linearised at w_opt (J of y ± ∂y/∂u_k δ, no simulation). The
+    intervals, correlations and Sobol indices of ``verdict`` are kept (the sandwich's).
+
+    :returns: the verdict with its ``identifiable`` and ``reasons`` replaced, and the figures for result.json.
+    """
+    opts = config.identifiability
+    names = problem.names
+    widths = problem.bounds[:, 1] - problem.bounds[:, 0]
+    y, jac = spectra_model.jacobian(np.asarray(x_opt, dtype=float))
+    jac_u = np.asarray(jac, dtype=float) * widths                      # dB per unit of u in [0, 1]^q
+    info = fisher_information(y, jac_u, problem.noise_model)
+    fv = fisher_identifiability(info, names, opts.n_sigmas, opts.max_width)
+    u_opt = problem.to_unit(np.asarray(x_opt, dtype=float))
+    delta = 0.01
+    reasons = [list(r) for r in fv.reasons]
+    for k in range(problem.q):
+        near_low, near_high = u_opt[k] <= opts.bound_margin, u_opt[k] >= 1 - opts.bound_margin
+        if not (near_low or near_high):
+            continue
+        slope = (spectra_model.objective(y + delta * jac_u[..., k])
+                 - spectra_model.objective(y - delta * jac_u[..., k])) / (2 * delta)
+        if near_low and slope < 0:
+            reasons[k].append("stuck on the lower bound (J of the linearised spectra still rises beyond it)")
+        if near_high and slope > 0:
+            reasons[k].append("stuck on the upper bound (J of the linearised spectra still rises beyond it)")
+    identifiable = np.array([not r for r in reasons])
+    figures = {"kind": "fisher", "n_sigmas": opts.n_sigmas, "max_width_percent": 100 * opts.max_width,
+               "note": "Cramér-Rao spreads under B (no model error, an efficient estimator): lower bounds, not the "
+                       "intervals, which are the sandwich's",
+               "sd_alone_percent": {n: float(100 * v) for n, v in zip(names, fv.sd_alone)},
+               "sd_percent": {n: (float(100 * v) if np.isfinite(v) else None) for n, v in zip(names, fv.sd)}}
+    return replace(verdict, identifiable=identifiable, reasons=reasons), figures
 
 
 def paper_loop(problem: Problem, ego: EGOResult) -> dict[str, Any]:

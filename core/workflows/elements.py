@@ -3,7 +3,7 @@
 Both work on a run's problem (:func:`suspid.workflows.problem.build_problem`:
 the measurement date's spectra and the reference date's, where w = w0) and on
 the Jacobian of the model's spectra with respect to every element of the
-analysed kinds (:func:`suspid.method.jacobian.spectra_jacobian`, analytic where
+analysed kinds (:func:`suspid.workflows.jacobian.spectra_jacobian`, analytic where
 the simulator differentiates), at w0 on the first ``localisation.n_segments``
 segments of the measurement date. The statistics are those of
 :mod:`suspid.method.localisation`.
@@ -34,10 +34,10 @@ from suspid.errors import ConfigError
 from suspid.infra.files import write_json
 from suspid.infra.lock import open_run_dir
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
-from suspid.method.jacobian import spectra_jacobian
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
                                         evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
                                         sandwich_sd, separability, without_channel_gains)
+from suspid.workflows.jacobian import spectra_jacobian
 from suspid.workflows.problem import Problem, _task, build_problem
 
 __all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",

@@ -3,7 +3,7 @@
 :class:`ProblemSpectraModel` gives an optimiser that asks for it
 (:attr:`suspid.interfaces.Optimizer.uses_jacobian`) the spectra y_sim(w) of the
 measurement date's segments with their Jacobian
-(:func:`suspid.method.jacobian.spectra_jacobian`: analytic where the simulator
+(:func:`suspid.workflows.jacobian.spectra_jacobian`: analytic where the simulator
 offers it, finite differences through the run's executor otherwise), and J of
 given spectra. Every Jacobian is kept in the run ledger (a resumed run reads
 it) and counted apart from the evaluations of J: how many, how many plain
@@ -21,7 +21,7 @@ import numpy as np
 
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.interfaces import Executor, SpectraModel
-from suspid.method.jacobian import spectra_jacobian
+from suspid.workflows.jacobian import spectra_jacobian
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem
 

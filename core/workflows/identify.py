@@ -312,8 +312,11 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         as_ego_result(opt_result, surrogate_for(config), problem)
     ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
+    model = getattr(optimizer, "spectra_model", None)
+    model = model if isinstance(model, ProblemSpectraModel) else None   # identifiability from the Fisher information
     with make_progress(progress) as bars, single_blas_thread():   # minutes on measured data: shown phase by phase
-        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor, ProgressPhases(bars))
+        result = analyse(problem, ledger, ego, config, failed, retry_failed, executor, ProgressPhases(bars),
+                         spectra_model=model)
     result.update({
         "run_id": run_id,
         "n_initial": int(ego.n_initial), "n_iterations": int(ego.n_iterations),
@@ -326,8 +329,7 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         "anytime": {"J": [None if not np.isfinite(v) else float(v) for v in opt_result.y],
                     "w_normalized": problem.to_unit(opt_result.X).tolist() if len(opt_result.X) else []},
     })
-    model = getattr(optimizer, "spectra_model", None)
-    if isinstance(model, ProblemSpectraModel):   # Jacobians: counted apart from the simulator calls
+    if model is not None:   # Jacobians: counted apart from the simulator calls
         # a plain simulation's wall time: the evaluations asked one at a time, after the design's batch
         walls = [ev.wall_time_s for ev in ledger.evaluations("ok") if ev.wall_time_s][int(ego.n_initial):]
         result["jacobian"] = model.summary(float(np.median(walls)) if walls else None)

@@ -9,7 +9,7 @@ the spectra are linearised instead, once per date, and every check reads them:
 
 - **two Jacobians**: the reference date's spectra at w0 and the measurement
   date's at w_opt, each with respect to the identified parameters w and the
-  model parameters θ (:func:`suspid.method.jacobian.spectra_jacobian`:
+  model parameters θ (:func:`suspid.workflows.jacobian.spectra_jacobian`:
   analytic where the simulator differentiates, forward differences through the
   run's executor otherwise, q + p + 1 simulations), kept in the run ledger;
 - **calibration** of θ at the reference date, where w = w0 is known
@@ -54,7 +54,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor, TrackSegment
 from suspid.method.calibration import UNIFORM_SD, calibrate_step, implicit_shifts, octave_clusters
 from suspid.method.identifiability import ModelErrorOptions, bias_aware_half_width
-from suspid.method.jacobian import spectra_jacobian
+from suspid.workflows.jacobian import spectra_jacobian
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates

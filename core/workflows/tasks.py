@@ -83,15 +83,15 @@ class SpectraTask:
         return cls(type(simulator), dict(simulator.options), list(segments), spectra, **kwargs)
 
     def __call__(self, w: dict[str, float]) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
-        y, freqs = simulate_spectra(_simulator(self.simulator_cls, self.options), w, self.segments, self.spectra,
-                                    self.transform)
+        simulator = simulator_instance(self.simulator_cls, self.options)
+        y, freqs = simulate_spectra(simulator, w, self.segments, self.spectra, self.transform)
         return (y, freqs) if self.with_freqs else y
 
 
 _SIMULATORS: dict[str, Simulator] = {}
 
 
-def _simulator(cls: type, options: dict) -> Simulator:
+def simulator_instance(cls: type, options: dict) -> Simulator:
     """The simulator ``cls(**options)``, built once per process (models keep caches per instance)."""
     key = stable_hash(f"{cls.__module__}.{cls.__qualname__}", options)
     if key not in _SIMULATORS:

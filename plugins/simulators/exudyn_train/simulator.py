@@ -522,11 +522,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         special = [i for i, s in enumerate(segments) if not is_constant_speed(s) or has_curve(s)]
         if special:
             return self._jacobian_by_differences(w, segments, names, special)
-        groups = self._groups() if any("[" in n for n in names) else {}
-        # a group not in w is differentiated at its elements' value (its kind's, or a wider group's), that
-        # group alone added to the values: a kind asked with it keeps acting on its other elements
-        at = {n: {**values, n: self._element_value(values, groups[_canonical(n, groups)])}
-              for n in names if "[" in n and n not in values}
+        shared, alone = self._derivative_points(values, names)
         o = self.opts
         channels = tuple(s.name for s in self.sensors(values))
         out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
@@ -541,7 +537,11 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
                 raise SimulatorError("exudyn-train: the eigenvectors of the linear model are ill-conditioned "
                                      f"at {speed * 3.6:.1f} km/h; its derivatives need finite differences")
             try:
-                derivatives = [d for n in names for d in matrix_derivatives(model, at.get(n, values), speed, [n], base)]
+                common = [n for n in names if n not in alone]
+                found = dict(zip(common, matrix_derivatives(model, shared, speed, common, base)))
+                for n, at in alone.items():
+                    found[n], = matrix_derivatives(model, at, speed, [n], base)
+                derivatives = [found[n] for n in names]
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: {exc}") from exc
             group = [segments[i] for i in idx]
@@ -550,6 +550,27 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
             for i, r, g in zip(idx, records, grads):
                 out[i] = (r, g)
         return out  # type: ignore[return-value]
+
+    def _derivative_points(self, values: dict[str, float], names: list[str]
+                           ) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+        """Where each of ``names`` is differentiated: ``(shared, alone)``. A group not in ``values`` is added at
+        its elements' value (its kind's, or a wider group's); in ``shared`` (one call, linearisations shared) when
+        no other name acts on its elements, else ``alone[name]``: the values with that group only, so that a
+        kind asked with it keeps acting on its other elements."""
+        missing = [n for n in names if "[" in n and n not in values]
+        if not missing:
+            return values, {}
+        groups = self._groups()
+        resolved = {n: groups[_canonical(n, groups)] for n in names if "[" in n}
+        at = {n: self._element_value(values, resolved[n]) for n in missing}
+
+        def crowded(n: str) -> bool:
+            g = resolved[n]
+            return g.kind in names or any(o != n and resolved[o].overlaps(g) for o in resolved)
+
+        alone = {n: {**values, n: at[n]} for n in missing if crowded(n)}
+        shared = {**values, **{n: at[n] for n in missing if n not in alone}}
+        return shared, alone
 
     @staticmethod
     def _element_value(values: dict[str, float], group) -> float:
