@@ -224,6 +224,19 @@ def stability(config: ConfigSource, overrides: Overrides = None, *, n_points: in
     return _simulate.stability_report(simulator, out, parameters=names, n_points=n_points)
 
 
+def observability(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None):
+    """Which element groups the sensors separate (``suspid observability``): Fisher information of the spectra
+    over every element of the analysed kinds, its rank and conditioning, the clusters only seen as a sum, and
+    which extra channel would split which cluster; writes ``observability.json`` in the run directory.
+
+    :returns: :class:`suspid.workflows.elements.ObservabilityResult`.
+    """
+    from suspid.workflows.elements import observability as _observability
+
+    cfg = load_config(config, overrides)
+    return _observability(cfg, log=log or (lambda s: None))
+
+
 def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float | None = None,
           w: Mapping[str, float] | None = None, out_dir: str | Path | None = None) -> dict[str, Any]:
     """Eigenmodes of the train model (``suspid modes``): frequency, damping ratio, body, motion, ``stable``.

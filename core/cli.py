@@ -20,6 +20,7 @@ from typing import List, Optional
 import click
 import typer
 from rich.console import Console
+from rich.markup import escape  # element groups (c_yaw[bogie1]) are not markup
 from rich.table import Table
 
 import suspid
@@ -178,6 +179,19 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 
 
 @app.command()
+def observability(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+                  quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Which element groups the sensors separate, which only as a sum, and which extra channel would help.
+
+    Writes observability.json in the run directory (the config's localisation: section sets the kinds,
+    the change judged and the χ² threshold).
+    """
+    out = api.observability(config, set_ or [], log=_log(quiet))
+    console.print(out.table(), markup=False, highlight=False)
+    console.print(f"wrote {out.path}")
+
+
+@app.command()
 def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           speed_kmh: Optional[float] = typer.Option(None, "--speed-kmh", help="Speed (default: the simulator's)."),
           out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),
@@ -315,7 +329,7 @@ def _print_result(result: dict, run_dir: Path) -> None:
     style = {"no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]", "warning": "[yellow]warning[/yellow]",
              "alarm": "[bold red]alarm[/bold red]", "not assessable": "[dim]not assessable[/dim]"}
     for row in cells:
-        table.add_row(*[style.get(c, c) if h in ("identifiable", "trustworthy", "verdict") else c
+        table.add_row(*[style.get(c, escape(c)) if h in ("identifiable", "trustworthy", "verdict") else escape(c)
                         for h, c in zip(header, row)])
     console.print(table)
     for r in rows:

@@ -43,6 +43,9 @@ from suspid.options import Section, against, key_error, raise_validation_error
 from suspid.sections import (W_REF_MEASURED, DataSection, DiagnoseOptions, ExecutorSection, Limits, MonitorOptions, NoiseSection,
                              ObjectiveSection, OptimizerSection, OutputSection, ParameterBounds, PluginSection, SimulatorSection,
                              StudyOptions, SurrogateSection)
+from suspid.elements import check_groups, declared_parameters, kind_of  # kind_of: also for suspid.workflows.verdict
+from suspid.interfaces import ElementSimulator
+from suspid.method.localisation import LocalisationOptions
 
 
 def _with_seed(options: BaseModel, seed: int) -> BaseModel:
@@ -74,6 +77,7 @@ class Config(Section):
     diagnose: DiagnoseOptions = Field(default_factory=DiagnoseOptions)
     limits: dict[str, Limits] = Field(default_factory=dict, description="acceptable domain per identified "
                                       "parameter or element group, for the maintenance verdict")
+    localisation: LocalisationOptions = Field(default_factory=LocalisationOptions)
     output: OutputSection = Field(default_factory=OutputSection)
     fleet: FleetSection | None = None
 
@@ -434,14 +438,28 @@ def build_simulator(config: Config):
 def check_parameters(config: Config, simulator) -> None:
     """Identified parameter names must be the simulator's; lower < upper after defaults."""
     file, lines = config.file, config._lines
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     for group, names in (("parameters", config.parameters), ("data.w_ref", config.data.w_ref)):
+        for name, message in check_groups(simulator, list(names), where=group):   # element groups: kind[tag,...]
+            raise ConfigError(message, file=file, key=f"{group}.{name}",
+                              line=lines.get(tuple(group.split(".")) + (name,)))
         for name in names:
             if name not in known:
                 raise ConfigError(
                     f"unknown parameter '{name}' for simulator '{config.simulator.plugin}'; "
-                    f"known: {', '.join(sorted(known))}",
+                    f"known: {', '.join(sorted(n for n in known if '[' not in n))}"
+                    + (" and element groups kind[tag,...] (see `suspid observability`)" if len(known) > len(
+                        [n for n in known if '[' not in n]) else ""),
                     file=file, key=f"{group}.{name}", line=lines.get(tuple(group.split(".")) + (name,)))
+    kinds = config.localisation.kinds
+    if kinds is not None:
+        have = list(dict.fromkeys(e.kind for e in simulator.elements())) if isinstance(simulator, ElementSimulator) \
+            else []
+        bad = [k for k in kinds if k not in have]
+        if bad:
+            raise ConfigError(f"kind(s) {', '.join(bad)} have no elements declared by simulator "
+                              f"'{config.simulator.plugin}' (kinds with elements: {', '.join(have) or 'none'})",
+                              file=file, key="localisation.kinds", line=lines.get(("localisation", "kinds")))
     bounds = identified_bounds(config, simulator)
     for name in config.parameters:
         lower, upper = bounds[name]
@@ -467,7 +485,7 @@ def check_parameters(config: Config, simulator) -> None:
 def check_nuisance(config: Config, simulator) -> None:
     """``identifiability.model_error.nuisance.parameters`` and ``.calibration.parameters``: the simulator's, not
     identified, low < high in its domain (a calibration range may be null: the simulator's bounds)."""
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     identified = set(config.parameters) or set(simulator.default_parameters())
     me = config.identifiability.model_error
     for section, given in (("nuisance", me.nuisance.parameters), ("calibration", me.calibration.parameters)):
@@ -484,11 +502,6 @@ def check_nuisance(config: Config, simulator) -> None:
                 _check_range(name, ends, known[name], key, line, config)
 
 
-def kind_of(name: str) -> str:
-    """The kind of a parameter or element-group name: ``c_yaw[bogie1,left]`` -> ``c_yaw``; a kind is its own."""
-    return name.split("[", 1)[0]
-
-
 def check_limits(config: Config, simulator) -> None:
     """``limits:`` keys name a parameter of the simulator or an element group of one (``c_yaw[bogie2]``);
     a nominal override keeps the sign of the simulator's nominal value (a change in % must mean the same)."""
@@ -503,6 +516,9 @@ def check_limits(config: Config, simulator) -> None:
         if not re.fullmatch(r"[A-Za-z_][\w.\-/]*(\[[\w.\-]+(,[\w.\-]+)*\])?", name):
             raise ConfigError(f"'{name}' is not a parameter or group name (kind or kind[group,side])",
                               file=config.file, key=key, line=line)
+        if "[" in name and isinstance(simulator, ElementSimulator):   # a group the simulator declares
+            for _, message in check_groups(simulator, [name], where="limits"):
+                raise ConfigError(message, file=config.file, key=key, line=line)
         p = known.get(name) or known[kind_of(name)]
         if limits.nominal is not None and p.nominal != 0 and (limits.nominal > 0) != (p.nominal > 0):
             raise ConfigError(f"nominal {limits.nominal:g} has the opposite sign of the simulator's "
@@ -524,7 +540,7 @@ def identified_bounds(config: Config, simulator) -> dict[str, tuple[float, float
 
     An empty ``parameters:`` section identifies the simulator's default set.
     """
-    known = {p.name: p for p in simulator.parameters()}
+    known = {p.name: p for p in declared_parameters(simulator)}
     names = list(config.parameters) or simulator.default_parameters()
     out = {}
     for name in names:

@@ -236,6 +236,49 @@ class DifferentiableSimulator(ABC):
         """
 
 
+@dataclass(frozen=True)
+class Element:
+    """One physical suspension element of a simulator (a yaw damper, an air spring, an axlebox's primary
+    spring): its ``kind``, the parameter that sets every element of that kind (``c_yaw``), and its ``tags``,
+    where it sits (``("bogie1", "left")``); the tags also name it in a group (``c_yaw[bogie1,left]``)."""
+
+    kind: str
+    tags: tuple[str, ...]
+
+
+class ElementSimulator(ABC):
+    """Optional capability of a :class:`Simulator`: it models suspension elements one by one.
+
+    A simulator class that has it subclasses both (``class MySim(Simulator, ElementSimulator)``). The core
+    derives from :meth:`elements` the *groups* a config may name (:mod:`suspid.elements`: ``kind[tag,...]``
+    is every element of ``kind`` carrying those tags) and accepts them wherever it accepts a parameter name;
+    the simulator must then take such names in ``w`` (:meth:`Simulator.simulate`, and
+    :meth:`DifferentiableSimulator.simulate_jacobian` when it has that capability too): a group's value
+    is the SI value of every element in it, elements no group in ``w`` covers keep the kind's value, and
+    ``w`` without any group gives exactly the kind-level results. Simulators without the capability are
+    unchanged. :func:`suspid.testing.check_elements` checks a simulator's declaration and that a group
+    moves the output.
+    """
+
+    @abstractmethod
+    def elements(self) -> list[Element]:
+        """Every element, each kind among :meth:`Simulator.parameters`' names, tags unique within a kind."""
+
+    def candidate_channels(self) -> list[str]:
+        """Channels the simulator could output besides :meth:`Simulator.channels` (an accelerometer elsewhere):
+        what a sensor-placement advice chooses from (:func:`suspid.workflows.elements.observability`).
+        Default: none."""
+        return []
+
+    def with_channels(self, channels: Sequence[str]) -> "Simulator":
+        """A simulator like this one whose outputs are its channels followed by ``channels`` (names from
+        :meth:`candidate_channels`).
+
+        :raises NotImplementedError: the simulator offers no extra channel (the default).
+        """
+        raise NotImplementedError(f"{type(self).__name__} offers no extra channel")
+
+
 class Objective(ABC):
     """Ψ_k: a per-channel comparison of measured and modelled spectra (eq. 5-8).
 

@@ -23,6 +23,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
+from suspid.elements import group_parameters
 from suspid.interfaces import (IRREGULARITY_CHANNELS, Executor, Objective, Parameter, Response, Simulator, Surrogate,
                                TrackSegment)
 
@@ -128,6 +129,42 @@ def check_simulator(cls: type, options: Mapping[str, Any] | None = None,
             f"moving parameter {name} to its upper bound does not change the output"
 
 
+def check_elements(cls: type, options: Mapping[str, Any] | None = None,
+                   segments: list[TrackSegment] | None = None, kind: str | None = None) -> None:
+    """Check a simulator's :class:`suspid.interfaces.ElementSimulator` declaration.
+
+    Checks: elements declared, each kind among ``parameters()``, tags unique within a kind; for ``kind``
+    (default: the first declared), every element set through its finest group at the kind's nominal value
+    gives exactly the kind-level output, and the first element's group moved to the kind's lower bound
+    changes it.
+    """
+    from suspid.elements import finest_groups
+    from suspid.interfaces import ElementSimulator
+
+    sim = _build(cls, Simulator, options)
+    assert isinstance(sim, ElementSimulator), f"{cls.__name__} must subclass ElementSimulator"
+    elements = sim.elements()
+    assert elements, "elements() must declare at least one element"
+    params = {p.name: p for p in sim.parameters()}
+    for e in elements:
+        assert e.kind in params, f"element kind {e.kind!r} is not among parameters()"
+    pairs = [(e.kind, tuple(sorted(e.tags))) for e in elements]
+    assert len(set(pairs)) == len(pairs), "two elements of one kind carry the same tags"
+    kind = kind or elements[0].kind
+    finest = finest_groups(elements, [kind])
+    assert finest, f"no element of kind {kind!r}"
+    segments = segments or sample_segments()[:1]
+    nominal = params[kind].nominal
+    base = sim.simulate({}, segments)
+    tied = sim.simulate({g.name: nominal for g in finest}, segments)
+    for a, b in zip(base, tied):
+        assert np.array_equal(a.accelerations, b.accelerations), \
+            f"every element of {kind} at its nominal value through groups must give the kind-level output"
+    moved = sim.simulate({finest[0].name: params[kind].lower}, segments)
+    assert any(not np.allclose(a.accelerations, b.accelerations) for a, b in zip(base, moved)), \
+        f"{finest[0].name} at {params[kind].lower:g} does not change the output"
+
+
 def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
                          segments: list[TrackSegment] | None = None, names: list[str] | None = None,
                          w: Mapping[str, float] | None = None, rtol: float = 1e-4,
@@ -151,6 +188,7 @@ def check_differentiable(cls: type, options: Mapping[str, Any] | None = None,
     assert isinstance(sim, DifferentiableSimulator), f"{cls.__name__} must subclass DifferentiableSimulator"
     declared = {p.name: p.nominal for p in sim.parameters()}
     asked = list(names) if names is not None else list(declared)
+    declared |= {p.name: p.nominal for p in group_parameters(sim) if p.name in asked}   # element groups asked for
     offered = sim.differentiable(asked)
     assert isinstance(offered, list) and all(n in asked for n in offered), \
         f"differentiable() must return names among those asked, got {offered}"

@@ -33,6 +33,7 @@ from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import calibration_result, linearised_model_error
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
+from suspid.elements import declared_parameters
 
 
 def _y_sim_key(problem: Problem, u: np.ndarray) -> tuple[str, dict[str, float]]:
@@ -216,7 +217,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
                                 "max_half_width_percent": 100 * opts.model_error.max_half_width})
     interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
     sampling_si = problem.from_unit(verdict.interval_unit.T).T
-    units = {p.name: p.unit for p in problem.simulator.parameters()}
+    units = {p.name: p.unit for p in declared_parameters(problem.simulator)}
     result: dict[str, Any] = {
         "name": config.name,
         "parameters": names,

@@ -33,7 +33,7 @@ import yaml
 
 from suspid import registry
 from suspid.config import Config, optimizer_budget
-from suspid.errors import SimulatorError
+from suspid.errors import ConfigError, SimulatorError
 from suspid.infra import history
 from suspid.infra.files import write_json, write_text
 from suspid.infra.ledger import Ledger
@@ -47,6 +47,7 @@ from suspid.workflows.analysis import analyse, cached_y_sim
 from suspid.workflows.asynchronous import drive_async
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
 from suspid.workflows.gradient import ProblemSpectraModel
+from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem, moved_kinds
 from suspid.workflows.phases import ProgressPhases
 from suspid.workflows.problem import Problem, build_problem
 from suspid.workflows.report import trust_word, write_report
@@ -336,6 +337,9 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     if floor is not None:
         result["noise_floor"] = {"mode": config.noise.floor if config.noise.path is None else "file",
                                  "channels": floor.summary(problem.freqs, problem.channels)}
+    localisation = _localise(config, problem, result, executor, log)
+    if localisation is not None:
+        result["localisation"] = localisation
     add_verdict(result, problem, config)   # after every other finding (a localisation's groups included)
     write_json(run_dir / "result.json", result)
     with make_progress(progress) as bars:
@@ -344,7 +348,27 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         y_opt = cached_y_sim(problem, ledger, problem.to_unit(np.asarray(ego.x_opt, float)), executor=executor)
         write_report(run_dir, problem, ego, result, ei_history, executor, y_opt=y_opt)
         phases.done()
+    if localisation is not None:   # a short section after the report (suspid.workflows.elements)
+        report = run_dir / "report.md"
+        text = report.read_text(encoding="utf-8") if report.exists() else ""
+        write_text(report, text.rstrip("\n") + "\n\n" + localisation_markdown(localisation, result.get("units")))
     return IdentificationResult.from_dict(result, run_dir, problem, ego)
+
+
+def _localise(config: Config, problem: Problem, result: dict[str, Any], executor, log) -> dict[str, Any] | None:
+    """The localisation entry of ``result`` (:func:`suspid.workflows.elements.localise_problem`) when
+    ``localisation.enabled`` asks for it (``auto``: an identified kind with elements moved out of its nominal
+    value); ``None`` otherwise. Without a reference date it is ``{"named": False, "not_assessed": why}``."""
+    if not localisation_wanted(config, result, problem.simulator):
+        return None
+    try:
+        return localise_problem(problem, config.localisation, moved=moved_kinds(result, problem.simulator),
+                                executor=executor, log=log)
+    except ConfigError as exc:
+        if config.localisation.enabled is True:
+            raise
+        return {"named": False, "rows": [], "hypotheses": [], "not_assessed": str(exc),
+                "options": config.localisation.model_dump()}
 
 
 def add_verdict(result: dict[str, Any], problem: Problem, config: Config) -> None:

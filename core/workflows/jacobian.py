@@ -25,6 +25,7 @@ from typing import Any, Literal, Mapping, Sequence
 import numpy as np
 
 from suspid import registry
+from suspid.elements import declared_parameters
 from suspid.errors import PluginBugError, SimulatorError, SuspidError
 from suspid.interfaces import DifferentiableSimulator, Executor, Simulator, TrackSegment
 from suspid.method.jacobian import DEFAULT_REL_STEP, SpectraJacobian, spectra_derivatives
@@ -99,7 +100,7 @@ def spectra_jacobian(simulator: Simulator, w: Mapping[str, float], names: Sequen
                           f"or forward and fallback central or forward")
     t0 = time.perf_counter()
     names = list(names)
-    declared = {p.name: p.nominal for p in simulator.parameters()}
+    declared = {p.name: p.nominal for p in declared_parameters(simulator)}   # element groups too
     unknown = [n for n in names if n not in declared]
     if unknown:
         raise SuspidError(f"parameter(s) {', '.join(unknown)} not declared by simulator '{simulator.name}' "

@@ -61,6 +61,7 @@ from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
 from suspid.workflows.trust import checks_report, trust_states
+from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_markdown",
            "equivalent_bias_bound", "DateJacobian"]
@@ -118,7 +119,7 @@ def model_parameters(problem: Problem, options: ModelErrorOptions) -> ModelParam
 
     :raises ConfigError: a name the simulator does not declare.
     """
-    declared = {p.name: p for p in problem.simulator.parameters()}
+    declared = {p.name: p for p in declared_parameters(problem.simulator)}
     if options.calibration.parameters:
         given, source, key = dict(options.calibration.parameters), "calibration.parameters", "calibration.parameters"
     elif options.nuisance.parameters:

@@ -47,6 +47,7 @@ from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import SearchObjective, local_search
 from suspid.workflows.tasks import SpectraTask, run_one
+from suspid.elements import declared_parameters
 
 
 @dataclass
@@ -119,7 +120,7 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
         n_sims += neg_j.n_simulations
         return found
 
-    nominal = {p.name: p.nominal for p in problem.simulator.parameters()}
+    nominal = {p.name: p.nominal for p in declared_parameters(problem.simulator)}
     base = identify({}, ref["y_sim0"])
     shifts = np.zeros((len(values), q))
     for i, (name, value) in enumerate(values):

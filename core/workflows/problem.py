@@ -42,6 +42,7 @@ from suspid.method.objective import reference_weights
 from suspid.method.spectra import SpectraOptions, compute_spectra, grid_lines
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
+from suspid.elements import declared_parameters
 
 
 def array_digest(*arrays: np.ndarray) -> str:
@@ -326,10 +327,10 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     noise_path = config.noise.path
     reference: dict[str, np.ndarray] = {}
     reference_segments: list[TrackSegment] = []
-    w0 = {p.name: float(p.nominal) for p in simulator.parameters() if p.name in names}
+    w0 = {p.name: float(p.nominal) for p in declared_parameters(simulator) if p.name in names}
 
     if config.data.source == "experiment":
-        w_ref = {p.name: p.nominal for p in simulator.parameters() if p.name in names} | config.data.w_ref
+        w_ref = {p.name: p.nominal for p in declared_parameters(simulator) if p.name in names} | config.data.w_ref
         segments = synthetic_track(config, "measurement")
         ref_opt = config.data.reference
         fixed_seed = seed_for(config.seed, "measurement-process-fixed")  # one vehicle, one set of sensors: every date

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 from suspid.config import kind_of
@@ -269,9 +269,12 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], lim
         unit = params[name].unit if name in params else params[kind].unit if kind in params else \
             result.get("units", {}).get(kind, "")
         t = trust_word(item.get("trustworthy"))
-        rows.append(_row(name, float(item["value"]), item["interval"], bool(item.get("identifiable", True)), t,
-                         list(item.get("reasons", [])), unit, params, limits, "localisation", None, None,
-                         [_group_name(a) for a in item.get("alternatives") or []]))
+        row = _row(name, float(item["value"]), item["interval"], bool(item.get("identifiable", True)), t,
+                   list(item.get("reasons", [])), unit, params, limits, "localisation", None, None,
+                   [_group_name(a) for a in item.get("alternatives") or []])
+        if item.get("not_separated"):   # a cluster of elements the sensors only see together (suspid.elements)
+            row = replace(row, label=f"{row.label} ({item['not_separated']})")
+        rows.append(row)
     return rows
 
 

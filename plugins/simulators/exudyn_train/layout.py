@@ -147,6 +147,37 @@ class Layout:
         return float(np.mean([self.wheel_load(values, j) for j in range(self.n_wheelsets)]))
 
 
+    # ------------------------------------------------------------------ elements
+    def element_tags(self, placement: str) -> tuple[tuple[str, ...], ...]:
+        """Tags of every element of a placement of :data:`.parameters.ELEMENT_KINDS`, in the model's order.
+
+        Bogies ``bogie1`` .. (1 leads), wheelsets ``ws1`` .., sides ``left``/``right``; the secondary
+        elements of an articulated layout also name the carbody end they carry (``car1`` ..: a Jacobs bogie
+        carries two). ``primary``: (bogie, wheelset, side); ``secondary``: (bogie[, car], side);
+        ``yaw``: (bogie, side); ``bogie``: (bogie,).
+        """
+        out: list[tuple[str, ...]] = []
+        for b in range(len(self.bogies)):
+            bogie = f"bogie{b + 1}"
+            if placement == "primary":
+                out += [(bogie, f"ws{2 * b + w + 1}", side) for w in range(2) for side in SIDES]
+            elif placement == "secondary":
+                for c, _ in self.bogie_cars(b):
+                    car = (f"car{c + 1}",) if self.articulated else ()
+                    out += [(bogie, *car, side) for side in SIDES]
+            elif placement == "yaw":
+                out += [(bogie, side) for side in SIDES]
+            elif placement == "bogie":
+                out.append((bogie,))
+            else:
+                raise KeyError(f"unknown placement {placement!r}")
+        return tuple(out)
+
+
+SIDES = ("left", "right")
+"""Side tags, side +1 (left, y > 0) first."""
+
+
 SINGLE = Layout()
 """One car on two bogies."""
 

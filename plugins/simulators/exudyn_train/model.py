@@ -426,36 +426,42 @@ class TrainModel:
             for w in range(2):
                 j = 2 * b + w
                 ws = self.objects[f"wheelset_{j + 1}"]
-                for side in (1.0, -1.0):
+                for side, side_name in ((1.0, "left"), (-1.0, "right")):
+                    tags = (f"bogie{b + 1}", f"ws{j + 1}", side_name)
                     m0 = self._marker(ws, (0.0, side * p["b_prim"], 0.0))
                     m1 = self._marker(self.objects[bogie], (xw[j] - xbogie[b], side * p["b_prim"],
                                                             p["r0"] - p["h_bogie"]))
                     self._cartesian(m0, m1,
-                                    lambda q: (q["k_prim_x"], q["k_prim_y"], q["k_prim_z"]),
-                                    lambda q: (q["c_prim_x"], 0.0, q["c_prim_z"]),
-                                    lambda q, b=b: (0.0, 0.0, lay.axlebox_load(q, b) / q["k_prim_z"]))
+                                    lambda q, t=tags: _primary(q, t, "k_prim_x", "k_prim_y", "k_prim_z"),
+                                    lambda q, t=tags: _primary(q, t, "c_prim_x", None, "c_prim_z"),
+                                    lambda q, b=b, t=tags: (0.0, 0.0, lay.axlebox_load(q, b)
+                                                            / _primary(q, t, None, None, "k_prim_z")[2]))
             # --- secondary suspension, per carbody end and side (springs and lateral dampers; the vertical
             #     dampers are Maxwell elements, :meth:`_add_secondary_dampers`)
             for c, end in ends:
-                for side in (1.0, -1.0):
+                for side, side_name in ((1.0, "left"), (-1.0, "right")):
+                    tags = _secondary_tags(lay, b, c, side_name)
                     m0 = self._marker(self.objects[bogie], (0.0, side * p["b_sec"], p["h_sec"] - p["h_bogie"]))
                     m1 = self._marker(self.objects[lay.carbodies[c]],
                                       (end * p["a_bogie"], side * p["b_sec"], p["h_sec"] - p["h_car"]))
                     self._cartesian(m0, m1,
-                                    lambda q: (q["k_sec_x"], q["k_sec_y"], q["k_sec_z"]),
-                                    lambda q: (0.0, q["c_sec_y"], 0.0),
-                                    lambda q: (0.0, 0.0, P.static_loads(q)["secondary_side"] / q["k_sec_z"]))
+                                    lambda q, t=tags: _secondary(q, t, "k_sec_x", "k_sec_y", "k_sec_z"),
+                                    lambda q, t=tags: _secondary(q, t, None, "c_sec_y", None),
+                                    lambda q, t=tags: (0.0, 0.0, P.static_loads(q)["secondary_side"]
+                                                       / _secondary(q, t, None, None, "k_sec_z")[2]))
             # --- traction rod: longitudinal link bogie frame - carrying carbody at the bogie centre
             m0 = self._marker(self.objects[bogie], (0.0, 0.0, p["h_trac"] - p["h_bogie"]))
             m1 = self._marker(carrying, (xb, 0.0, p["h_trac"] - p["h_car"]))
-            self._cartesian(m0, m1, lambda q: (q["k_trac"], 0.0, 0.0), lambda q: (0.0, 0.0, 0.0),
-                            lambda q: (0.0, 0.0, 0.0))
+            bogie_tags = (f"bogie{b + 1}",)
+            self._cartesian(m0, m1, lambda q, t=bogie_tags: (_element(q, "bogie", t)["k_trac"], 0.0, 0.0),
+                            lambda q: (0.0, 0.0, 0.0), lambda q: (0.0, 0.0, 0.0))
             # --- anti-roll bar: relative roll of the carrying carbody and the bogie frame
             mr0 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[bogie], coordinate=3))
             mr1 = mbs.AddMarker(ii.MarkerNodeCoordinate(nodeNumber=self.nodes[lay.carbodies[ends[0][0]]],
                                                         coordinate=3))
             arb = mbs.AddObject(ii.CoordinateSpringDamper(markerNumbers=[mr0, mr1], stiffness=0.0))
-            self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v), lambda q: q["k_arb"])
+            self._track(lambda v, o=arb: mbs.SetObjectParameter(o, "stiffness", v),
+                        lambda q, t=bogie_tags: _element(q, "bogie", t)["k_arb"])
         self._add_articulations()
         self._add_neighbour_loads()
 
@@ -534,8 +540,10 @@ class TrainModel:
                     node = self.add_effect_node("secondary_damper", (f"{bogie}_{car}_{side_name}",))
                     if k == 0:
                         self.secondary_damper_nodes[(bogie, side)] = node
+                    tags = _secondary_tags(self.layout, b, c, side_name)
                     self.add_linear_element([self.nodes[bogie], self.nodes[car], node], 13,
-                                            lambda q, e=end, s=side: maxwell_secondary_damper(q, e, s))
+                                            lambda q, e=end, s=side, t=tags: maxwell_secondary_damper(
+                                                _element(q, "secondary", t), e, s))
 
     def _add_yaw_dampers(self) -> None:
         """Yaw dampers, one per side of each bogie: Maxwell elements (spring k_yaw_s in series with c_yaw).
@@ -549,11 +557,12 @@ class TrainModel:
         """
         damped = not self.features.yaw_blow_off
         self.yaw_nodes: list[tuple[str, float, float, object]] = []
-        for bogie, car, end, side, side_name in self.yaw_damper_places():
+        for b, (bogie, car, end, side, side_name) in enumerate(self.yaw_damper_places()):
             node = self.add_effect_node("yaw_damper", (f"{bogie}_{side_name}",))
             self.yaw_nodes.append((car, end, side, node))
+            tags = (f"bogie{b // 2 + 1}", side_name)
             self.add_linear_element([self.nodes[bogie], self.nodes[car], node], 13,
-                                    lambda q, e=end, s=side: maxwell_yaw_damper(q, e, s, q["k_yaw_s"], damped))
+                                    lambda q, e=end, s=side, t=tags: _yaw_damper(_element(q, "yaw", t), e, s, damped))
 
     def yaw_damper_places(self) -> list[tuple[str, str, float, float, str]]:
         """``(bogie, carrying carbody, pivot side +1 front / -1 rear of that carbody, side +1 left / -1 right,
@@ -1227,6 +1236,35 @@ class quiet:
 
     def __exit__(self, *exc) -> None:
         self.cfg.suppressWarnings, self.cfg.printToConsole = self.saved
+
+
+def _element(q: dict[str, float], placement: str, tags: tuple[str, ...]) -> dict[str, float]:
+    """The values the element at ``tags`` of a placement of :data:`.parameters.ELEMENT_KINDS` sees (its
+    groups' values in place of the kinds', :func:`.parameters.element_view`; ``q`` itself without groups)."""
+    return P.element_view(q, P.ELEMENT_KINDS[placement], tags)
+
+
+def _primary(q: dict[str, float], tags: tuple[str, ...], x: str | None, y: str | None,
+             z: str | None) -> tuple[float, float, float]:
+    """(x, y, z) rates of one axlebox's primary element: the named parameters, 0.0 for ``None``."""
+    v = _element(q, "primary", tags)
+    return tuple(0.0 if n is None else v[n] for n in (x, y, z))
+
+
+def _secondary(q: dict[str, float], tags: tuple[str, ...], x: str | None, y: str | None,
+               z: str | None) -> tuple[float, float, float]:
+    """(x, y, z) rates of one secondary element (one side of a carbody end), as :func:`_primary`."""
+    v = _element(q, "secondary", tags)
+    return tuple(0.0 if n is None else v[n] for n in (x, y, z))
+
+
+def _secondary_tags(layout: Layout, b: int, c: int, side_name: str) -> tuple[str, ...]:
+    """Tags of the secondary element of bogie ``b`` under carbody ``c`` on a side (:meth:`.layout.Layout.element_tags`)."""
+    return (f"bogie{b + 1}",) + ((f"car{c + 1}",) if layout.articulated else ()) + (side_name,)
+
+
+def _yaw_damper(q: dict[str, float], end: float, side: float, damped: bool):
+    return maxwell_yaw_damper(q, end, side, q["k_yaw_s"], damped)
 
 
 def _kind(body: str) -> str:

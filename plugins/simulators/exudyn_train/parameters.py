@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -307,6 +308,42 @@ Kalker's creep coefficients, the equivalent conicity. A reference date calibrate
 
 BY_NAME: dict[str, VehicleParameter] = {p.name: p for p in PARAMETERS}
 
+ELEMENT_KINDS: dict[str, tuple[str, ...]] = {
+    "primary": ("k_prim_x", "c_prim_x", "k_prim_y", "k_prim_z", "c_prim_z"),
+    "secondary": ("k_sec_x", "k_sec_y", "k_sec_z", "c_sec_z", "k_sec_z_s", "c_sec_y"),
+    "yaw": ("c_yaw", "k_yaw_s"),
+    "bogie": ("k_trac", "k_arb"),
+}
+"""Where each suspension kind sits, element by element (:meth:`.layout.Layout.element_tags`): per axlebox
+(primary), per carbody end and side (secondary: air spring, vertical and lateral dampers), per bogie and side
+(yaw dampers), per bogie (traction rod, anti-roll bar). A group ``kind[tag,...]`` in a parameter dict sets
+the elements of ``kind`` carrying those tags (:func:`element_view`)."""
+
+
+@lru_cache(maxsize=4096)
+def _group_key(key: str) -> tuple[str, frozenset] | None:
+    if not key.endswith("]") or "[" not in key:
+        return None
+    kind, rest = key[:-1].split("[", 1)
+    return kind.strip(), frozenset(t.strip() for t in rest.split(","))
+
+
+def element_view(q: dict[str, float], kinds: tuple[str, ...], tags: tuple[str, ...]) -> dict[str, float]:
+    """The values one element sees: ``q`` with each of ``kinds`` replaced by the value of the most specific
+    group in ``q`` (``kind[tag,...]``, its tags among the element's ``tags``) that covers the element; ``q``
+    itself (the same object) when no group covers it, so that kind-level values give identical results."""
+    best: dict[str, tuple[int, float]] = {}
+    for key, value in q.items():
+        parsed = _group_key(key) if "[" in key else None
+        if parsed is None:
+            continue
+        kind, ktags = parsed
+        if kind in kinds and ktags <= set(tags) and len(ktags) >= best.get(kind, (-1, 0.0))[0]:
+            best[kind] = (len(ktags), value)
+    if not best:
+        return q
+    return {**q, **{k: v for k, (_, v) in best.items()}}
+
 
 def by_name(preset: str = DEFAULT_PRESET) -> dict[str, VehicleParameter]:
     """Name -> parameter of a preset."""
@@ -449,9 +486,9 @@ def check_values(values: dict[str, float], known: dict | None = None) -> list[st
     known = BY_NAME if known is None else known
     problems = []
     for name, value in values.items():
-        if name not in known:
+        if name not in known and (_group_key(name) is None or _group_key(name)[0] not in known):
             problems.append(f"unknown parameter '{name}'")
         elif not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0.0:
             problems.append(f"parameter '{name}' = {value!r} must be a positive finite number "
-                            f"({known[name].unit})")
+                            f"({known[name.split('[')[0]].unit})")
     return problems

@@ -56,6 +56,11 @@ LINEAR = frozenset({
     "k_track", "c_track", "k_art", "c_art", "c_ic"})
 """Parameters on which M, K, D and G depend affinely (one linearisation per derivative suffices)."""
 
+def _kind(name: str) -> str:
+    """An element group (``c_yaw[bogie1]``, :mod:`suspid.elements`) is as linear as its kind."""
+    return name.split("[", 1)[0]
+
+
 LINEAR_STEP = 1e-2
 """Relative step of the one-sided difference of the matrices for :data:`LINEAR` parameters (exact: affine)."""
 
@@ -92,7 +97,7 @@ def _difference(a: LinearSystem, b: LinearSystem, h: float) -> MatrixDerivative:
 
 
 def _step(name: str, x: float) -> float:
-    rel = LINEAR_STEP if name in LINEAR else CENTRAL_STEP
+    rel = LINEAR_STEP if _kind(name) in LINEAR else CENTRAL_STEP
     return rel * abs(x) if x != 0 else rel
 
 
@@ -113,7 +118,7 @@ def _single(model: TrainModel, values: dict[str, float], speed: float, name: str
     """One parameter's derivative: one-sided for :data:`LINEAR`, central otherwise."""
     h = _step(name, float(values[name]))
     plus = _linearised(model, values, speed, base, {name: h}, repr(name))
-    if name in LINEAR:
+    if _kind(name) in LINEAR:
         return _difference(plus, base, h)
     minus = _linearised(model, values, speed, base, {name: -h}, repr(name))
     return _difference(plus, minus, 2 * h)
@@ -135,9 +140,9 @@ def _groups(names: list[str], patterns: list[Pattern]) -> list[list[int]]:
     sizes = [sum(int(m.sum()) for m in pat) for pat in patterns]
     groups: list[list[int]] = []
     used: list[list[np.ndarray]] = []
-    for i in sorted(range(len(names)), key=lambda i: (names[i] not in LINEAR, -sizes[i])):
+    for i in sorted(range(len(names)), key=lambda i: (_kind(names[i]) not in LINEAR, -sizes[i])):
         for g, union in zip(groups, used):
-            if (names[g[0]] in LINEAR) == (names[i] in LINEAR) and \
+            if (_kind(names[g[0]]) in LINEAR) == (_kind(names[i]) in LINEAR) and \
                     not any(np.any(u & m) for u, m in zip(union, patterns[i])):
                 g.append(i)
                 for u, m in zip(union, patterns[i]):
@@ -179,7 +184,7 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
             steps = {names[i]: _step(names[i], float(values[names[i]])) for i in group}
             what = ", ".join(map(repr, steps))
             plus = _linearised(model, values, speed, base, steps, what)
-            if names[group[0]] in LINEAR:
+            if _kind(names[group[0]]) in LINEAR:
                 low, scale = base, 1.0
             else:
                 low, scale = _linearised(model, values, speed, base, {n: -h for n, h in steps.items()}, what), 2.0

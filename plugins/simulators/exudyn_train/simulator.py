@@ -12,12 +12,14 @@ from pydantic_core import InitErrorDetails
 
 from suspid.options import parse_options
 from suspid.errors import SimulatorError
-from suspid.interfaces import DifferentiableSimulator, Parameter, Response, Simulator, TrackSegment
+from suspid.elements import declared_groups, resolve_group
+from suspid.interfaces import (DifferentiableSimulator, Element, ElementSimulator, Parameter, Response, Simulator,
+                               TrackSegment)
 
 from . import effects as E
 from . import parameters as P
 from .layout import layout_of
-from .model import TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
+from .model import FLOOR_HEIGHT, TABLE_PAD, Sensor, TimeFeatures, TrainModel, default_sensors
 from .modes import critical_speed, modes_summary, stability_sweep
 from .sensitivity import analytic_parameters, matrix_derivatives, record_derivatives
 from .solvers import (FrequencyResponse, InputSpectra, TimeSettings, check_segment, is_constant_speed, output_samples,
@@ -231,6 +233,16 @@ def validate_effects(value: list[Any]) -> list[dict[str, Any]]:
     return out
 
 
+def _canonical(name: str, groups: dict) -> str | None:
+    """The canonical name of the element group ``name`` (tags in any order, :func:`suspid.elements.resolve_group`),
+    ``None`` when it selects no declared elements."""
+    if name in groups:
+        return name
+    elements = [Element(g.kind, m) for g in groups.values() if not g.tags for m in g.members]
+    g = resolve_group(elements, name)
+    return None if g is None else g.name
+
+
 def _unit(parameter: str) -> str:
     """Unit of an effect parameter from its name's suffix."""
     for suffix, unit in (("_n_per_m", "N/m"), ("_hz", "Hz"), ("_kg", "kg"), ("_deg", "deg"), ("_rad", "rad"),
@@ -240,7 +252,7 @@ def _unit(parameter: str) -> str:
     return "1"
 
 
-class ExudynTrain(Simulator, DifferentiableSimulator):
+class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
     """High-speed car built with exudyn: 7 rigid bodies, suspension, linearised wheel-rail contact.
 
     See :mod:`suspid.plugins.simulators.exudyn_train` for the model and
@@ -314,6 +326,72 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
     def default_parameters(self) -> list[str]:
         return list(P.DEFAULT_IDENTIFIED)
 
+    def elements(self) -> list[Element]:
+        """Every suspension element (:data:`.parameters.ELEMENT_KINDS`, tags of
+        :meth:`.layout.Layout.element_tags`): per axlebox the primary rates, per carbody end and side the
+        secondary springs and dampers, per bogie and side the yaw dampers, per bogie the traction rod and
+        anti-roll bar. The yaw dampers are left out when an effect replaces them or they blow off (one
+        damper law for all of them)."""
+        layout = self.opts.layout
+        replaced = set().union(*(e.replaces for e in self.effects()))
+        out = []
+        for placement, kinds in P.ELEMENT_KINDS.items():
+            if placement == "yaw" and ("yaw_damper" in replaced or self.opts.yaw_damper.blow_off):
+                continue
+            tags = layout.element_tags(placement)
+            out += [Element(kind, t) for kind in kinds for t in tags]
+        return out
+
+    def candidate_sensors(self) -> list[Sensor]:
+        """Accelerometers a sensor-placement advice may add (:meth:`candidate_channels`): on each carbody above
+        each of its pivots, left and right (floor level, y = ±b_sec), vertical and longitudinal; on each bogie
+        frame left and right (±b_yaw) vertical and longitudinal, and lateral over its leading and trailing
+        wheelset; on each wheelset's axleboxes (±b_prim) vertical."""
+        v = self._nominal()
+        layout = self.opts.layout
+        z = FLOOR_HEIGHT - v["h_car"]
+        out = []
+        for car in layout.carbodies:
+            for where, x in (("front", v["a_bogie"]), ("rear", -v["a_bogie"])):
+                for side, y in (("left", v["b_sec"]), ("right", -v["b_sec"])):
+                    for d in ("vertical", "longitudinal"):
+                        out.append(Sensor(f"{car}_{where}_{side}_{d}", car, d, (x, y, z)))
+        for bogie in layout.bogies:
+            for side, y in (("left", v["b_yaw"]), ("right", -v["b_yaw"])):
+                for d in ("vertical", "longitudinal"):
+                    out.append(Sensor(f"{bogie}_{side}_{d}", bogie, d, (0.0, y, 0.0)))
+            for where, x in (("leading", v["a_ws"]), ("trailing", -v["a_ws"])):
+                out.append(Sensor(f"{bogie}_{where}_lateral", bogie, "lateral", (x, 0.0, 0.0)))
+        for ws in layout.wheelsets:
+            for side, y in (("left", v["b_prim"]), ("right", -v["b_prim"])):
+                out.append(Sensor(f"{ws}_{side}_vertical", ws, "vertical", (0.0, y, 0.0)))
+        have = set(self.channels())
+        return [s for s in out if s.name not in have]
+
+    def candidate_channels(self) -> list[str]:
+        return [s.name for s in self.candidate_sensors()]
+
+    def with_channels(self, channels: Sequence[str]) -> "ExudynTrain":
+        """This simulator with the candidate ``channels`` added after its own (:meth:`candidate_sensors`).
+
+        :raises SimulatorError: a name that is not a candidate channel.
+        """
+        by_name = {s.name: s for s in self.candidate_sensors()}
+        unknown = [c for c in channels if c not in by_name]
+        if unknown:
+            raise SimulatorError(f"exudyn-train: unknown candidate channel(s) {', '.join(unknown)} "
+                                 f"(candidates: {', '.join(by_name)})")
+        current = [{"name": s.name, "body": s.body, "direction": s.direction, "position": list(s.position)}
+                   for s in self.sensors()]
+        extra = [{"name": c, "body": by_name[c].body, "direction": by_name[c].direction,
+                  "position": list(by_name[c].position)} for c in channels]
+        return type(self)(**{**self.options, "sensors": current + extra})
+
+    def _groups(self) -> dict:
+        if getattr(self, "_group_cache", None) is None:
+            self._group_cache = declared_groups(self.elements())
+        return self._group_cache
+
     def calibratable(self) -> list[str]:
         """The model parameters the vehicle tables give as assumptions or ranges (:data:`.parameters.CALIBRATABLE`):
         the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity."""
@@ -336,11 +414,14 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         """
         values = self._nominal()
         effect_values = {p.name: p.nominal for p in self._effect_parameters()}
-        unknown = [k for k in w if k not in values and k not in effect_values]
+        groups = self._groups() if any("[" in k for k in w) else {}
+        canonical = {k: _canonical(k, groups) for k in w if "[" in k}
+        unknown = [k for k in w if k not in values and k not in effect_values and canonical.get(k) is None]
         if unknown:
             raise SimulatorError(f"unknown parameter(s) {', '.join(map(repr, unknown))} for exudyn-train; "
                                  f"known: {', '.join(sorted(values) + sorted(effect_values))}")
         values.update({k: float(v) for k, v in w.items() if k in values})
+        values.update({canonical[k]: float(v) for k, v in w.items() if canonical.get(k) is not None})
         problems = P.check_values(values, P.by_name(self.opts.preset))
         effect_values.update({k: float(v) for k, v in w.items() if k in effect_values})
         problems += [f"effect parameter '{k}' = {v!r} must be finite" for k, v in effect_values.items()
@@ -416,7 +497,9 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         (their periodic inputs and parameters): the caller takes finite differences for those."""
         if self.opts.solver != "frequency" or self.opts.effects:
             return []
-        return analytic_parameters(names, {p.name for p in P.parameter_table(self.opts.preset)})
+        table = {p.name for p in P.parameter_table(self.opts.preset)}
+        groups = self._groups() if any("[" in n for n in names) else {}
+        return analytic_parameters(names, table | {n for n in names if _canonical(n, groups) is not None})
 
     def simulate_jacobian(self, w: Mapping[str, float], segments: Sequence[TrackSegment],
                           names: Sequence[str]) -> list[tuple[Response, np.ndarray]]:
@@ -439,6 +522,7 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         special = [i for i, s in enumerate(segments) if not is_constant_speed(s) or has_curve(s)]
         if special:
             return self._jacobian_by_differences(w, segments, names, special)
+        shared, alone = self._derivative_points(values, names)
         o = self.opts
         channels = tuple(s.name for s in self.sensors(values))
         out: list[tuple[Response, np.ndarray] | None] = [None] * len(segments)
@@ -453,7 +537,11 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
                 raise SimulatorError("exudyn-train: the eigenvectors of the linear model are ill-conditioned "
                                      f"at {speed * 3.6:.1f} km/h; its derivatives need finite differences")
             try:
-                derivatives = matrix_derivatives(model, values, speed, names, base)
+                common = [n for n in names if n not in alone]
+                found = dict(zip(common, matrix_derivatives(model, shared, speed, common, base)))
+                for n, at in alone.items():
+                    found[n], = matrix_derivatives(model, at, speed, [n], base)
+                derivatives = [found[n] for n in names]
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: {exc}") from exc
             group = [segments[i] for i in idx]
@@ -462,6 +550,33 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
             for i, r, g in zip(idx, records, grads):
                 out[i] = (r, g)
         return out  # type: ignore[return-value]
+
+    def _derivative_points(self, values: dict[str, float], names: list[str]
+                           ) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+        """Where each of ``names`` is differentiated: ``(shared, alone)``. A group not in ``values`` is added at
+        its elements' value (its kind's, or a wider group's); in ``shared`` (one call, linearisations shared) when
+        no other name acts on its elements, else ``alone[name]``: the values with that group only, so that a
+        kind asked with it keeps acting on its other elements."""
+        missing = [n for n in names if "[" in n and n not in values]
+        if not missing:
+            return values, {}
+        groups = self._groups()
+        resolved = {n: groups[_canonical(n, groups)] for n in names if "[" in n}
+        at = {n: self._element_value(values, resolved[n]) for n in missing}
+
+        def crowded(n: str) -> bool:
+            g = resolved[n]
+            return g.kind in names or any(o != n and resolved[o].overlaps(g) for o in resolved)
+
+        alone = {n: {**values, n: at[n]} for n in missing if crowded(n)}
+        shared = {**values, **{n: at[n] for n in missing if n not in alone}}
+        return shared, alone
+
+    @staticmethod
+    def _element_value(values: dict[str, float], group) -> float:
+        """The value the first element of ``group`` has in ``values``."""
+        placement = next(pl for pl, kinds in P.ELEMENT_KINDS.items() if group.kind in kinds)
+        return float(P.element_view(values, P.ELEMENT_KINDS[placement], group.members[0])[group.kind])
 
     def _jacobian_by_differences(self, w: Mapping[str, float], segments: list[TrackSegment], names: list[str],
                                  special: list[int]) -> list[tuple[Response, np.ndarray]]:
@@ -477,10 +592,12 @@ class ExudynTrain(Simulator, DifferentiableSimulator):
         base = self.simulate(w, group)
         values = self.values(w)
         grads = [np.zeros((len(names),) + r.accelerations.shape) for r in base]
+        groups = self._groups() if any("[" in n for n in names) else {}
         for k, name in enumerate(names):
-            h = DIFFERENCE_STEP * max(abs(values[name]), 1e-12)
-            up = self.simulate({**w, name: values[name] + h}, group)
-            down = self.simulate({**w, name: values[name] - h}, group)
+            x = values[name] if name in values else self._element_value(values, groups[_canonical(name, groups)])
+            h = DIFFERENCE_STEP * max(abs(x), 1e-12)
+            up = self.simulate({**w, name: x + h}, group)
+            down = self.simulate({**w, name: x - h}, group)
             for g, a, b in zip(grads, up, down):
                 g[k] = (a.accelerations - b.accelerations) / (2 * h)
         for i, r, g in zip(special, base, grads):

@@ -1,0 +1,214 @@
+"""Element-level parameters, observability of element groups and localisation of a change (suspid.elements,
+suspid.workflows.elements), on exudyn-train's own data; the independent generator's run is
+``tests/test_localisation_independent.py`` (long) and ``benchmarks/bench_localisation.py``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from suspid import api
+from suspid.elements import check_groups, declared_groups, declared_parameters, resolve_group, split_name
+from suspid.errors import ConfigError
+from suspid.infra.lock import open_run_dir
+from suspid.plugins.simulators.exudyn_train.simulator import ExudynTrain
+from suspid.testing import check_differentiable, check_elements, sample_segments
+from suspid.workflows.elements import (element_analysis, localise_problem, mirror, observability_of)
+from suspid.workflows.problem import build_problem
+
+
+def test_group_syntax_and_declared_groups():
+    sim = ExudynTrain(solver="frequency")
+    assert split_name("c_yaw[bogie1, left]") == ("c_yaw", ("bogie1", "left"))
+    assert split_name("c_yaw") == ("c_yaw", ())
+    assert split_name("c_yaw[") is None and split_name("c_yaw[]") is None
+    groups = declared_groups(sim.elements())
+    yaw = {n for n, g in groups.items() if g.kind == "c_yaw"}
+    assert yaw == {"c_yaw", "c_yaw[bogie1]", "c_yaw[bogie2]", "c_yaw[left]", "c_yaw[right]", "c_yaw[bogie1,left]",
+                   "c_yaw[bogie1,right]", "c_yaw[bogie2,left]", "c_yaw[bogie2,right]"}
+    assert len(groups["c_prim_z[bogie2]"].members) == 4 and len(groups["c_sec_y"].members) == 4
+    assert resolve_group(sim.elements(), "c_yaw[left,bogie1]").name == "c_yaw[bogie1,left]"
+    names = {p.name for p in declared_parameters(sim)}
+    assert {"c_yaw", "c_yaw[bogie1]", "k_prim_z[ws3,left]"} <= names
+    assert len(sim.parameters()) == len(ExudynTrain(solver="frequency").parameters())   # kinds unchanged
+
+
+def test_articulated_preset_declares_jacobs_bogies_with_two_carbody_ends():
+    sim = ExudynTrain(solver="frequency", vehicle="tgv-articulated")
+    groups = declared_groups(sim.elements())
+    assert len(groups["k_sec_z[bogie2]"].members) == 4            # Jacobs bogie: two carbody ends, two sides
+    assert len(groups["k_sec_z[bogie1]"].members) == 2            # end bogie: one carbody end
+    assert "k_sec_z[bogie2,car2,left]" in groups and "c_yaw[bogie4,right]" in groups
+
+
+def test_unknown_and_overlapping_groups_are_one_line_errors():
+    sim = ExudynTrain(solver="frequency")
+    (name, msg), = check_groups(sim, ["c_yaw[bogie9]"])
+    assert name == "c_yaw[bogie9]" and "groups of c_yaw: c_yaw, c_yaw[bogie1]" in msg
+    (name, msg), = check_groups(sim, ["c_yaw", "c_yaw[bogie1,left]"])
+    assert "share element" in msg and "c_yaw[bogie1,left]" in msg
+    assert check_groups(sim, ["c_yaw[bogie1]", "c_yaw[bogie2]", "c_sec_y[left]"]) == []
+    base = {"simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency"}},
+            "data": {"source": "experiment", "track": {"n_segments": 2, "length_m": 1000.0}},
+            "spectra": {"f_min_hz": 1.0, "f_max_hz": 15.0, "n_freqs": 40}}
+    with pytest.raises(ConfigError, match=r"parameters\.c_yaw\[bogie1\].*share element"):
+        api.validate(base | {"parameters": {"c_yaw": {}, "c_yaw[bogie1]": {}}})
+    with pytest.raises(ConfigError, match=r"unknown element group 'c_yaw\[front\]'"):
+        api.validate(base | {"parameters": {"c_yaw[front]": {}}})
+    with pytest.raises(ConfigError, match="localisation.kinds"):
+        api.validate(base | {"parameters": {"c_yaw": {}}, "localisation": {"kinds": ["m_car"]}})
+    assert api.validate(base | {"parameters": {"c_yaw[bogie1]": {}, "c_yaw[bogie2]": {}},
+                                "data": base["data"] | {"w_ref": {"c_yaw[bogie1]": 150e3}}})
+
+
+def test_kind_level_results_unchanged_and_groups_act_on_their_elements():
+    sim = ExudynTrain(solver="frequency")
+    segs = sample_segments()[:1]
+    a = sim.simulate({"c_yaw": 250e3}, segs)[0].accelerations
+    same = sim.simulate({"c_yaw[bogie1]": 250e3, "c_yaw[bogie2]": 250e3}, segs)[0].accelerations
+    assert np.array_equal(a, same)                                 # every element at the kind's value: identical
+    front = sim.simulate({"c_yaw": 250e3, "c_yaw[bogie1]": 125e3}, segs)[0].accelerations
+    both = sim.simulate({"c_yaw[bogie1]": 125e3, "c_yaw[bogie2]": 250e3}, segs)[0].accelerations
+    assert np.array_equal(front, both) and not np.allclose(front, a)
+
+
+def test_group_derivatives_are_analytic_and_sum_to_the_kind_derivative():
+    sim = ExudynTrain(solver="frequency")
+    segs = sample_segments()[:1]
+    names = ["k_sec_z", "k_sec_z[bogie1,left]", "k_sec_z[bogie1,right]", "k_sec_z[bogie2]"]
+    assert sim.differentiable(names) == names
+    (_, g), = sim.simulate_jacobian({}, segs, names)
+    # the records' derivatives are single precision (about 1e-6 of each record)
+    assert np.abs(g[1] + g[2] + g[3] - g[0]).max() < 1e-5 * np.abs(g[0]).max()
+    errors = check_differentiable(ExudynTrain, {"solver": "frequency"}, names=["c_yaw[bogie1,left]",
+                                                                               "c_prim_z[ws3,right]"])
+    assert max(errors.values()) < 1e-4
+
+
+def test_conformance_kit_accepts_exudyn_train_elements():
+    check_elements(ExudynTrain, {"solver": "frequency"}, kind="c_sec_y")
+    check_elements(ExudynTrain, {"solver": "frequency", "vehicle": "tgv-articulated"}, kind="k_sec_z")
+
+
+def test_mirror_changes_the_sign_of_alignment_and_cross_level_only():
+    seg = sample_segments()[0]
+    m = mirror(seg)
+    assert np.array_equal(m.irregularities[[0, 3]], seg.irregularities[[0, 3]])
+    assert np.array_equal(m.irregularities[[1, 2]], -seg.irregularities[[1, 2]])
+
+
+def _config(tmp_path, name, w_ref):
+    return api.load_config({
+        "name": name, "seed": 3,
+        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0}},
+        "parameters": {"c_yaw": {}, "k_sec_z": {}, "c_sec_y": {}},
+        "data": {"source": "experiment", "w_ref": w_ref,
+                 "track": {"spectrum": "german-low", "n_segments": 8, "length_m": 600.0, "speed_kmh": 300.0},
+                 "reference": {"segment_gain_db": 0.3, "model_error_scatter_db": 0.5}},
+        "spectra": {"f_min_hz": 0.5, "f_max_hz": 15.0, "n_freqs": 80},
+        "localisation": {"n_segments": 4, "gauss_newton_steps": 2, "refine_top": 2},
+        "output": {"dir": str(tmp_path / name)}})
+
+
+def _analyse(cfg):
+    with open_run_dir(cfg.run_dir(), config_name=cfg.name, config_file=None) as ledger:
+        problem = build_problem(cfg, ledger)
+        analysis = element_analysis(problem, cfg.localisation)
+        return problem, analysis
+
+
+@pytest.fixture(scope="module")
+def yaw_case(tmp_path_factory):
+    cfg = _config(tmp_path_factory.mktemp("yaw"), "yaw", {"c_yaw[bogie1]": 150e3})
+    return _analyse(cfg)
+
+
+def test_default_sensors_cannot_separate_left_and_right_but_bogies_and_an_extra_channel_can(yaw_case):
+    problem, analysis = yaw_case
+    names = {h.name: h for h in analysis.hypotheses}
+    for kind in ("c_yaw", "k_sec_z", "c_sec_y"):
+        for bogie in ("bogie1", "bogie2"):                         # left/right: one cluster, reported together
+            h = names[f"{kind}[{bogie}]"]
+            assert len(h.members) == 2 and "not separable" in h.note
+    result = observability_of(analysis, problem.simulator, problem)
+    rows = {r["name"]: r for r in result.clusters}
+    assert rows["c_yaw[bogie1]"]["detectable"] and not rows["c_yaw[bogie1]"]["separable"]
+    assert result.rank < len(result.groups)
+    splits = {a["channel"]: a["splits"] for a in result.advice}
+    # an accelerometer off the centre line breaks the mirror symmetry: it splits the air springs left/right
+    assert any("k_sec_z[bogie1]" in s for c, s in splits.items() if "left" in c or "right" in c)
+    assert "rank" in result.table() and "sensor-placement advice" in result.table()
+    import json
+
+    written = api.observability(problem.config)                    # the command's API: observability.json
+    data = json.loads(written.path.read_text())
+    assert {r["name"] for r in data["clusters"]} == set(rows) and data["rank"] == result.rank
+
+
+def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
+    problem, analysis = yaw_case
+    out = localise_problem(problem, problem.config.localisation, analysis=analysis)
+    assert out["named"]
+    row, = out["rows"]
+    assert row["group"] == "c_yaw[bogie1]" and not row["separable"]
+    assert row["not_separated"] == "left/right not separable with these sensors"
+    from suspid.workflows.verdict import verdict_rows
+
+    empty = {"parameters": [], "w_opt": {}, "interval": {}, "identifiable": {}, "localisation": out}
+    vrow, = verdict_rows(empty, problem.simulator.parameters(), {})
+    assert vrow.name == "c_yaw[bogie1]" and vrow.label.endswith("(left/right not separable with these sensors)")
+    assert row["interval"][0] <= 150e3 <= row["interval"][1] or abs(row["value"] / 150e3 - 1) < 0.05
+    assert all(a["group"] != "c_yaw[bogie1,left]" for a in row["alternatives"])   # never one of the pair alone
+    as_loss = localise_problem(problem, problem.config.localisation.model_copy(update={"direction": "decrease"}),
+                               analysis=analysis)
+    assert as_loss["rows"][0]["group"] == "c_yaw[bogie1]"
+    # after an identification in which two kinds moved: each localised with the other's kind-level change fitted
+    both = localise_problem(problem, problem.config.localisation, analysis=analysis, moved=["c_yaw", "k_sec_z"])
+    assert [r["group"] for r in both["rows"]] == ["c_yaw[bogie1]"] and both["moved"] == ["c_yaw", "k_sec_z"]
+
+
+def test_nothing_is_named_when_nothing_changed(tmp_path):
+    problem, analysis = _analyse(_config(tmp_path, "null", {}))
+    out = localise_problem(problem, problem.config.localisation, analysis=analysis)
+    assert not out["named"] and out["rows"] == []
+
+
+@pytest.mark.long
+def test_localisation_on_the_independent_generator(tmp_path):
+    """One seed of benchmarks/bench_localisation.py (12 segments per date): one bogie's yaw dampers at 50 % and
+    one bogie's primary vertical dampers at 50 % named first (their pairs together), nothing named in the null;
+    the whole measurement (3 seeds, 4 cases, values) is in benchmarks/RESULTS.md."""
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "benchmarks"))
+    try:
+        import bench_localisation as B
+        from independent2 import measure as MS
+    finally:
+        sys.path.remove(str(root / "benchmarks"))
+    ref = tmp_path / "reference"
+    MS.generate_date(ref, {}, seed=3, n_segments=12, speed_mps=B.SPEED, chainage_m=10_000.0, instrument_seed=1)
+    for case in ("yaw-bogie1-50", "primary-dampers-bogie2-50", "null"):
+        w = {} if case == "null" else B.PR.ELEMENT_CASES[case]
+        MS.generate_date(tmp_path / case / "measurement", w, seed=4, n_segments=12, speed_mps=B.SPEED,
+                         chainage_m=200_000.0, instrument_seed=1)
+        out, _, widths = B.run_case(B.config_for(tmp_path / case, ref, 1, 12))
+        s = B.score(case, out, widths.get((B.EXPECTED[case][0] or "").split("[")[0]))
+        assert s["right"], (case, s)
+
+
+def test_localisation_runs_after_an_identification_when_a_kind_with_elements_moved(tmp_path):
+    from suspid.workflows.elements import localisation_wanted
+
+    sim = ExudynTrain(solver="frequency")
+    cfg = _config(tmp_path, "auto", {})
+    assert cfg.localisation.enabled is False                       # default: a kind-level run stays as it was
+    cfg = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": "auto"})})
+    moved = {"parameters": ["c_yaw", "k_sec_z"], "interval": {"c_yaw": [190e3, 230e3], "k_sec_z": [340e3, 360e3]}}
+    still = {"parameters": ["c_yaw"], "interval": {"c_yaw": [280e3, 320e3]}}
+    assert localisation_wanted(cfg, moved, sim) and not localisation_wanted(cfg, still, sim)
+    off = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": False})})
+    on = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": True})})
+    assert not localisation_wanted(off, moved, sim) and localisation_wanted(on, still, sim)
