@@ -193,13 +193,16 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/ingest.md).", show_default=False),
            set_: Optional[List[str]] = SetOpt,
            out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: the file's output.dir)."),
-           quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+           quiet: bool = typer.Option(False, "--quiet", help="No progress lines."),
+           strict: bool = typer.Option(False, "--strict", help="Refuse a static 1 g on a vertical channel "
+                                       "instead of removing it (quality.strict).")) -> None:
     """Cut a long recording (mf4, mat, tdms, csv, hdf5) into segments: units, track alignment, quality report."""
     global _interrupted_note
     where = str(out) if out is not None else "the output folder"
     _interrupted_note = (f"ingest keeps no partial work (it has no ledger): {where} still holds the segments "
                          f"and reports of the previous ingest, if any; run the same command to ingest again")
-    r = api.ingest(ingest_file, set_ or [], out_dir=out, log=_log(quiet))
+    r = api.ingest(ingest_file, [*(set_ or []), *(["quality.strict=true"] if strict else [])], out_dir=out,
+                   log=_log(quiet))
     for w in r.warnings:
         print(f"warning: {w}", file=sys.stderr)
     console.print(f"{len(r.segments)} segments, offset {r.offset_m:.2f} m (peak ratio {r.peak_ratio:.2f}); "

@@ -52,7 +52,7 @@ def run(source: str | Path | Mapping[str, Any], overrides: Sequence[str] = (), *
     simulator = build_simulator(cfg)
     out = Path(out_dir) if out_dir is not None else opts.output_dir(base)
     try:
-        return run_ingest(opts, simulator, out, log)
+        return run_ingest(opts, simulator, out, log, f_max_hz=cfg.spectra.f_max_hz)
     except ConfigError as exc:
         if exc.file is None:   # a key of the ingest file, found while running: name the file
             raise ConfigError(exc.detail, file=file, key=exc.key) from None

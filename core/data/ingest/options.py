@@ -37,6 +37,8 @@ from suspid.options import ConfigPath, Section
 
 G = 9.80665
 """Standard gravity, m/s^2 per g."""
+STATIC_G_TOLERANCE = 0.15
+"""A vertical channel whose mean lies within this fraction of +-1 g carries the static gravity."""
 
 ACCELERATION_UNITS = {"m/s^2": 1.0, "mm/s^2": 1e-3, "g": G}
 """Declared acceleration unit -> factor to m/s^2."""
@@ -212,6 +214,8 @@ class QualitySection(Section):
         default_factory=lambda: ["dropouts", "clipping", "flat", "spikes"],
         description="what excludes a stretch from the segments (the rest is only reported)")
     figures: bool = Field(default=True, description="write the PNG figures")
+    strict: bool = Field(default=False, description="refuse what would otherwise be corrected with a warning: a "
+                         "static 1 g on a vertical channel (``suspid ingest --strict``)")
 
 
 class OutputSection(Section):
