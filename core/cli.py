@@ -83,6 +83,8 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt, stric
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "
                   f"surrogate {cfg.surrogate.plugin}, optimizer {cfg.optimizer.plugin}, "
                   f"executor {cfg.executor.plugin}{data})")
+    for note in cfg._notes:
+        console.print(f"note: {note}", markup=False, highlight=False)
 
 
 @app.command()
