@@ -128,3 +128,50 @@ def test_a_channel_sampled_below_the_spectra_nyquist_rate_is_refused(recording, 
                                            "config": "suspid-10hz.yaml"})
     r = suspid.ingest(path, out_dir=tmp_path / "ok")
     assert len(r.segments) >= 3
+
+
+def _curve(x: np.ndarray, start: float, transition: float, body: float, value: float) -> np.ndarray:
+    """A design quantity along a curve: 0, a linear ramp over ``transition`` m, ``value`` over ``body`` m, ramp."""
+    return value * np.interp(x, [start, start + transition, start + transition + body,
+                                 start + 2 * transition + body], [0, 1, 1, 0], left=0, right=0)
+
+
+def test_curvature_radius_and_cant_are_mapped_and_select_the_segments(recording, tmp_path):
+    from suspid.data.files import read_track
+
+    folder, truth = recording
+    lines = (folder / "track-record.csv").read_text().splitlines()
+    data = np.loadtxt(lines[2:], delimiter=",")
+    x = data[:, 0]
+    kappa = _curve(x, 3000.0, 300.0, 600.0, -1 / 7000.0)        # a right-hand curve, R = 7000 m
+    with np.errstate(divide="ignore"):
+        radius = np.where(kappa == 0, 0.0, 1 / np.where(kappa == 0, 1, kappa))   # 0: straight, as cars write
+    cant = _curve(x, 3000.0, 300.0, 600.0, -150.0)               # mm, left rail above the right (outer rail)
+    _write_csv(folder / "track-curve.csv", lines[:1], lines[1].split(",") + ["RADIUS", "CANT"],
+               np.column_stack([data, radius, cant]))
+    track = {"track.path": "track-curve.csv", "track.curvature": {"name": "RADIUS", "quantity": "radius", "unit": "m"},
+             "track.cant": {"name": "CANT", "unit": "mm"}}
+    r = suspid.ingest(_ingest(folder, "curve", **track), out_dir=tmp_path / "all")
+    segs = read_track(r.track_path)
+    inside = [s for s in segs if np.abs(s.curvature).max() > 0]
+    assert inside and len(inside) < len(segs)
+    for s in inside:
+        assert np.all(s.curvature <= 0) and np.abs(s.curvature).max() == pytest.approx(1 / 7000.0, rel=1e-6)
+        assert np.all(s.cant <= 0) and np.abs(s.cant).max() <= 0.150 + 1e-12
+        assert s.curvature.shape == s.distance.shape == s.cant.shape
+    # straight track only: no segment meets the curve, and the report says why the curve is left out
+    r2 = suspid.ingest(_ingest(folder, "straight", **track, **{"segments.max_curvature_per_m": 1e-5}),
+                       out_dir=tmp_path / "straight")
+    segs2 = read_track(r2.track_path)
+    assert segs2 and all(np.abs(s.curvature).max() <= 1e-5 for s in segs2)
+    assert len(segs2) < len(segs)
+    assert any("|curvature| above segments.max_curvature_per_m" in e["reason"] for e in r2.report["excluded"])
+    # the curve only, by its cant
+    r3 = suspid.ingest(_ingest(folder, "canted", **track, **{"segments.min_cant_m": 0.1,
+                                                             "segments.length_m": 300.0}),
+                       out_dir=tmp_path / "canted")
+    assert all(np.abs(s.cant).min() >= 0.1 for s in read_track(r3.track_path))
+    # a limit without the channel it needs: a config error naming the key
+    with pytest.raises(suspid.errors.ConfigError, match=r"segments.min_curvature_per_m / max_curvature_per_m "
+                                                        r"need the track record's curvature channel"):
+        suspid.ingest(_ingest(folder, "nochannel", **{"segments.max_curvature_per_m": 1e-5}))

@@ -25,7 +25,10 @@ Track segment (``*.csv``)::
   the four channels ``vertical_m``, ``lateral_m``, ``cross_level_m``,
   ``gauge_m``, all in metres. Optional: ``speed_mps``, a speed record (one
   value per distance sample, variable speed); the speed must come from this
-  column or from the metadata.
+  column or from the metadata. Optional: ``curvature_per_m`` (design
+  curvature 1 / radius, 1/m, positive for a left-hand curve) and ``cant_m``
+  (design cant, m, right rail above the left), the ``TrackSegment.curvature``
+  and ``cant`` of curved track (straight, untilted track without them).
 - Distance increases with a uniform step (relative tolerance 1e-6); at least
   two rows; every value finite.
 
@@ -52,6 +55,8 @@ Track (``format = "suspid-track"``)::
     /segments/<name>/distance        (n_x,) m
     /segments/<name>/irregularities  (4, n_x) m; attrs: channels = IRREGULARITY_CHANNELS
     /segments/<name>/speed           () or (n_x,) m/s
+    /segments/<name>/curvature       (n_x,) 1/m, optional (as curvature_per_m of the CSV layout)
+    /segments/<name>/cant            (n_x,) m, optional (as cant_m)
 
 Files are written in the HDF5 1.10 format (readable by HDF5 >= 1.10), whose
 metadata carry checksums, and array datasets with a Fletcher-32 checksum
@@ -163,6 +168,13 @@ def check_segment(seg: TrackSegment, where: Path | str) -> TrackSegment:
                            f"({x.size}), got shape {v.shape}")
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         raise _fail(where, f"segment '{seg.name}': speed must be positive and finite")
+    for label, values in (("curvature", seg.curvature), ("cant", seg.cant)):
+        if values is None:
+            continue
+        a = np.asarray(values, dtype=float)
+        if a.shape != x.shape or not np.all(np.isfinite(a)):
+            raise _fail(where, f"segment '{seg.name}': {label} must be one finite value per distance sample "
+                               f"({x.size}), got shape {a.shape}")
     return seg
 
 
@@ -370,10 +382,15 @@ def read_track_csv(path: str | Path, *, strict: bool = False,
         raise _fail(path, "no speed: add a '# speed_mps: <m/s>' line or a speed_mps column")
     irr = np.array([col[c] for c in CSV_TRACK_COLUMNS[1:]])
     seg = TrackSegment(meta.get("name", path.stem), col["distance_m"].copy(), irr, speed,
-                       meta={"file": str(path)})
+                       meta={"file": str(path)}, curvature=_optional(col, "curvature_per_m"),
+                       cant=_optional(col, "cant_m"))
     check_segment(seg, path)
     check_plausibility(seg, path, strict=strict, accept=accept)
     return seg
+
+
+def _optional(col: dict[str, np.ndarray], name: str) -> np.ndarray | None:
+    return col[name].copy() if name in col else None
 
 
 def write_track_csv(segment: TrackSegment, path: str | Path) -> Path:
@@ -391,6 +408,10 @@ def write_track_csv(segment: TrackSegment, path: str | Path) -> Path:
     else:
         columns.append("speed_mps")
         data.append(v)
+    for name, values in (("curvature_per_m", segment.curvature), ("cant_m", segment.cant)):
+        if values is not None:
+            columns.append(name)
+            data.append(np.asarray(values, dtype=float))
     lines.append(",".join(columns))
     table = np.column_stack(data)
     lines += [",".join(repr(float(c)) for c in row) for row in table]
@@ -696,6 +717,9 @@ def write_track_h5(segments: Sequence[TrackSegment], path: str | Path) -> Path:
             d.attrs["channels"] = _fixed(IRREGULARITY_CHANNELS)
             d.attrs["units"] = _fixed("m")
             _array(g, "speed", s.speed)
+            for key in ("curvature", "cant"):
+                if getattr(s, key) is not None:
+                    _array(g, key, getattr(s, key))
 
     return _write_h5(path, fill)
 
@@ -721,8 +745,9 @@ def read_track_h5(path: str | Path, *, strict: bool = False,
                 raise _fail(path, f"segment '{name}': irregularity channels {channels}, expected "
                                   f"{list(IRREGULARITY_CHANNELS)}")
             speed = data["speed"]
+            curve = {key: _dataset(g, key, path) if key in g else None for key in ("curvature", "cant")}
             seg = TrackSegment(name, data["distance"], data["irregularities"],
-                               float(speed) if speed.ndim == 0 else speed, meta={"file": str(path)})
+                               float(speed) if speed.ndim == 0 else speed, meta={"file": str(path)}, **curve)
             out.append(check_segment(seg, path))
     if not out:
         raise _fail(path, "no segments")

@@ -162,6 +162,27 @@ def _motion_reasons(rec: Recording, opts: IngestOptions) -> dict[str, np.ndarray
                 np.isfinite(v) & (v * 3.6 < opts.segments.min_speed_kmh)}
 
 
+def design_reasons(rec: Recording, track: TrackRecord, offset: float, opts: IngestOptions) -> dict[str, np.ndarray]:
+    """Reason -> ``(n,)`` samples whose track lies outside the curvature and cant limits of ``segments``."""
+    seg = opts.segments
+    out = {}
+    x = rec.distance + offset
+    for what, values, lo, hi, unit in (("curvature", track.curvature, seg.min_curvature_per_m,
+                                        seg.max_curvature_per_m, "1/m"),
+                                       ("cant", track.cant, seg.min_cant_m, seg.max_cant_m, "m")):
+        if values is None or (lo is None and hi is None):
+            continue
+        a = np.abs(track.at(values, x))
+        with np.errstate(invalid="ignore"):
+            if hi is not None:
+                key = "curvature_per_m" if what == "curvature" else "cant_m"
+                out[f"|{what}| above segments.max_{key} = {hi:g} {unit}"] = a > hi
+            if lo is not None:
+                key = "curvature_per_m" if what == "curvature" else "cant_m"
+                out[f"|{what}| below segments.min_{key} = {lo:g} {unit}"] = a < lo
+    return out
+
+
 def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, offset: float, dx: float
                    ) -> TrackSegment | None:
     """The track under the odometry reference point during window ``w``, at its mean speed; None when
@@ -179,7 +200,11 @@ def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, off
     irr = np.array([np.interp(x, x_src, row[k0:k1]) for row in track.irregularities])
     if not np.all(np.isfinite(irr)):
         return None
-    return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])})
+    design = {k: np.interp(x, x_src, getattr(track, k)[k0:k1]) for k in ("curvature", "cant")
+              if getattr(track, k) is not None}
+    if not all(np.all(np.isfinite(d)) for d in design.values()):
+        return None
+    return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])}, **design)
 
 
 def _provenance(rec: Recording, w: Window, seg: TrackSegment, al: Alignment) -> dict[str, Any]:
@@ -407,6 +432,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         reasons[f"{CHECK_WORDS[check]} in {where}"] = mask
     reasons["outside the track record"] = ((rec.distance + al.offset_m < track.x0)
                                            | (rec.distance + al.offset_m > x_src_end))
+    reasons.update(design_reasons(rec, track, al.offset_m, opts))
     windows, excluded = cut(rec.distance, rec.speed, reasons, opts.segments, g.fs)
     dx = opts.track.step_m or track.dx
     segs, resps, provs, kept = [], [], [], []
