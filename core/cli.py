@@ -205,11 +205,17 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
                          f"and reports of the previous ingest, if any; run the same command to ingest again")
     r = api.ingest(ingest_file, [*(set_ or []), *(["quality.strict=true"] if strict else [])], out_dir=out,
                    log=_log(quiet))
-    for w in r.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    console.print(f"{len(r.segments)} segments, offset {r.offset_m:.2f} m (peak ratio {r.peak_ratio:.2f}); "
-                  f"data.track_file: {r.track_path}, data.measurements: {r.measurements_path}; "
-                  f"report: {r.out_dir / 'ingest.md'}", markup=False, highlight=False)
+    dates = (("reference date: ", r.reference), ("measurement date: ", r)) if r.reference else (("", r),)
+    for date, res in dates:
+        for w in res.warnings:
+            print(f"warning: {date}{w}", file=sys.stderr)
+    for date, res in dates:
+        console.print(f"{date}{len(res.segments)} segments, offset {res.offset_m:.2f} m (peak ratio "
+                      f"{res.peak_ratio:.2f}); data.track_file: {res.track_path}, data.measurements: "
+                      f"{res.measurements_path}; report: {res.out_dir / 'ingest.md'}", markup=False, highlight=False)
+    if r.config_path is not None:
+        console.print(f"two-date config: {r.config_path} (suspid validate {r.config_path}; suspid run "
+                      f"{r.config_path})", markup=False, highlight=False)
 
 
 def _log(quiet: bool):

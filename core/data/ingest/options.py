@@ -294,8 +294,23 @@ class OutputSection(Section):
                                            "folders; hdf5: track.h5 and accelerations.h5")
 
 
+class ReferenceDate(Section):
+    """``reference:`` the reference-date recording (the train at its nominal parameters w0), ingested as the
+    measurement date's is, with these sections in place of the file's own (alignment: the file's when left out)."""
+
+    recording: RecordingSection
+    track: TrackRecordSection
+    alignment: AlignmentSection | None = None
+
+
 class IngestOptions(Section):
-    """A whole ingest file (``suspid ingest INGEST.yaml``)."""
+    """A whole ingest file (``suspid ingest INGEST.yaml``).
+
+    With ``reference:`` it ingests two recordings, the reference date's and the measurement date's, into
+    ``<output>/reference/`` and ``<output>/measurement/``, and writes ``<output>/two-dates.yaml``: the config
+    of ``config`` with ``data`` (measurement date, ``track_band``) and ``noise.reference`` (reference date)
+    pointing at them, ready for ``suspid validate`` and ``suspid run``.
+    """
 
     config: ConfigPath | None = Field(default=None, description="the suspid config whose simulator defines "
                                       "the channels (default: the built-in exudyn-train with its defaults)")
@@ -305,15 +320,25 @@ class IngestOptions(Section):
     segments: SegmentsSection = Field(default_factory=SegmentsSection)
     quality: QualitySection = Field(default_factory=QualitySection)
     output: OutputSection = Field(default_factory=OutputSection)
+    reference: ReferenceDate | None = Field(default=None, description="the reference-date recording: both dates "
+                                            "are ingested and a two-date config is written")
+
+    def for_reference(self) -> "IngestOptions":
+        """These options with the reference date's recording, track record and alignment."""
+        ref = self.reference
+        return self.model_copy(update={"recording": ref.recording, "track": ref.track, "reference": None,
+                                       "alignment": ref.alignment or self.alignment})
 
     @model_validator(mode="after")
     def _design_limits_need_channels(self) -> "IngestOptions":
         seg = self.segments
+        tracks = [("track", self.track)] + ([("reference.track", self.reference.track)] if self.reference else [])
         for what, key, limits in (("curvature", "curvature_per_m", (seg.min_curvature_per_m, seg.max_curvature_per_m)),
                                   ("cant", "cant_m", (seg.min_cant_m, seg.max_cant_m))):
-            if any(v is not None for v in limits) and getattr(self.track, what) is None:
-                raise ValueError(f"segments.min_{key} / max_{key} need the track record's {what} channel "
-                                 f"(track.{what})")
+            for where, track in tracks:
+                if any(v is not None for v in limits) and getattr(track, what) is None:
+                    raise ValueError(f"segments.min_{key} / max_{key} need the track record's {what} channel "
+                                     f"({where}.{what})")
         return self
 
     def output_dir(self, base: Path) -> Path:

@@ -61,6 +61,8 @@ class IngestResult:
     :ivar segments: the names of the segments written.
     :ivar warnings: one line per problem of the quality report.
     :ivar report: the content of ``ingest.json``.
+    :ivar reference: with ``reference:`` in the ingest file, the reference date's result (its own folder).
+    :ivar config_path: with ``reference:``, the two-date config written (``two-dates.yaml``).
     """
 
     out_dir: Path
@@ -71,6 +73,8 @@ class IngestResult:
     segments: list[str]
     warnings: list[str]
     report: dict[str, Any] = field(repr=False, default_factory=dict)
+    reference: "IngestResult | None" = None      # the reference date's ingest (two-date ingest)
+    config_path: Path | None = None              # the two-date config written (two-date ingest)
 
     def to_dict(self) -> dict[str, Any]:
         """Equals ``ingest.json``."""
