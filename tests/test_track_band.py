@@ -120,3 +120,24 @@ def test_identification_on_a_d1_d2_record_equals_the_full_band_where_the_unrestr
     assert abs(estimate(track, full)) < 0.005
     assert abs(estimate(record, restricted)) < 0.01
     assert abs(estimate(record, full)) > 0.04          # -7 % when written
+
+
+@pytest.mark.parametrize("suffix", ["csv", "h5"])
+def test_curvature_and_cant_round_trip_through_the_track_files(tmp_path, suffix):
+    from suspid.data.files import read_track, write_track, write_track_csv
+
+    x = np.arange(0.0, 100.0, 0.25)
+    seg = TrackSegment("curve", x, np.zeros((4, x.size)), 80.0, curvature=np.full(x.size, 1 / 3000.0),
+                       cant=np.linspace(0.0, 0.15, x.size))
+    plain = TrackSegment("straight", x, np.zeros((4, x.size)), 80.0)
+    if suffix == "csv":
+        (tmp_path / "t").mkdir()
+        write_track_csv(seg, tmp_path / "t" / "curve.csv")
+        write_track_csv(plain, tmp_path / "t" / "straight.csv")
+        back = read_track(tmp_path / "t")
+    else:
+        back = read_track(write_track([seg, plain], tmp_path / "t.h5"))
+    by = {s.name: s for s in back}
+    np.testing.assert_allclose(by["curve"].curvature, seg.curvature)
+    np.testing.assert_allclose(by["curve"].cant, seg.cant)
+    assert by["straight"].curvature is None and by["straight"].cant is None
