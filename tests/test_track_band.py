@@ -83,9 +83,13 @@ def test_validate_restricts_the_spectra_of_an_experiment_and_says_so():
                                     "track_band": {"filter": "en13848", "bands": ["D1", "D2"]}},
            "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 100, "window": "hann"}}
     checked = suspid.validate(cfg).config
-    assert checked.spectra.f_min_hz == pytest.approx(83.333 / TrackBand().model_copy(
-        update={"filter": "en13848"}).supported_wavelengths()[1], rel=1e-3)
-    assert len(checked._notes) == 1 and "spectra restricted from 0.4-20 Hz" in checked._notes[0]
+    short, long = TrackBand(filter="en13848").supported_wavelengths()
+    lo, hi = (300 / 3.6) / long, (300 / 3.6) / short          # 1.94 and 17.07 Hz
+    step = (20.0 - 0.4) / 99
+    s = checked.spectra                            # the configured grid's points within the band: same spacing
+    assert lo <= s.f_min_hz < lo + step and hi - step < s.f_max_hz <= hi
+    assert (s.f_max_hz - s.f_min_hz) / (s.n_freqs - 1) == pytest.approx(step)
+    assert len(checked._notes) == 1 and "spectra restricted from 0.4-20 Hz to the" in checked._notes[0]
     cfg["data"]["track_band"] = {"filter": "en13848", "bands": ["D1"]}
     cfg["spectra"] = {"f_min_hz": 0.4, "f_max_hz": 1.0, "n_freqs": 10}
     with pytest.raises(ConfigError, match=r"data\.track_band.*leaves nothing of the spectra's 0.4-1 Hz"):

@@ -97,10 +97,16 @@ def apply_track_band(config: Config) -> None:
     except ValueError as exc:
         raise config.error(str(exc), "data.track_band") from None
     if (lo, hi) != (spectra.f_min_hz, spectra.f_max_hz):
-        update = {"f_min_hz": lo, "f_max_hz": hi}
-        if spectra.df_hz is not None and spectra.df_hz > hi - lo:
-            update["df_hz"] = None
+        # the points of the configured grid within the band: the same spacing (and cells), fewer points
+        freqs = frequency_grid(spectra)[0]
+        inside = freqs[(freqs >= lo * (1 - 1e-9)) & (freqs <= hi * (1 + 1e-9))]
+        if inside.size < 2:
+            raise config.error(f"{note}: fewer than 2 frequencies of the spectra's grid lie in it", "data.track_band")
+        update = {"f_min_hz": float(inside[0]), "f_max_hz": float(inside[-1])}
+        if spectra.df_hz is None:
+            update["n_freqs"] = int(inside.size)
         config.spectra = spectra.model_copy(update=update)
+        note = note.rsplit(" to ", 1)[0] + f" to the {inside.size} grid frequencies {inside[0]:.4g}-{inside[-1]:.4g} Hz"
     if note and spectra.window == "boxcar":
         note += ("; spectra.window: boxcar leaks the power of the unsupported band into the cells next to it "
                  "(a Hann window keeps it out)")
