@@ -8,7 +8,8 @@ record's chainage 612.3 m ahead of the odometry (beyond the default +-500 m sear
 channel is not one of the simulator's sensors), writes the two-date config; ``suspid run`` identifies; every
 identifiable and trustworthy component must lie within 5 % of the truth.
 
-The ingest half runs in the default suite's ``slow`` set; the identification (minutes) is ``long``.
+Both are ``long`` (the recordings alone take about 2 minutes of CPU); the parts run in the default suite in
+``test_ingest_refuse.py``, ``test_ingest_two_dates.py`` and ``test_track_band.py``.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ def ingested(tmp_path_factory):
     return root, result
 
 
-@pytest.mark.slow
+@pytest.mark.long   # two 33 km recordings written and ingested: about 2 minutes of CPU
 def test_ingest_of_two_measurement_train_recordings(ingested):
     root, r = ingested
     for date, res in (("measurement", r), ("reference", r.reference)):
