@@ -89,7 +89,8 @@ def test_two_date_identification_from_the_recordings_within_5_percent(ingested):
     truth = json.loads((root / "2026-11" / "truth.json").read_text())["parameters"]
     checked = [n for n in result["parameters"] if result["identifiable"][n] and result["trustworthy"][n]]
     errors = {n: result["w_opt"][n] / truth[n] - 1.0 for n in result["parameters"]}
-    print("errors", errors, "checked", checked)
+    print("errors", errors, "checked", checked, "not identifiable:", result["non_identifiable_reasons"],
+          "not trustworthy:", result.get("untrustworthy_reasons"))   # 2026-11-27: k_sec_z +2.8 %, c_sec_z -2.2 %
     assert checked
     for n in checked:
         assert abs(errors[n]) < 0.05, (n, errors[n])
