@@ -106,6 +106,8 @@ def validate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt, stric
     console.print(f"{config}: valid (simulator {cfg.simulator.plugin}, objective {cfg.objective.plugin}, "
                   f"surrogate {cfg.surrogate.plugin}, optimizer {cfg.optimizer.plugin}, "
                   f"executor {cfg.executor.plugin}{data})")
+    for note in cfg._notes:
+        console.print(f"note: {note}", markup=False, highlight=False)
 
 
 @app.command()
@@ -229,18 +231,27 @@ def study(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
 def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/ingest.md).", show_default=False),
            set_: Optional[List[str]] = SetOpt,
            out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: the file's output.dir)."),
-           quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+           quiet: bool = typer.Option(False, "--quiet", help="No progress lines."),
+           strict: bool = typer.Option(False, "--strict", help="Refuse a static 1 g on a vertical channel "
+                                       "instead of removing it (quality.strict).")) -> None:
     """Cut a long recording (mf4, mat, tdms, csv, hdf5) into segments: units, track alignment, quality report."""
     global _interrupted_note
     where = str(out) if out is not None else "the output folder"
     _interrupted_note = (f"ingest keeps no partial work (it has no ledger): {where} still holds the segments "
                          f"and reports of the previous ingest, if any; run the same command to ingest again")
-    r = api.ingest(ingest_file, set_ or [], out_dir=out, log=_log(quiet))
-    for w in r.warnings:
-        print(f"warning: {w}", file=sys.stderr)
-    console.print(f"{len(r.segments)} segments, offset {r.offset_m:.2f} m (peak ratio {r.peak_ratio:.2f}); "
-                  f"data.track_file: {r.track_path}, data.measurements: {r.measurements_path}; "
-                  f"report: {r.out_dir / 'ingest.md'}", markup=False, highlight=False)
+    r = api.ingest(ingest_file, [*(set_ or []), *(["quality.strict=true"] if strict else [])], out_dir=out,
+                   log=_log(quiet))
+    dates = (("reference date: ", r.reference), ("measurement date: ", r)) if r.reference else (("", r),)
+    for date, res in dates:
+        for w in res.warnings:
+            print(f"warning: {date}{w}", file=sys.stderr)
+    for date, res in dates:
+        console.print(f"{date}{len(res.segments)} segments, offset {res.offset_m:.2f} m (peak ratio "
+                      f"{res.peak_ratio:.2f}); data.track_file: {res.track_path}, data.measurements: "
+                      f"{res.measurements_path}; report: {res.out_dir / 'ingest.md'}", markup=False, highlight=False)
+    if r.config_path is not None:
+        console.print(f"two-date config: {r.config_path} (suspid validate {r.config_path}; suspid run "
+                      f"{r.config_path})", markup=False, highlight=False)
 
 
 fleet_app = typer.Typer(no_args_is_help=True, help="The fleet's monitoring database (docs/fleet.md).")

@@ -84,6 +84,7 @@ class Config(Section):
     # set by load_config, not by the user
     source_file: Path | None = Field(default=None, exclude=True)
     _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)  # YAML line of each key path
+    _notes: list[str] = PrivateAttr(default_factory=list)  # what the dry run changed (validate and report.md say it)
 
     @model_validator(mode="after")
     def _derive_seeds(self) -> "Config":

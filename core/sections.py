@@ -22,7 +22,7 @@ from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from suspid.data.experiment import MeasurementOptions, ReferenceOptions
 from suspid.data.plausibility import Check
-from suspid.data.track import TrackOptions
+from suspid.data.track import TrackBand, TrackOptions
 from suspid.method.noise import NoiseOptions
 from suspid.options import ConfigPath, Section
 
@@ -177,6 +177,10 @@ class DataSection(Section):
                                 "with a warning: implausible_amplitude (values 1000 times too large: mm/s^2 or mm "
                                 "for SI units), dead_channel (a constant or silent channel), implausible_speed "
                                 "(km/h for m/s); see suspid.data.plausibility")
+    track_band: TrackBand | None = Field(
+        default=None, description="how the track record was measured (full, en13848 bands, chord, transfer; "
+        "suspid.data.track.TrackBand): the spectra are restricted to the band it supports at every segment's "
+        "speed; in a numerical experiment the model's track input is filtered as the record would be")
     corrections: list[SensorCorrection] = Field(
         default_factory=list, description="sensor faults corrected in the measured records before their spectra "
         "(measured data; the reference date's records are taken as they are)")

@@ -25,9 +25,10 @@ Track segment (``*.csv``)::
   the four channels ``vertical_m``, ``lateral_m``, ``cross_level_m``,
   ``gauge_m``, all in metres. Optional: ``speed_mps``, a speed record (one
   value per distance sample, variable speed); the speed must come from this
-  column or from the metadata. Optional design geometry: ``curvature_1pm``
-  (1/m, positive to the left) and ``cant_m`` (m, right rail above the left),
-  see :class:`suspid.interfaces.TrackSegment`.
+  column or from the metadata. Optional: ``curvature_per_m`` (design
+  curvature 1 / radius, 1/m, positive for a left-hand curve) and ``cant_m``
+  (design cant, m, right rail above the left), the ``TrackSegment.curvature``
+  and ``cant`` of curved track (straight, untilted track without them).
 - Distance increases with a uniform step (relative tolerance 1e-6); at least
   two rows; every value finite.
 
@@ -54,8 +55,8 @@ Track (``format = "suspid-track"``)::
     /segments/<name>/distance        (n_x,) m
     /segments/<name>/irregularities  (4, n_x) m; attrs: channels = IRREGULARITY_CHANNELS
     /segments/<name>/speed           () or (n_x,) m/s
-    /segments/<name>/curvature       (n_x,) 1/m, optional (design curvature, positive to the left)
-    /segments/<name>/cant            (n_x,) m, optional (design cant, right rail above the left)
+    /segments/<name>/curvature       (n_x,) 1/m, optional (as curvature_per_m of the CSV layout)
+    /segments/<name>/cant            (n_x,) m, optional (as cant_m)
 
 Files are written in the HDF5 1.10 format (readable by HDF5 >= 1.10), whose
 metadata carry checksums, and array datasets with a Fletcher-32 checksum
@@ -167,15 +168,13 @@ def check_segment(seg: TrackSegment, where: Path | str) -> TrackSegment:
                            f"({x.size}), got shape {v.shape}")
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         raise _fail(where, f"segment '{seg.name}': speed must be positive and finite")
-    for what, record in (("curvature", seg.curvature), ("cant", seg.cant)):
-        if record is None:
+    for label, values in (("curvature", seg.curvature), ("cant", seg.cant)):
+        if values is None:
             continue
-        a = np.asarray(record, dtype=float)
-        if a.shape != x.shape:
-            raise _fail(where, f"segment '{seg.name}': {what} must have one value per distance sample "
+        a = np.asarray(values, dtype=float)
+        if a.shape != x.shape or not np.all(np.isfinite(a)):
+            raise _fail(where, f"segment '{seg.name}': {label} must be one finite value per distance sample "
                                f"({x.size}), got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise _fail(where, f"segment '{seg.name}': NaN or inf in {what}")
     return seg
 
 
@@ -383,16 +382,15 @@ def read_track_csv(path: str | Path, *, strict: bool = False,
         raise _fail(path, "no speed: add a '# speed_mps: <m/s>' line or a speed_mps column")
     irr = np.array([col[c] for c in CSV_TRACK_COLUMNS[1:]])
     seg = TrackSegment(meta.get("name", path.stem), col["distance_m"].copy(), irr, speed,
-                       meta={"file": str(path)}, curvature=_optional(col, "curvature_1pm"),
+                       meta={"file": str(path)}, curvature=_optional(col, "curvature_per_m"),
                        cant=_optional(col, "cant_m"))
     check_segment(seg, path)
     check_plausibility(seg, path, strict=strict, accept=accept)
     return seg
 
 
-def _optional(columns: dict[str, np.ndarray], key: str) -> np.ndarray | None:
-    """A copy of an optional column, or None."""
-    return columns[key].copy() if key in columns else None
+def _optional(col: dict[str, np.ndarray], name: str) -> np.ndarray | None:
+    return col[name].copy() if name in col else None
 
 
 def write_track_csv(segment: TrackSegment, path: str | Path) -> Path:
@@ -410,10 +408,10 @@ def write_track_csv(segment: TrackSegment, path: str | Path) -> Path:
     else:
         columns.append("speed_mps")
         data.append(v)
-    for key, record in (("curvature_1pm", segment.curvature), ("cant_m", segment.cant)):
-        if record is not None:
-            columns.append(key)
-            data.append(np.asarray(record, dtype=float))
+    for name, values in (("curvature_per_m", segment.curvature), ("cant_m", segment.cant)):
+        if values is not None:
+            columns.append(name)
+            data.append(np.asarray(values, dtype=float))
     lines.append(",".join(columns))
     table = np.column_stack(data)
     lines += [",".join(repr(float(c)) for c in row) for row in table]
@@ -719,9 +717,9 @@ def write_track_h5(segments: Sequence[TrackSegment], path: str | Path) -> Path:
             d.attrs["channels"] = _fixed(IRREGULARITY_CHANNELS)
             d.attrs["units"] = _fixed("m")
             _array(g, "speed", s.speed)
-            for key, record in (("curvature", s.curvature), ("cant", s.cant)):
-                if record is not None:
-                    _array(g, key, np.asarray(record, dtype=float))
+            for key in ("curvature", "cant"):
+                if getattr(s, key) is not None:
+                    _array(g, key, getattr(s, key))
 
     return _write_h5(path, fill)
 
@@ -747,9 +745,9 @@ def read_track_h5(path: str | Path, *, strict: bool = False,
                 raise _fail(path, f"segment '{name}': irregularity channels {channels}, expected "
                                   f"{list(IRREGULARITY_CHANNELS)}")
             speed = data["speed"]
-            design = {key: _dataset(g, key, path) if key in g else None for key in ("curvature", "cant")}
+            curve = {key: _dataset(g, key, path) if key in g else None for key in ("curvature", "cant")}
             seg = TrackSegment(name, data["distance"], data["irregularities"],
-                               float(speed) if speed.ndim == 0 else speed, meta={"file": str(path)}, **design)
+                               float(speed) if speed.ndim == 0 else speed, meta={"file": str(path)}, **curve)
             out.append(check_segment(seg, path))
     if not out:
         raise _fail(path, "no segments")

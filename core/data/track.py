@@ -233,3 +233,196 @@ def synthetic_segments(options: TrackOptions | Mapping[str, Any] | None = None,
                                 meta={"spectrum": opt.spectrum, "seed": opt.seed, "index": i},
                                 curvature=curvature, cant=cant))
     return out
+
+
+# ---------------------------------------------------------------------------------------------- record bands
+EN13848_BANDS = {"D1": (3.0, 25.0), "D2": (25.0, 70.0), "D3": (70.0, 150.0)}
+"""Wavelength ranges (shortest, longest) in m of the EN 13848 bands D1, D2 and D3 (EN 13848-1 and -5, as
+summarised in the public literature on track geometry, e.g. the UIC/CEN track quality documents); D3's
+longest wavelength is 150 m for the longitudinal level and 200 m for the alignment (``TrackBand.d3_long_m``)."""
+
+
+class TrackBand(BaseModel):
+    """How a track record was measured: the transfer function H(k) from the true rail position to the record.
+
+    ``filter``:
+
+    - ``full``: the full band (H = 1), e.g. an inertial record without filtering;
+    - ``en13848``: the EN 13848 wavelength bands ``bands`` (D1 3-25 m, D2 25-70 m, D3 70-150 or 200 m,
+      :data:`EN13848_BANDS`). The standard prescribes the band limits; the filter that realises them is
+      modelled here as a zero-phase Butterworth band-pass of ``order`` per edge, |H|² = 1 / (1 + (k_c / k)^(2n))
+      / (1 + (k / k_h)^(2n)) with k = 1 / wavelength, -3 dB at the band's edges (no public text of the
+      standard's own filter coefficients could be consulted; a recording car with another filter is
+      described with ``transfer``);
+    - ``chord``: a versine (chord offset) measurement, chord length ``chord_m``, the measuring point
+      ``chord_offset_m`` from the chord's rear end (default: the middle):
+      v(x) = z(x) - (b z(x - a) + a z(x + b)) / L with a = chord_offset_m, b = L - a, so
+      H(k) = 1 - (b e^(-2 pi i k a) + a e^(2 pi i k b)) / L (symmetric: 1 - cos(pi k L));
+    - ``transfer``: a user transfer function, gains ``transfer_gain`` at ``transfer_wavelength_m`` (m),
+      interpolated linearly in log(wavelength), 0 outside.
+
+    The record *supports* the wavelengths where ``min_gain <= |H| <= 1 / min_gain`` (the contiguous range of the longest
+    such wavelengths: a chord's main lobe); at speed v that is the frequency band f = v / wavelength, where the model's response
+    to the record and the vehicle's to the real track agree within 10 log10(1 / min_gain) dB of Y. A chord
+    record amplifies (|H| up to 2) and nulls wavelengths: only a narrow band of it is the rail position
+    itself; reconstruct the rail position from it first for a wider band.
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    filter: Literal["full", "en13848", "chord", "transfer"] = Field(default="full", description="how the "
+                                                                    "record was measured")
+    bands: list[Literal["D1", "D2", "D3"]] = Field(default_factory=lambda: ["D1", "D2"], min_length=1,
+                                                   description="EN 13848 bands of the record (contiguous)")
+    d3_long_m: Literal[150.0, 200.0] = Field(default=150.0, description="D3's longest wavelength, m "
+                                             "(150: longitudinal level, 200: alignment)")
+    order: int = Field(default=4, ge=1, le=12, description="Butterworth order per band edge (en13848)")
+    chord_m: PositiveFloat | None = Field(default=None, description="chord length L, m (chord)")
+    chord_offset_m: PositiveFloat | None = Field(default=None, description="measuring point from the "
+                                                 "chord's rear end, m (chord; default L / 2)")
+    transfer_wavelength_m: list[PositiveFloat] | None = Field(default=None, description="wavelengths of "
+                                                              "the user transfer function, m, increasing")
+    transfer_gain: list[float] | None = Field(default=None, description="|H| at transfer_wavelength_m")
+    min_gain: float = Field(default=0.99, gt=0.0, le=1.0, description="|H| from which a wavelength counts "
+                            "as supported by the record")
+    restrict: bool = Field(default=True, description="restrict the spectra to the band every segment's "
+                           "record supports at its speed (false: only report it)")
+
+    @model_validator(mode="after")
+    def _check(self) -> "TrackBand":
+        if self.filter == "en13848":
+            idx = sorted("D1 D2 D3".split().index(b) for b in self.bands)
+            if len(set(idx)) != len(idx) or idx != list(range(idx[0], idx[0] + len(idx))):
+                raise ValueError(f"bands must be distinct and contiguous (D1, D2, D3), got {self.bands}")
+        if self.filter == "chord":
+            if self.chord_m is None:
+                raise ValueError("filter chord needs chord_m (the chord length, m)")
+            if self.chord_offset_m is not None and not self.chord_offset_m < self.chord_m:
+                raise ValueError(f"chord_offset_m ({self.chord_offset_m:g}) must lie within the chord "
+                                 f"(chord_m = {self.chord_m:g})")
+        if self.filter == "transfer":
+            w, g = self.transfer_wavelength_m, self.transfer_gain
+            if w is None or g is None or len(w) != len(g) or len(w) < 2:
+                raise ValueError("filter transfer needs transfer_wavelength_m and transfer_gain, two or more "
+                                 "values each, of the same length")
+            if any(b <= a for a, b in zip(w, w[1:])):
+                raise ValueError("transfer_wavelength_m must increase")
+            if any(x < 0 for x in g):
+                raise ValueError("transfer_gain must be >= 0")
+        return self
+
+    @property
+    def wavelengths_m(self) -> tuple[float, float]:
+        """The EN 13848 bands' (shortest, longest) wavelength, m."""
+        edges = [EN13848_BANDS[b] for b in self.bands]
+        long = max(e[1] for e in edges)
+        return min(e[0] for e in edges), (self.d3_long_m if "D3" in self.bands else long)
+
+    def describe(self) -> str:
+        """One phrase naming the band, for reports."""
+        if self.filter == "full":
+            return "full band"
+        if self.filter == "en13848":
+            lo, hi = self.wavelengths_m
+            return f"EN 13848 {'+'.join(self.bands)} ({lo:g}-{hi:g} m, Butterworth order {self.order})"
+        if self.filter == "chord":
+            a = self.chord_offset_m if self.chord_offset_m is not None else self.chord_m / 2
+            return f"chord {self.chord_m:g} m, measuring point {a:g} m from its rear end"
+        return f"user transfer function ({len(self.transfer_gain)} points)"
+
+    def response(self, k: np.ndarray) -> np.ndarray:
+        """H(k), complex, at wavenumbers ``k`` (cycles per m, >= 0), ``k.shape``."""
+        k = np.asarray(k, dtype=float)
+        if self.filter == "full":
+            return np.ones_like(k, dtype=complex)
+        if self.filter == "en13848":
+            lo, hi = self.wavelengths_m
+            n = 2 * self.order
+            with np.errstate(divide="ignore", over="ignore"):
+                high = 1.0 / np.sqrt(1.0 + np.where(k > 0, (1.0 / hi) / np.maximum(k, 1e-300), np.inf) ** n)
+            low = 1.0 / np.sqrt(1.0 + (k * lo) ** n)
+            return (high * low).astype(complex)
+        if self.filter == "chord":
+            length = self.chord_m
+            a = self.chord_offset_m if self.chord_offset_m is not None else length / 2
+            b = length - a
+            return 1.0 - (b * np.exp(-2j * np.pi * k * a) + a * np.exp(2j * np.pi * k * b)) / length
+        w = np.asarray(self.transfer_wavelength_m, dtype=float)
+        with np.errstate(divide="ignore"):
+            lam = np.where(k > 0, 1.0 / np.maximum(k, 1e-300), np.inf)
+        g = np.interp(np.log(np.minimum(lam, 1e300)), np.log(w), np.asarray(self.transfer_gain, float),
+                      left=0.0, right=0.0)
+        return g.astype(complex)
+
+    def supported_wavelengths(self) -> tuple[float, float]:
+        """(shortest, longest) wavelength in m where |H| >= ``min_gain`` around the largest gain
+        (``(0, inf)`` for the full band)."""
+        if self.filter == "full":
+            return 0.0, math.inf
+        lam = np.geomspace(0.05, 5000.0, 20000)
+        g = np.abs(self.response(1.0 / lam))
+        ok = (g >= self.min_gain * (1 - 1e-12)) & (g <= (1 + 1e-12) / self.min_gain)
+        if not ok.any():
+            raise ValueError(f"the record's gain never reaches min_gain = {self.min_gain:g}")
+        i = int(np.flatnonzero(ok)[-1])      # the run of the longest supported wavelengths (a chord's main lobe)
+        j0, j1 = i, i
+        while j0 > 0 and ok[j0 - 1]:
+            j0 -= 1
+        while j1 < lam.size - 1 and ok[j1 + 1]:
+            j1 += 1
+        return float(lam[j0]), float(lam[j1]) if j1 < lam.size - 1 else math.inf
+
+    def supported_hz(self, speed_mps: float) -> tuple[float, float]:
+        """The frequency band (Hz) the record supports at ``speed_mps``: f = v / wavelength."""
+        short, long = self.supported_wavelengths()
+        return (0.0 if math.isinf(long) else speed_mps / long), (math.inf if short == 0 else speed_mps / short)
+
+
+def filter_track(segment: TrackSegment, band: TrackBand) -> TrackSegment:
+    """``segment`` as a recording car of ``band`` records it: each irregularity channel filtered by H(k) over
+    distance (by FFT of the mean-removed record, zero-padded to twice its length so that its ends do not wrap).
+
+    Curvature, cant, speed and name are kept; ``meta['track_band']`` names the band.
+    """
+    if band.filter == "full":
+        return segment
+    irr = np.asarray(segment.irregularities, dtype=float)
+    n = irr.shape[1]
+    m = 2 * n
+    k = np.fft.rfftfreq(m, segment.dx)
+    mean = irr.mean(axis=1, keepdims=True)
+    out = np.fft.irfft(np.fft.rfft(irr - mean, n=m, axis=1) * band.response(k), n=m, axis=1)[:, :n]
+    return TrackSegment(segment.name, segment.distance, out, segment.speed,
+                        meta=dict(segment.meta) | {"track_band": band.describe()},
+                        curvature=segment.curvature, cant=segment.cant)
+
+
+def band_note(band: TrackBand, speeds_mps: np.ndarray, f_min_hz: float, f_max_hz: float
+              ) -> tuple[float, float, str]:
+    """The spectra's band restricted to what the record supports on every segment, and one line saying so.
+
+    :param speeds_mps: ``(n_segments,)`` each segment's mean speed.
+    :returns: ``(f_min, f_max, note)``: the supported band intersected with ``[f_min_hz, f_max_hz]``
+        (unchanged when ``band.restrict`` is false or the record is full band).
+    :raises ValueError: no frequency of the spectra is supported on every segment.
+    """
+    v = np.asarray(speeds_mps, dtype=float)
+    if band.filter == "full" or v.size == 0:
+        return f_min_hz, f_max_hz, ""
+    lo = max(band.supported_hz(float(s))[0] for s in v)
+    hi = min(band.supported_hz(float(s))[1] for s in v)
+    short, long = band.supported_wavelengths()
+    what = (f"the track record ({band.describe()}) supports wavelengths {short:.3g}-{long:.4g} m "
+            f"(|H| >= {band.min_gain:g}), at the segments' speeds {v.min() * 3.6:.0f}-{v.max() * 3.6:.0f} km/h "
+            f"the band {lo:.3g}-{hi:.3g} Hz on every segment")
+    new_lo, new_hi = max(f_min_hz, lo), min(f_max_hz, hi)
+    if not band.restrict:
+        outside = new_lo > f_min_hz or new_hi < f_max_hz
+        return f_min_hz, f_max_hz, what + (f"; the spectra ({f_min_hz:g}-{f_max_hz:g} Hz) reach outside it and "
+                                           f"are NOT restricted (track_band.restrict: false): the model's "
+                                           f"input lacks track there" if outside else "")
+    if not new_hi > new_lo:
+        raise ValueError(f"{what}, which leaves nothing of the spectra's {f_min_hz:g}-{f_max_hz:g} Hz")
+    if (new_lo, new_hi) == (f_min_hz, f_max_hz):
+        return f_min_hz, f_max_hz, what + f"; the spectra ({f_min_hz:g}-{f_max_hz:g} Hz) lie within it"
+    return new_lo, new_hi, what + f"; spectra restricted from {f_min_hz:g}-{f_max_hz:g} Hz to {new_lo:.4g}-{new_hi:.4g} Hz"

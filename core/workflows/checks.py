@@ -18,8 +18,14 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import warnings
+
+import numpy as np
+
 from suspid import registry
 from suspid.config import Config, build_simulator
+from suspid.data.files import read_track
+from suspid.data.track import band_note
 from suspid.errors import DataError
 from suspid.method.noise import NoiseModel
 from suspid.method.spectra import frequency_grid, grid_lines
@@ -58,6 +64,56 @@ def check_noise_model(config: Config, channels: list[str]) -> None:
         raise DataError(f"noise model {path}: {exc}") from None
 
 
+def track_speeds(config: Config) -> np.ndarray:
+    """``(n_segments,)`` m/s: the mean speed of every segment a run compares (both dates of measured data)."""
+    if config.data.source == "experiment":
+        return np.array([config.data.track.speed])
+    files = [config.data.track_file] + ([config.noise.reference.track_file] if config.noise.reference else [])
+    speeds = []
+    with warnings.catch_warnings():     # validate_data reads them again and says what it finds
+        warnings.simplefilter("ignore")
+        for f in files:
+            if f is not None:
+                speeds += [s.mean_speed for s in read_track(f, accept=config.data.accept)]
+    return np.array(speeds)
+
+
+def apply_track_band(config: Config) -> None:
+    """Restrict ``config.spectra`` to the band the track record (``data.track_band``) supports on every segment.
+
+    At speed v a wavelength L of the track excites the frequency v / L; where the record's transfer function
+    is far from 1 the model's input lacks (or distorts) what the vehicle ran on, and the spectra there would
+    bias the identification. The change is said in ``config._notes`` (``validate`` prints it, report.md
+    carries it). Idempotent: a second call finds the spectra within the band.
+
+    :raises ConfigError: naming ``data.track_band`` when nothing of the spectra's band is supported.
+    """
+    band = config.data.track_band
+    if band is None or band.filter == "full":
+        return
+    spectra = config.spectra
+    try:
+        lo, hi, note = band_note(band, track_speeds(config), spectra.f_min_hz, spectra.f_max_hz)
+    except ValueError as exc:
+        raise config.error(str(exc), "data.track_band") from None
+    if (lo, hi) != (spectra.f_min_hz, spectra.f_max_hz):
+        # the points of the configured grid within the band: the same spacing (and cells), fewer points
+        freqs = frequency_grid(spectra)[0]
+        inside = freqs[(freqs >= lo * (1 - 1e-9)) & (freqs <= hi * (1 + 1e-9))]
+        if inside.size < 2:
+            raise config.error(f"{note}: fewer than 2 frequencies of the spectra's grid lie in it", "data.track_band")
+        update = {"f_min_hz": float(inside[0]), "f_max_hz": float(inside[-1])}
+        if spectra.df_hz is None:
+            update["n_freqs"] = int(inside.size)
+        config.spectra = spectra.model_copy(update=update)
+        note = note.rsplit(" to ", 1)[0] + f" to the {inside.size} grid frequencies {inside[0]:.4g}-{inside[-1]:.4g} Hz"
+    if note and spectra.window == "boxcar":
+        note += ("; spectra.window: boxcar leaks the power of the unsupported band into the cells next to it "
+                 "(a Hann window keeps it out)")
+    if note and note not in config._notes:
+        config._notes.append(note)
+
+
 def check_records(config: Config, fs: float | None) -> None:
     """The grid against the simulator's rate and the length of the numerical experiment's segments."""
     if fs is None:
@@ -82,6 +138,7 @@ def dry_run(config: Config) -> int:
     :raises SuspidError: the first problem, in one line.
     """
     check_output_dir(config)
+    apply_track_band(config)
     simulator = build_simulator(config)
     check_noise_model(config, simulator.channels())
     check_records(config, simulator.sampling_rate_hz())

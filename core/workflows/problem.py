@@ -31,7 +31,7 @@ from suspid.data.corrections import resolve as resolve_corrections
 from suspid.data.corrections import untilt
 from suspid.data.experiment import measurement_process
 from suspid.data.files import read_accelerations_records, read_track
-from suspid.data.track import synthetic_segments
+from suspid.data.track import filter_track, synthetic_segments
 from suspid.errors import DataError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
@@ -145,6 +145,15 @@ def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarra
         ledger.put_array(key + ":y", y)
         ledger.put_array(key + ":freqs", f)
     return y, f
+
+
+def model_track(config: Config, segments: Sequence[TrackSegment]) -> list[TrackSegment]:
+    """The model's track input in a numerical experiment: ``segments`` (the track the vehicle ran on) as the
+    recording car of ``data.track_band`` records them, so that the model sees the record, as with measured data."""
+    band = config.data.track_band
+    if band is None or band.filter == "full":
+        return list(segments)
+    return [filter_track(s, band) for s in segments]
 
 
 def synthetic_track(config: Config, date: str, n_segments: int | None = None) -> list[TrackSegment]:
@@ -331,7 +340,8 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
 
     if config.data.source == "experiment":
         w_ref = {p.name: p.nominal for p in declared_parameters(simulator) if p.name in names} | config.data.w_ref
-        segments = synthetic_track(config, "measurement")
+        true_segments = synthetic_track(config, "measurement")   # what the vehicle runs on
+        segments = model_track(config, true_segments)              # what the model gets: the record
         ref_opt = config.data.reference
         fixed_seed = seed_for(config.seed, "measurement-process-fixed")  # one vehicle, one set of sensors: every date
         jobs = []
@@ -346,10 +356,13 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             key = stable_hash("reference", sim_id, ref_sim.identity(), segments_digest(ref_segments),
                               ref_opt.model_dump(), spectra_options.model_dump(), config.seed)
             err_rng = named_rng(config.seed, "reference-model-error")
+            ref_model = model_track(config, ref_segments)
+            if config.data.track_band is not None and config.data.track_band.filter != "full":
+                key = stable_hash(key, "track-band", config.data.track_band.model_dump())
             jobs += [(key + ":mes", _task(ref_sim, ref_segments, spectra_options,
                                           partial(measurement_process, options=ref_opt, rng=err_rng,
                                                   fixed_seed=fixed_seed)), {}),
-                     (key + ":sim", _task(simulator, ref_segments, spectra_options), {})]
+                     (key + ":sim", _task(simulator, ref_model, spectra_options), {})]
         log("measurement date: simulating w_ref (eq. 10)")
         speeds = segment_speeds(segments)
         meas_opt = config.data.measurement
@@ -365,18 +378,18 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         transform = None
         if through_process:   # the same fixed gains as the reference date, this date's own segment gains and noise
             transform = partial(measurement_process, options=ref_opt, fixed_seed=fixed_seed,
-                                rng=named_rng(config.seed, "measurement-process-" + segments_digest(segments)[:16]))
-        key = stable_hash("measurement", meas_id, w_meas, segments_digest(segments), spectra_options.model_dump(),
+                                rng=named_rng(config.seed, "measurement-process-" + segments_digest(true_segments)[:16]))
+        key = stable_hash("measurement", meas_id, w_meas, segments_digest(true_segments), spectra_options.model_dump(),
                           *([ref_opt.model_dump(exclude={"n_segments", "simulator_options"}), config.seed]
                             if through_process else []))
-        jobs.append((key, _task(meas_sim, segments, spectra_options, transform), w_meas))
+        jobs.append((key, _task(meas_sim, true_segments, spectra_options, transform), w_meas))
         *reference_spectra, (y_sim_ref, freqs) = cached_spectra(ledger, executor, jobs)
         if not noise_path:
             (y_mes0, freqs0), (y_sim0, _) = reference_spectra
             noise_model = fit_noise_model(y_mes0, y_sim0, noise_options, freqs=freqs0, channels=channels,
                                           speeds=segment_speeds(ref_segments))
             reference = {"y_mes0": y_mes0, "y_sim0": y_sim0}
-            reference_segments = ref_segments
+            reference_segments = ref_model
         if through_process:
             y_mes = y_sim_ref
         else:

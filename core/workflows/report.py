@@ -424,7 +424,7 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
 seed {config.seed}. {search_line(result)}{refine},
 J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
-
+{"".join(chr(10) + "Track band: " + n + "." + chr(10) for n in config._notes)}
 {markdown_table(header, rows)}
 
 Components marked **no** (not identifiable, or not trustworthy under model error) are not findings:

@@ -23,7 +23,12 @@ Beside them: ``suspid.yaml`` (the simulator with the four recorded sensors),
 measured-data config on what ``ingest-mf4.yaml`` writes, for ``suspid
 validate``); ``truth.json`` holds the offset and the speed profile.
 
-Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...]``
+With ``--reference REF_DIR`` (a folder this script wrote before, e.g. with another ``--seed``: the
+reference date) it also writes ``identify.yaml`` (the simulator, five parameters, the spectra) and
+``ingest-two-dates.yaml``: the measurement date's first format here and the reference date's
+recording in REF_DIR, for ``suspid ingest`` to write both dates and ``ingested/two-dates.yaml``.
+
+Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...] [--reference REF_DIR]``
 (about 15 s of computing, the time solver at variable speed; tests call :func:`make` with a
 ``tmp_path``).
 """
@@ -283,6 +288,27 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     return truth
 
 
+def two_date_ingest(out: str | Path, reference: str | Path, fmt: str = "csv", ref_fmt: str | None = None) -> Path:
+    """Write ``identify.yaml`` and ``ingest-two-dates.yaml`` in ``out`` (module docstring); returns the latter."""
+    out, reference = Path(out), Path(reference)
+    ref_fmt = ref_fmt or next(f for f in FORMATS if (reference / FILES[f]).exists())
+    config = yaml.safe_load((out / "suspid.yaml").read_text())
+    config["simulator"]["options"]["solver"] = "frequency"
+    config |= {"name": "recordings-two-dates", "seed": 7,
+               "parameters": {"k_sec_z": {}, "c_sec_z": {}, "k_prim_z": {}, "c_sec_y": {}, "c_yaw": {}},
+               "spectra": {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 100, "window": "hann"},
+               "design": {"n_initial": 30}, "ego": {"max_iter": 30}}
+    (out / "identify.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+    meas = ingest_file(fmt, FILES[fmt], "measurement")
+    ref = ingest_file(ref_fmt, str((reference / FILES[ref_fmt]).resolve()), "reference")
+    ref["track"]["path"] = str((reference / "track-record.csv").resolve())
+    meas |= {"config": "identify.yaml", "output": {"dir": "ingested", "format": "csv"},
+             "reference": {"recording": ref["recording"], "track": ref["track"]}}
+    path = out / "ingest-two-dates.yaml"
+    path.write_text(yaml.safe_dump(meas, sort_keys=False))
+    return path
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("out", type=Path)
@@ -290,10 +316,14 @@ def main(argv: Sequence[str] | None = None) -> None:
     p.add_argument("--fs", type=float, default=200.0)
     p.add_argument("--offset", type=float, default=137.37, help="track record offset, m")
     p.add_argument("--seed", type=int, default=3)
+    p.add_argument("--reference", type=Path, default=None, help="folder of the reference date's recording "
+                   "(written before by this script): also write ingest-two-dates.yaml")
     a = p.parse_args(argv)
     truth = make(a.out, a.formats, fs=a.fs, offset_m=a.offset, seed=a.seed)
     print(f"wrote {', '.join(truth['files'].values())} and track-record.csv to {a.out} "
           f"({truth['distance_m'] / 1000:.2f} km, {truth['duration_s']:.0f} s, offset {truth['offset_m']} m)")
+    if a.reference is not None:
+        print(f"wrote {two_date_ingest(a.out, a.reference, a.formats[0])}")
 
 
 if __name__ == "__main__":

@@ -39,6 +39,9 @@ from suspid.interfaces import Simulator, TrackSegment
 from .load import CHUNK, TrackRecord
 from .options import AlignmentSection
 
+MAX_WIDENING = 8.0
+"""A peak at the edge of ``guess_m +- search_m`` doubles the half-width, up to this many times search_m."""
+
 
 @dataclass
 class Alignment:
@@ -51,11 +54,12 @@ class Alignment:
     lever_m: float
     method: str
     calibration_speed_mps: float | None = None
+    searched_m: float | None = None    # the half-width finally searched (wider than search_m: widened)
 
     def to_dict(self) -> dict:
         return {"offset_m": self.offset_m, "peak_ratio": self.peak_ratio, "rho": self.rho,
                 "channel": self.channel, "lever_m": self.lever_m, "method": self.method,
-                "calibration_speed_mps": self.calibration_speed_mps}
+                "calibration_speed_mps": self.calibration_speed_mps, "searched_m": self.searched_m}
 
 
 def _band(n: int, dx: float, band: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
@@ -200,14 +204,39 @@ def align(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.n
     z = np.interp(xt, x_src, z_src) if ok.all() else np.interp(xt, x_src[ok], z_src[ok])
     u_t = _bandpass(z - z.mean(), dx, band)
     del x_src, z, ok
+    search = opts.search_m
+    widest = max(opts.search_m, MAX_WIDENING * opts.search_m)
+    while True:
+        lags, rho, i, lag, ratio, peak = _search(u_v, u_t, xv, xt, dx, opts.guess_m + opts.lever_m, search, band,
+                                                 track.path)
+        at_edge = (lags[i] - (opts.guess_m + opts.lever_m - search) < band[1]
+                   or (opts.guess_m + opts.lever_m + search) - lags[i] < band[1])
+        if not at_edge:
+            break
+        if search >= widest:
+            raise DataError(f"{track.path}: alignment: the correlation peak (offset {lag - opts.lever_m:.2f} m) "
+                            f"stays at the edge of the offsets searched even at alignment.guess_m +- "
+                            f"{search:g} m: the true offset lies further out; give alignment.guess_m near it "
+                            f"(or alignment.offset_m)")
+        search = min(2.0 * search, widest)
+    return Alignment(lag - opts.lever_m, ratio, peak, lags - opts.lever_m, rho, channel, opts.lever_m,
+                     "correlation", v_cal, searched_m=search)
+
+
+def _search(u_v: np.ndarray, u_t: np.ndarray, xv: np.ndarray, xt: np.ndarray, dx: float, centre: float,
+            search: float, band: tuple[float, float], path) -> tuple[np.ndarray, np.ndarray, int, float, float, float]:
+    """The normalised correlation of the band-limited profiles at sensor offsets ``centre +- search`` (m).
+
+    :returns: ``(lags, rho, i_peak, refined peak lag, peak ratio, rho at the peak)``.
+    """
     # r(s) = sum_j u_v[j] u_t[j + s]; sensor offset L: xv[0] + L = xt[0] + s dx
-    lags = (opts.guess_m + opts.lever_m) + np.arange(-opts.search_m, opts.search_m + dx / 2, dx)
+    lags = centre + np.arange(-search, search + dx / 2, dx)
     s = np.round((xv[0] + lags - xt[0]) / dx).astype(np.int64)
     valid = (s > -u_v.size) & (s < u_t.size)
     if not valid.any():
-        raise DataError(f"{track.path}: the track record ({xt[0]:.0f} to {xt[-1]:.0f} m) does not overlap the "
+        raise DataError(f"{path}: the track record ({xt[0]:.0f} to {xt[-1]:.0f} m) does not overlap the "
                         f"vehicle's distances ({xv[0]:.0f} to {xv[-1]:.0f} m) for any offset within "
-                        f"alignment.guess_m +- search_m")
+                        f"alignment.guess_m +- {search:g} m")
     lags, s = lags[valid], s[valid]
     cs = np.concatenate(([0.0], np.cumsum(u_t ** 2)))
     lo, hi = np.clip(s, 0, u_t.size), np.clip(s + u_v.size, 0, u_t.size)
@@ -232,5 +261,4 @@ def align(distance: np.ndarray, speed: np.ndarray, acc: np.ndarray, usable: np.n
     far = np.abs(lags - lags[i]) > band[1]
     other = float(np.max(np.abs(rho[far]))) if far.any() else 0.0
     ratio = abs(peak) / other if other > 0 else float("inf")
-    return Alignment(lag - opts.lever_m, ratio, peak, lags - opts.lever_m, rho, channel, opts.lever_m,
-                     "correlation", v_cal)
+    return lags, rho, i, lag, ratio, peak

@@ -352,6 +352,13 @@ class TrackRecord:
     dx: float
     irregularities: np.ndarray   # (4, n) m, rows as IRREGULARITY_CHANNELS, NaN where the record has none
     present: tuple[str, ...]
+    curvature: np.ndarray | None = None   # (n,) 1/m, positive: left-hand curve; None: not recorded
+    cant: np.ndarray | None = None        # (n,) m, right rail above the left; None: not recorded
+
+    def at(self, values: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``values`` (one of the record's ``(n,)`` rows) at track distances ``x`` (m), NaN outside."""
+        x_src = self.x0 + np.arange(values.size) * self.dx
+        return np.interp(x, x_src, values, left=np.nan, right=np.nan)
 
 
 def read_track_record(section: TrackRecordSection, quantities: Sequence[str]) -> tuple[TrackRecord, list[str]]:
@@ -366,7 +373,8 @@ def read_track_record(section: TrackRecordSection, quantities: Sequence[str]) ->
                 raise DataError(f"{section.path}: no channel '{name}' (mapped to track {q}, key "
                                 f"track.channels.{q}.name); channels in the "
                                 f"file: {', '.join(sorted(available)[:40])}")
-        reader.select(list(names.values()))
+        reader.select(list(names.values()) + [c.name for c in (section.curvature, section.cant)
+                                               if c is not None and c.name in available])
         out = None
         x0 = dx = 0.0
         for row, q in enumerate(quantities):
@@ -388,9 +396,20 @@ def read_track_record(section: TrackRecordSection, quantities: Sequence[str]) ->
             w = _unit_warning(f"track {q} ('{names[q]}')", sig.unit, section.channels[q].unit, LENGTH_UNITS)
             if w:
                 warnings.append(w)
+        design = {}
+        for key, ch in (("curvature", section.curvature), ("cant", section.cant)):
+            if ch is None:
+                continue
+            if ch.name not in available:
+                raise DataError(f"{section.path}: no channel '{ch.name}' (key track.{key}.name); channels in the "
+                                f"file: {', '.join(sorted(available)[:40])}")
+            sig = reader.read(ch.name)
+            row = np.empty(out.shape[1])
+            onto_grid(sig, abscissa(sig, section.path), Grid(x0 / du, 1.0 / (dx / du), out.shape[1]), 1.5, out=row)
+            design[key] = ch.to_curvature(row) if key == "curvature" else row * ch.sign * LENGTH_UNITS[ch.unit]
     missing = [q for q in quantities if q not in names]
     if missing:
         warnings.append(f"track record: no channel mapped for {', '.join(missing)}; written as zeros")
         for q in missing:
             out[list(quantities).index(q)] = 0.0
-    return TrackRecord(section.path, x0, dx, out, tuple(names)), warnings
+    return TrackRecord(section.path, x0, dx, out, tuple(names), **design), warnings

@@ -31,12 +31,17 @@ from typing import Any, Literal
 
 from pydantic import Field, NonNegativeFloat, PositiveFloat, PositiveInt, field_validator, model_validator
 
+import numpy as np
+
 from suspid.data.plausibility import ACCELERATION_LIMITS, Check, kind_of  # noqa: F401 - kind_of for the ingest modules
+from suspid.data.track import TrackBand
 from suspid.interfaces import IRREGULARITY_CHANNELS
 from suspid.options import ConfigPath, Section
 
 G = 9.80665
 """Standard gravity, m/s^2 per g."""
+STATIC_G_TOLERANCE = 0.15
+"""A vertical channel whose mean lies within this fraction of +-1 g carries the static gravity."""
 
 ACCELERATION_UNITS = {"m/s^2": 1.0, "mm/s^2": 1e-3, "g": G}
 """Declared acceleration unit -> factor to m/s^2."""
@@ -116,6 +121,50 @@ class RecordingSection(Section):
         return self
 
 
+CURVATURE_UNITS = {"1/m": 1.0, "1/km": 1e-3}
+"""Declared curvature unit -> factor to 1/m."""
+
+
+class CurveChannel(Section):
+    """The design curvature of the track record: a curvature or a radius channel.
+
+    A radius channel gives the curvature 1 / R; ``|R| >= straight_radius_m`` (and R = 0, how many
+    recording cars write straight track) is straight.
+    """
+
+    name: str = Field(min_length=1, description="channel name in the track record")
+    quantity: Literal["curvature", "radius"] = Field(default="curvature", description="what the channel holds")
+    unit: str = Field(description="declared unit: 1/m, 1/km (curvature); m, km (radius)")
+    sign: Literal[1, -1] = Field(default=1, description="-1 when the record's positive curves are to the right "
+                                 "(suspid: positive = left-hand curve in the direction of travel)")
+    straight_radius_m: PositiveFloat = Field(default=1.0e5, description="radius from which the track is "
+                                             "straight (radius channels), m")
+
+    @model_validator(mode="after")
+    def _unit(self) -> "CurveChannel":
+        table = CURVATURE_UNITS if self.quantity == "curvature" else LENGTH_UNITS
+        u = canonical_unit(self.unit)
+        if u not in table:
+            raise ValueError(f"unknown unit '{self.unit}' of a {self.quantity} channel; expected one of: "
+                             f"{', '.join(table)}")
+        self.unit = u
+        return self
+
+    def to_curvature(self, values: np.ndarray) -> np.ndarray:
+        """The channel's values (in their declared unit) as curvature, 1/m, ``values.shape``."""
+        if self.quantity == "curvature":
+            return self.sign * values * CURVATURE_UNITS[self.unit]
+        r = values * LENGTH_UNITS[self.unit]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where((np.abs(r) >= self.straight_radius_m) | (r == 0), 0.0, 1.0 / r)
+        return self.sign * np.where(np.isfinite(r), k, np.nan)
+
+
+class CantChannel(LengthChannel):
+    sign: Literal[1, -1] = Field(default=1, description="-1 when the record gives the left rail above the right "
+                                 "(suspid: right rail above the left is positive)")
+
+
 class TrackRecordSection(Section):
     """The track geometry record of a track recording car, indexed by distance."""
 
@@ -128,6 +177,11 @@ class TrackRecordSection(Section):
     distance_unit: str = Field(default="m", description="unit of the record's abscissa (index or step)")
     step_m: PositiveFloat | None = Field(default=None, le=5.0, description="distance step of the written track "
                                          "segments, m (default: the record's)")
+    curvature: CurveChannel | None = Field(default=None, description="design curvature (or radius) channel: "
+                                           "written as the segments' curvature_per_m")
+    cant: CantChannel | None = Field(default=None, description="design cant channel: written as cant_m")
+    band: TrackBand = Field(default_factory=TrackBand, description="how the record was measured (full, en13848 "
+                            "bands, chord, transfer): reported, and data.track_band of the config ingest writes")
 
     _du = field_validator("distance_unit")(classmethod(lambda cls, v: _unit_field(LENGTH_UNITS)(v)))
 
@@ -188,6 +242,23 @@ class SegmentsSection(Section):
                                        "stretch, flat line or spike, s")
     max_segments: PositiveInt | None = Field(default=None, description="keep at most this many (the first)")
     prefix: str = Field(default="seg", pattern=r"^[A-Za-z0-9_.\-]+$", description="segment names <prefix>-001")
+    max_curvature_per_m: NonNegativeFloat | None = Field(default=None, description="keep only stretches whose "
+                                                         "|curvature| stays at or below this, 1/m (e.g. 1e-5: "
+                                                         "straight track, radius 100 km or more)")
+    min_curvature_per_m: NonNegativeFloat | None = Field(default=None, description="keep only stretches whose "
+                                                         "|curvature| stays at or above this, 1/m (curves)")
+    max_cant_m: NonNegativeFloat | None = Field(default=None, description="keep only stretches whose |cant| "
+                                                "stays at or below this, m")
+    min_cant_m: NonNegativeFloat | None = Field(default=None, description="keep only stretches whose |cant| "
+                                                "stays at or above this, m")
+
+    @model_validator(mode="after")
+    def _limits(self) -> "SegmentsSection":
+        for what in ("curvature_per_m", "cant_m"):
+            lo, hi = getattr(self, f"min_{what}"), getattr(self, f"max_{what}")
+            if lo is not None and hi is not None and lo > hi:
+                raise ValueError(f"min_{what} ({lo:g}) is above max_{what} ({hi:g})")
+        return self
 
 
 class QualitySection(Section):
@@ -212,6 +283,8 @@ class QualitySection(Section):
         default_factory=lambda: ["dropouts", "clipping", "flat", "spikes"],
         description="what excludes a stretch from the segments (the rest is only reported)")
     figures: bool = Field(default=True, description="write the PNG figures")
+    strict: bool = Field(default=False, description="refuse what would otherwise be corrected with a warning: a "
+                         "static 1 g on a vertical channel (``suspid ingest --strict``)")
 
 
 class OutputSection(Section):
@@ -221,8 +294,23 @@ class OutputSection(Section):
                                            "folders; hdf5: track.h5 and accelerations.h5")
 
 
+class ReferenceDate(Section):
+    """``reference:`` the reference-date recording (the train at its nominal parameters w0), ingested as the
+    measurement date's is, with these sections in place of the file's own (alignment: the file's when left out)."""
+
+    recording: RecordingSection
+    track: TrackRecordSection
+    alignment: AlignmentSection | None = None
+
+
 class IngestOptions(Section):
-    """A whole ingest file (``suspid ingest INGEST.yaml``)."""
+    """A whole ingest file (``suspid ingest INGEST.yaml``).
+
+    With ``reference:`` it ingests two recordings, the reference date's and the measurement date's, into
+    ``<output>/reference/`` and ``<output>/measurement/``, and writes ``<output>/two-dates.yaml``: the config
+    of ``config`` with ``data`` (measurement date, ``track_band``) and ``noise.reference`` (reference date)
+    pointing at them, ready for ``suspid validate`` and ``suspid run``.
+    """
 
     config: ConfigPath | None = Field(default=None, description="the suspid config whose simulator defines "
                                       "the channels (default: the built-in exudyn-train with its defaults)")
@@ -232,6 +320,26 @@ class IngestOptions(Section):
     segments: SegmentsSection = Field(default_factory=SegmentsSection)
     quality: QualitySection = Field(default_factory=QualitySection)
     output: OutputSection = Field(default_factory=OutputSection)
+    reference: ReferenceDate | None = Field(default=None, description="the reference-date recording: both dates "
+                                            "are ingested and a two-date config is written")
+
+    def for_reference(self) -> "IngestOptions":
+        """These options with the reference date's recording, track record and alignment."""
+        ref = self.reference
+        return self.model_copy(update={"recording": ref.recording, "track": ref.track, "reference": None,
+                                       "alignment": ref.alignment or self.alignment})
+
+    @model_validator(mode="after")
+    def _design_limits_need_channels(self) -> "IngestOptions":
+        seg = self.segments
+        tracks = [("track", self.track)] + ([("reference.track", self.reference.track)] if self.reference else [])
+        for what, key, limits in (("curvature", "curvature_per_m", (seg.min_curvature_per_m, seg.max_curvature_per_m)),
+                                  ("cant", "cant_m", (seg.min_cant_m, seg.max_cant_m))):
+            for where, track in tracks:
+                if any(v is not None for v in limits) and getattr(track, what) is None:
+                    raise ValueError(f"segments.min_{key} / max_{key} need the track record's {what} channel "
+                                     f"({where}.{what})")
+        return self
 
     def output_dir(self, base: Path) -> Path:
         """The output folder: ``output.dir`` or ``ingested/<recording stem>/`` beside the ingest file."""

@@ -56,7 +56,9 @@ def build(opts: IngestOptions, rec: Recording, quality: dict[str, ChannelQuality
         "motion": {"channel": mi.name, "kind": motion, "declared_unit": mi.declared_unit, "file_unit": mi.file_unit,
                    "fs_file_hz": mi.fs_file, "jitter": mi.jitter, "gaps": mi.n_gaps},
         "channels": channels,
-        "track": {"path": str(opts.track.path), "quantities": list(opts.track.channels)},
+        "track": {"path": str(opts.track.path), "quantities": list(opts.track.channels),
+                  "band": opts.track.band.describe(), "curvature": opts.track.curvature is not None,
+                  "cant": opts.track.cant is not None},
         "alignment": al.to_dict(),
         "segments": segments,
         "excluded": [{"reason": e.reason, **_span(rec, e.i0, e.i1), "duration_s": (e.i1 - e.i0) / g.fs}
@@ -83,6 +85,12 @@ def markdown(rep: dict[str, Any]) -> str:
         lines.append(f"Track distance = odometry distance + **{al['offset_m']:.3f} m**, from the correlation of "
                      f"`{al['channel']}` ({lever}) with the vertical profile: "
                      f"peak correlation {al['rho']:.3f}, peak ratio **{al['peak_ratio']:.2f}** (confidence).")
+    tr = rep["track"]
+    design = [q for q in ("curvature", "cant") if tr.get(q)]
+    lines += ["", "## Track record", "",
+              f"`{tr['path']}`: {', '.join(tr['quantities'])}{(', ' + ', '.join(design)) if design else ''}; "
+              f"measured as: **{tr.get('band', 'full band')}** (data.track_band of the config: validate and run "
+              f"restrict the spectra to the band it supports at each segment's speed)."]
     lines += ["", "## Warnings", ""]
     lines += [f"- {w}" for w in rep["warnings"]] or ["None."]
     lines += ["", "## Channels", "",

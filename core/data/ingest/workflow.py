@@ -40,7 +40,7 @@ from suspid.interfaces import IRREGULARITY_CHANNELS, Response, Simulator, TrackS
 from . import report as _report
 from .align import Alignment, align
 from .load import Recording, TrackRecord, read_recording, read_track_record
-from .options import IngestOptions, kind_of
+from .options import G, STATIC_G_TOLERANCE, IngestOptions, kind_of
 from .quality import check_recording, check_track_record, excluded_mask
 from .segment import Excluded, Window, cut
 
@@ -62,6 +62,8 @@ class IngestResult:
     :ivar segments: the names of the segments written.
     :ivar warnings: one line per problem of the quality report.
     :ivar report: the content of ``ingest.json``.
+    :ivar reference: with ``reference:`` in the ingest file, the reference date's result (its own folder).
+    :ivar config_path: with ``reference:``, the two-date config written (``two-dates.yaml``).
     """
 
     out_dir: Path
@@ -72,6 +74,8 @@ class IngestResult:
     segments: list[str]
     warnings: list[str]
     report: dict[str, Any] = field(repr=False, default_factory=dict)
+    reference: "IngestResult | None" = None      # the reference date's ingest (two-date ingest)
+    config_path: Path | None = None              # the two-date config written (two-date ingest)
 
     def to_dict(self) -> dict[str, Any]:
         """Equals ``ingest.json``."""
@@ -92,6 +96,54 @@ def check_mapping(opts: IngestOptions, sim_channels: Sequence[str], simulator: s
         raise ConfigError(f"no mapping for simulator channel(s) {', '.join(missing)} (simulator '{simulator}' "
                           f"has channels {', '.join(sim_channels)}); map each to a recorded channel, or "
                           f"configure the simulator's sensors to the recorded ones", key="recording.channels")
+
+
+def check_rates(rec: Recording, opts: IngestOptions, f_max_hz: float) -> None:
+    """Refuse a channel the file samples below the Nyquist rate of the spectra's top frequency.
+
+    Interpolated onto the common grid such a channel would have no content between half its own rate
+    and ``f_max_hz``, which the identification compares: a guess suspid does not make.
+
+    :raises DataError: naming the channel, its rate and the rate needed.
+    """
+    for c in rec.channels:
+        info = rec.info[c]
+        if info.fs_file < 2.0 * f_max_hz * (1.0 - 1e-6):
+            raise DataError(f"{opts.recording.path}: channel {c} ('{info.name}') is sampled at {info.fs_file:.4g} Hz, "
+                            f"below 2 x spectra.f_max_hz = {2 * f_max_hz:.4g} Hz of the config: it holds nothing "
+                            f"above {info.fs_file / 2:.4g} Hz and is not interpolated; lower spectra.f_max_hz to "
+                            f"{info.fs_file / 2:.4g} Hz or less, or leave the channel out of the simulator's sensors")
+
+
+def static_gravity(rec: Recording, opts: IngestOptions) -> list[str]:
+    """Detect a static 1 g (or -1 g) on a vertical channel and remove it (in place), or refuse it.
+
+    A vertical accelerometer that measures gravity reads about +-9.81 m/s^2 on average; the dynamic
+    acceleration the identification compares has a zero mean. A mean within
+    :data:`STATIC_G_TOLERANCE` of +-1 g is that offset: ``quality.strict`` refuses it, otherwise
+    +-1 g (standard gravity) is subtracted and the residual mean reported.
+
+    :returns: one warning per channel corrected.
+    :raises DataError: ``quality.strict`` and a channel carries 1 g.
+    """
+    out = []
+    for row, c in enumerate(rec.channels):
+        if "vertical" not in c:
+            continue
+        a = rec.accelerations[row]
+        mean = float(np.nanmean(a[:: max(1, a.size // 1_000_000)])) if np.isfinite(a).any() else 0.0
+        if abs(abs(mean) - G) > STATIC_G_TOLERANCE * G:
+            continue
+        m = opts.recording.channels[c]
+        sign = 1.0 if mean > 0 else -1.0
+        if opts.quality.strict:
+            raise DataError(f"{opts.recording.path}: channel {c} ('{m.name}') carries a static {sign:+.0f} g "
+                            f"(mean {mean:.3f} m/s^2): remove gravity from it, or ingest without "
+                            f"--strict (quality.strict) to have it removed")
+        a -= sign * G
+        out.append(f"channel {c} ('{m.name}'): a static {sign:+.0f} g (mean {mean:.3f} m/s^2) was removed "
+                   f"(residual mean {mean - sign * G:.3f} m/s^2)")
+    return out
 
 
 def alignment_channel(opts: IngestOptions, channels: Sequence[str]) -> str | None:
@@ -115,6 +167,27 @@ def _motion_reasons(rec: Recording, opts: IngestOptions) -> dict[str, np.ndarray
                 np.isfinite(v) & (v * 3.6 < opts.segments.min_speed_kmh)}
 
 
+def design_reasons(rec: Recording, track: TrackRecord, offset: float, opts: IngestOptions) -> dict[str, np.ndarray]:
+    """Reason -> ``(n,)`` samples whose track lies outside the curvature and cant limits of ``segments``."""
+    seg = opts.segments
+    out = {}
+    x = rec.distance + offset
+    for what, values, lo, hi, unit in (("curvature", track.curvature, seg.min_curvature_per_m,
+                                        seg.max_curvature_per_m, "1/m"),
+                                       ("cant", track.cant, seg.min_cant_m, seg.max_cant_m, "m")):
+        if values is None or (lo is None and hi is None):
+            continue
+        a = np.abs(track.at(values, x))
+        with np.errstate(invalid="ignore"):
+            if hi is not None:
+                key = "curvature_per_m" if what == "curvature" else "cant_m"
+                out[f"|{what}| above segments.max_{key} = {hi:g} {unit}"] = a > hi
+            if lo is not None:
+                key = "curvature_per_m" if what == "curvature" else "cant_m"
+                out[f"|{what}| below segments.min_{key} = {lo:g} {unit}"] = a < lo
+    return out
+
+
 def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, offset: float, dx: float
                    ) -> TrackSegment | None:
     """The track under the odometry reference point during window ``w``, at its mean speed; None when
@@ -132,7 +205,11 @@ def _track_segment(w: Window, name: str, rec: Recording, track: TrackRecord, off
     irr = np.array([np.interp(x, x_src, row[k0:k1]) for row in track.irregularities])
     if not np.all(np.isfinite(irr)):
         return None
-    return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])})
+    design = {k: np.interp(x, x_src, getattr(track, k)[k0:k1]) for k in ("curvature", "cant")
+              if getattr(track, k) is not None}
+    if not all(np.all(np.isfinite(d)) for d in design.values()):
+        return None
+    return TrackSegment(name, x - x[0], irr, float(v), meta={"track_start_m": float(x[0])}, **design)
 
 
 def _provenance(rec: Recording, w: Window, seg: TrackSegment, al: Alignment) -> dict[str, Any]:
@@ -304,13 +381,21 @@ def read_accelerations_h5_first(path: Path, name: str, channels: Sequence[str]) 
     return check_response(r, path, channels)
 
 
-def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = lambda s: None) -> IngestResult:
-    """The whole ingest (module docstring) for ``simulator``'s channels; ``out`` is the output folder."""
+def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = lambda s: None, *,
+               f_max_hz: float | None = None) -> IngestResult:
+    """The whole ingest (module docstring) for ``simulator``'s channels; ``out`` is the output folder.
+
+    :param f_max_hz: the top frequency of the spectra the segments are for (``spectra.f_max_hz`` of the
+        config): a channel the file samples at less than twice it is refused (:func:`check_rates`).
+    """
     channels = list(simulator.channels())
     check_mapping(opts, channels, simulator.name)
     log(f"reading {opts.recording.path}")
     rec = read_recording(opts, channels)
+    if f_max_hz is not None:
+        check_rates(rec, opts, f_max_hz)
     warnings = list(rec.warnings)
+    warnings += static_gravity(rec, opts)
     g = rec.grid
     v_min = opts.segments.min_speed_kmh / 3.6
     moving = np.isfinite(rec.speed) & (rec.speed >= v_min)
@@ -331,6 +416,11 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
     log("aligning the track record")
     al = align(rec.distance, rec.speed, rec.accelerations[channels.index(ach)] if ach else np.full(g.n, np.nan),
                usable, track, opts.alignment, ach, v_min, simulator)
+    if al.searched_m is not None and al.searched_m > opts.alignment.search_m:
+        warnings.append(f"alignment: the correlation peak lay at the edge of the offsets searched "
+                        f"(alignment.guess_m +- {opts.alignment.search_m:g} m); the search was widened to +- "
+                        f"{al.searched_m:g} m and found offset {al.offset_m:.2f} m: check it, or set "
+                        f"alignment.guess_m near it")
     if al.method == "correlation":
         if al.rho < 0:
             warnings.append(f"alignment: the correlation peak is negative ({al.rho:.2f}): is the sign of "
@@ -347,6 +437,7 @@ def run_ingest(opts: IngestOptions, simulator: Simulator, out: Path, log: Log = 
         reasons[f"{CHECK_WORDS[check]} in {where}"] = mask
     reasons["outside the track record"] = ((rec.distance + al.offset_m < track.x0)
                                            | (rec.distance + al.offset_m > x_src_end))
+    reasons.update(design_reasons(rec, track, al.offset_m, opts))
     windows, excluded = cut(rec.distance, rec.speed, reasons, opts.segments, g.fs)
     dx = opts.track.step_m or track.dx
     segs, resps, provs, kept = [], [], [], []
