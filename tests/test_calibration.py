@@ -177,6 +177,10 @@ def test_linearised_run_calibrates_the_mounts_and_corrects_w_opt(dates):
     lo, hi = result["bounds"]["c_yaw"]
     corrected = result["model_error"]["nuisance"]["w_opt_calibrated"]["c_yaw"]
     assert abs(corrected - c_yaw_true) / (hi - lo) < 0.03, (corrected, c_yaw_true, result["w_opt"]["c_yaw"])
+    # the reported value is the corrected one (no self-check here: the calibrated model's shift alone), and the
+    # interval around it holds the truth
+    assert result["w_corrected"]["c_yaw"] == pytest.approx(corrected, rel=1e-9)
+    assert result["interval"]["c_yaw"][0] <= c_yaw_true <= result["interval"]["c_yaw"][1], result["interval"]
     budget = result["model_error"]["budget"]
     assert budget["total"] <= result["n_simulator_calls"]
     assert "Model parameters calibrated at the reference date" in (out / "runs" / "linearised" / "report.md").read_text()

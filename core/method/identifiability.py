@@ -111,6 +111,11 @@ class ModelErrorOptions(Section):
         default="full", description="full: the checks re-identify w by simulation (self-check splits, data groups, "
         "nuisance ends); linearised: the model parameters calibrated at the reference date and every check on the "
         "spectra linearised at w0 and w_opt (one Jacobian per date, suspid.workflows.linearised)")
+    correct: bool = Field(
+        default=True, description="linearised method: correct w_opt by the biases the reference date measures "
+        "(the self-check's mean shift where the truth is w0, and the shift the calibrated model parameters give) "
+        "and centre the interval on the corrected value, whose spread (sampling, the self-check's scatter, the "
+        "model parameters' posterior) it carries; false: keep w_opt and bound those biases as worst cases")
     calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)

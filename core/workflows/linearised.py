@@ -439,6 +439,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     y_sim0_cal = None if not have_ref else jac0.y + jac0.dt @ t_hat
 
     bound_known = np.zeros(q)     # bias bounds from the self-check and the groups (signs unknown)
+    sc_bias, sc_scatter, groups_half = np.zeros(q), np.zeros(q), np.zeros(q)
+    correct = options.correct
     sc_opt = options.self_check
     if not sc_opt.enabled:
         report["self_check"] = {"status": "disabled"}
@@ -463,7 +465,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                 "excess_bias_percent": {n: float(100 * v) for n, v in zip(names, np.maximum(np.abs(bias) - 2 * se, 0))}}
             budget["self_check"] = 0
             bound_known += np.abs(bias)
-            for k in np.flatnonzero((np.abs(bias) > 2 * se) & (np.abs(bias) > options.max_bias)):
+            sc_bias, sc_scatter = bias, scatter
+            for k in ([] if correct else np.flatnonzero((np.abs(bias) > 2 * se) & (np.abs(bias) > options.max_bias))):
                 reasons.setdefault(names[k], []).append(
                     f"reference-date self-check (linearised): w_opt moves by {100 * bias[k]:+.1f} ± {100 * se[k]:.1f} % "
                     f"of the interval where the truth is w0 ({n_splits} splits; threshold "
@@ -488,6 +491,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "spread_percent": {n: float(100 * v) for n, v in zip(names, spread)}}
         budget["data_groups"] = 0
         bound_known += spread / 2
+        groups_half = spread / 2
         for k in range(q):
             if spread[k] > ad.max_spread and spread[k] > 2 * np.sqrt(2) * sd_[k]:
                 parts = ", ".join(f"{g.name} {100 * ge.u[i, k]:.0f} %" for i, g in enumerate(ge.groups)
@@ -554,8 +558,9 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "w_opt_calibrated": {n: float(v) for n, v in
                                  zip(names, problem.from_unit(np.clip(u_opt + shift_known, 0, 1)))}}
         budget["nuisance"] = 0
+        calibrated = report["calibration"].get("status") == "done"
         for k in range(q):
-            if flat[k]:
+            if flat[k] or (correct and calibrated):   # corrected: the posterior's spread widens the interval
                 continue
             if largest[k] > options.nuisance.max_shift:
                 name, value = values[largest_row[k]]
@@ -566,7 +571,20 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"identified {100 * shifts[largest_row[k], k]:+.1f} % of its interval away (threshold "
                     f"{100 * options.nuisance.max_shift:.0f} %)")
     n_sigmas = problem.config.identifiability.n_sigmas
-    bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
+    correction = None
+    if correct:
+        # the biases the reference date measures, with their signs, corrected; what remains: the sampling spread,
+        # the self-check's scatter (one split's, a conservative spread of the mean of overlapping halves), the
+        # model parameters' posterior spread, and half the groups' spread as a bound of unknown sign
+        correction = shift_known - sc_bias
+        bound = equivalent_bias_bound(sd_, groups_half, np.hypot(sd_model, sc_scatter), n_sigmas)
+        report["correction"] = {
+            "method": "w_opt + the calibrated model's shift − the reference-date self-check's mean shift",
+            "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
+            "w_corrected": {n: float(v) for n, v in
+                            zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
+    else:
+        bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
                                           "model_parameters_spread": float(100 * m)}
                                       for n, a, s, m in zip(names, bound_known, shift_known, sd_model)}
@@ -580,7 +598,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                          "not run: the adequacy test is disabled" if not ad.enabled else
                          "disabled (identifiability.model_error.adequacy.groups: false)"),
               "nuisance": report.get("nuisance", {}).get("status", "done")}
-    return _trust(names, reasons, checks, bound, report)
+    return {**_trust(names, reasons, checks, bound, report), "correction": correction}
 
 
 def _base_status(report: dict[str, Any], check: str) -> str:
