@@ -113,10 +113,10 @@ class ModelErrorOptions(Section):
         "a few simulator calls, fewer than the identification's); full: the checks re-identify w by simulation "
         "(self-check splits, data groups, nuisance ends: about 30 times the identification's simulations)")
     correct: bool = Field(
-        default=True, description="linearised method: correct w_opt by the biases the reference date measures "
-        "(the self-check's mean shift where the truth is w0, and the shift the calibrated model parameters give) "
-        "and centre the interval on the corrected value, whose spread (sampling, the self-check's scatter, the "
-        "model parameters' posterior) it carries; false: keep w_opt and bound those biases as worst cases")
+        default=True, description="linearised method: correct w_opt by the shift the model parameters calibrated "
+        "at the reference date give, centre the interval there with their posterior spread, and bound the rest "
+        "(the self-check's bias, half the groups' spread) in quadrature; false: keep w_opt and add every source as "
+        "a worst case (the self-check and the ends of each model parameter's range then flag on their own)")
     calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)

@@ -221,10 +221,10 @@ def model_error_section(result: dict[str, Any]) -> str:
     bound = me.get("bias_bound_percent")
     corr = me.get("correction")
     if bound and corr:
-        out += ["", f"Bias correction: {corr['method']} (the biases the reference date measures, with their signs); "
-                    f"the equivalent bound on the remaining bias (half the groups' spread, and the self-check's scatter "
-                    f"and the model parameters' posterior spread as one) and the interval's half-width, in % of the "
-                    f"interval. A component wider than ± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
+        out += ["", f"Bias correction: {corr['method']}; the equivalent bound on the remaining bias (the "
+                    f"self-check's bias and half the groups' spread in quadrature, with the model parameters' posterior "
+                    f"spread as one) and the interval's half-width, in % of the interval. A component wider than "
+                    f"± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
                 markdown_table(["parameter", "correction (%)", "bias-corrected", "bound on the bias (%)",
                                 "half-width (%)"],
                                [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}",
@@ -311,11 +311,10 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
     reference_date = (", and over the reference date's segments with B fitted again on each resample"
                       if result.get("interval_method", {}).get("bootstrap_reference") else "")
     if "w_corrected" in result:
-        widened = (", the bias-corrected value being w_opt + the shift the calibrated model parameters give − "
-                   "the reference-date self-check's mean shift, where the truth is w0 (the error column is its "
-                   "error); with the self-check's scatter and the model parameters' posterior spread added in "
-                   "quadrature and half the data groups' spread as a bound on the bias (Armstrong and Kolesár's "
-                   "fixed-length interval)")
+        widened = (", the bias-corrected value being w_opt + the shift the model parameters calibrated at the "
+                   "reference date give (the error column is its error); with their posterior spread added in "
+                   "quadrature, and the reference-date self-check's bias and half the data groups' spread, "
+                   "combined in quadrature, as a bound on the bias (Armstrong and Kolesár's fixed-length interval)")
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
