@@ -219,6 +219,30 @@ def main(argv: list[str] | None = None) -> None:
                                                              f"{np.mean([r['half_width'] for r in rep]):.1f})"
                                                              if rep else ""))
         print(f"  {obj}: " + ", ".join(cells))
+    budget_table(cfgs)
+
+
+def budget_table(cfgs: list[Path]) -> None:
+    """The simulator calls of each run's model-error checks against its identification's (the design and EGO)."""
+    print("\nsimulator calls: model-error checks / identification (method)")
+    ratios = []
+    for cfg in cfgs:
+        path = cfg.parent / "runs" / cfg.stem / "result.json"
+        if not path.exists():
+            continue
+        res = json.loads(path.read_text())
+        me = res.get("model_error", {})
+        if me.get("method") == "linearised":
+            checks = int(me.get("budget", {}).get("total", 0))
+        else:
+            checks = sum(int(me.get(k, {}).get("n_simulations", 0)) for k in ("self_check", "nuisance")) \
+                + int(me.get("adequacy", {}).get("groups", {}).get("n_simulations", 0))
+        ident = int(res["n_simulator_calls"])
+        ratios.append(checks / max(ident, 1))
+        print(f"  {cfg.parent.name}/{cfg.stem}: {checks} / {ident} ({me.get('method', 'full')})")
+    if ratios:
+        print(f"  checks within the identification's calls in {sum(r <= 1 for r in ratios)}/{len(ratios)} runs; "
+              f"largest ratio {max(ratios):.2f}")
 
 
 def objectives_in(all_rows: list) -> list[str]:
