@@ -222,9 +222,9 @@ def model_error_section(result: dict[str, Any]) -> str:
     corr = me.get("correction")
     if bound and corr:
         out += ["", f"Bias correction: {corr['method']}; the equivalent bound on the remaining bias (the "
-                    f"self-check's bias and half the groups' spread in quadrature, with the model parameters' posterior "
-                    f"spread as one) and the interval's half-width, in % of the interval. A component wider than "
-                    f"± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
+                    f"self-check's bias and half the groups' spread in quadrature, with the model parameters' "
+                    f"posterior spread as one) and the interval's half-width, in % of the interval. A component "
+                    f"wider than ± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
                 markdown_table(["parameter", "correction (%)", "bias-corrected", "bound on the bias (%)",
                                 "half-width (%)"],
                                [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}",
@@ -315,6 +315,7 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
                    "reference date give (the error column is its error); with their posterior spread added in "
                    "quadrature, and the reference-date self-check's bias and half the data groups' spread, "
                    "combined in quadrature, as a bound on the bias (Armstrong and Kolesár's fixed-length interval)")
+    centre = "the bias-corrected value" if "w_corrected" in result else "w_opt"
     text = f"""# suspid run `{config.name}`
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
@@ -327,7 +328,7 @@ Components marked **no** (not identifiable, or not trustworthy under model error
 their value is not to be reported. *not assessed*: no model-error check that ran flags the component, but
 the checks that would judge it did not all run (see "Model error"); its interval holds no bias those
 checks would have bounded.
-Intervals: {'the bias-corrected value' if 'w_corrected' in result else 'w_opt'} ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
+Intervals: {centre} ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
 bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths{reference_date}){widened}, clipped to the
 admissible box.
