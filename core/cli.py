@@ -225,12 +225,9 @@ def _print_result(result: dict, run_dir: Path) -> None:
     style = {"yes": "yes", "no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]"}
     for n in result["parameters"]:
         lo, hi = result["interval"][n]
-        est = result.get("w_corrected", result["w_opt"])   # the bias-corrected value where the checks correct it
-        errors = result.get("errors_percent_corrected", result.get("errors_percent"))
-        table.add_row(n, f"{result['w_opt'][n]:.4g}" + (f" → {est[n]:.4g}" if "w_corrected" in result else ""),
-                      f"[{lo:.4g}, {hi:.4g}]",
+        table.add_row(n, f"{result['w_opt'][n]:.4g}", f"[{lo:.4g}, {hi:.4g}]",
                       f"{result['w_ref'][n]:.4g}" if "w_ref" in result else "-",
-                      f"{errors[n]:.2f}" if errors is not None else "-",
+                      f"{result['errors_percent'][n]:.2f}" if "errors_percent" in result else "-",
                       "yes" if result["identifiable"][n] else "[red]no[/red]",
                       style[trust_word(result.get("trustworthy", {}).get(n))])
     console.print(table)

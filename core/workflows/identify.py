@@ -68,10 +68,7 @@ class IdentificationResult:
 
     :ivar w_opt: identified values, SI units.
     :ivar w_opt_normalized: the same in ``[0, 1]`` of each admissible interval.
-    :ivar intervals: ``name -> (lower, upper)`` SI; not a finding where ``identifiable`` is False. Centred on
-        :attr:`w_corrected` where there is one.
-    :ivar w_corrected: w_opt corrected by the shift the model parameters calibrated at the reference date give
-        (the linearised model-error checks with ``correct: true``, on measured data), SI; else None.
+    :ivar intervals: ``name -> (lower, upper)`` SI; not a finding where ``identifiable`` is False.
     :ivar identifiable: ``name -> bool``; :ivar reasons: why a component is not identifiable.
     :ivar w_ref: the known parameters of a numerical experiment, else None.
     :ivar errors_percent: ``|w_opt - w_ref|`` in % of the interval (numerical experiment), else None.
@@ -108,7 +105,6 @@ class IdentificationResult:
     trustworthy: dict[str, bool | None] | None = None
     untrustworthy_reasons: dict[str, list[str]] = field(default_factory=dict)
     not_assessed_reasons: dict[str, list[str]] = field(default_factory=dict)
-    w_corrected: dict[str, float] | None = None
     problem: Problem | None = field(default=None, repr=False, compare=False)
     ego: EGOResult | None = field(default=None, repr=False, compare=False)
     _data: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -129,7 +125,7 @@ class IdentificationResult:
                    errors_percent=data.get("errors_percent"), trustworthy=data.get("trustworthy"),
                    untrustworthy_reasons=dict(data.get("untrustworthy_reasons", {})),
                    not_assessed_reasons=dict(data.get("not_assessed_reasons", {})),
-                   w_corrected=data.get("w_corrected"), problem=problem, ego=ego, _data=data)
+                   problem=problem, ego=ego, _data=data)
 
     @classmethod
     def load(cls, run_dir: str | Path) -> "IdentificationResult":
