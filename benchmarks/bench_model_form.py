@@ -21,6 +21,7 @@ Usage (from the repository root)::
         [--seeds 7 8 11] [--w-refs quickstart other w0]
         [--objectives overlap likelihood] [--jobs 2] [--segments 40] [--summary]
         [--nuisance k_yaw_s=5e6:20e6 kalker_scale=0.6:1.0] [--weights reference]
+        [--method full|linearised]
 
 A finished run (its result.json) is kept: running again completes a cut grid;
 ``--summary`` prints the table of the runs finished so far.
@@ -74,8 +75,8 @@ GEN = GENERATORS["independent"]
 
 
 def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list[float]] | None = None,
-                 weights: str | None = None) -> Path:
-    name = objective + (f"-{weights}-weights" if weights else "")
+                 weights: str | None = None, method: str | None = None) -> Path:
+    name = objective + (f"-{weights}-weights" if weights else "") + (f"-{method}" if method else "")
     cfg = {"name": name, "seed": seed,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0,
                                                                "vehicle": GEN["vehicle"]}},
@@ -86,8 +87,13 @@ def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list
            "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200},
            "objective": {"plugin": objective, **({"weights": weights} if weights else {})}, "surrogate": {"plugin": "gpy-kriging"},
            "design": {"method": "maximin-lhs", "n_initial": 30}, "ego": {"max_iter": 40, "tol": 1.0e-4}}
+    model_error: dict = {}
     if nuisance:
-        cfg["identifiability"] = {"model_error": {"nuisance": {"parameters": nuisance}}}
+        model_error["nuisance"] = {"parameters": nuisance}
+    if method:
+        model_error["method"] = method
+    if model_error:
+        cfg["identifiability"] = {"model_error": model_error}
     path = case / f"{name}.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False), encoding="utf-8")
     return path
@@ -118,7 +124,8 @@ def summarise(cfg: Path) -> dict:
         lo, hi = res["bounds"][n]
         t = truth[n]
         iv = res["interval"][n]
-        rows[n] = {"error": 100 * (res["w_opt"][n] - t) / (hi - lo), "identifiable": res["identifiable"][n],
+        w = res.get("w_corrected", res["w_opt"])   # the reported value: bias-corrected where the checks correct it
+        rows[n] = {"error": 100 * (w[n] - t) / (hi - lo), "identifiable": res["identifiable"][n],
                    "trustworthy": res.get("trustworthy", {}).get(n, True), "in_interval": iv[0] <= t <= iv[1],
                    "in_sampling_interval": res["interval_sampling"][n][0] <= t <= res["interval_sampling"][n][1],
                    "half_width": 50 * (iv[1] - iv[0]) / (hi - lo),
@@ -142,6 +149,9 @@ def main(argv: list[str] | None = None) -> None:
                     help="nuisance parameters of the model-error check, e.g. k_yaw_s=5e6:20e6")
     ap.add_argument("--weights", choices=["reference"], default=None,
                     help="objective.weights of the runs (their run directories get the suffix -reference-weights)")
+    ap.add_argument("--method", choices=["full", "linearised"], default=None,
+                    help="identifiability.model_error.method of the runs (default: the config's default; the run "
+                         "directories get the suffix -METHOD)")
     a = ap.parse_args(argv)
     global GEN
     GEN = GENERATORS[a.generator]
@@ -155,7 +165,8 @@ def main(argv: list[str] | None = None) -> None:
     for obj in a.objectives:       # the runs most needed first: a cut grid still covers every w_ref
         for seed in a.seeds:
             for w_ref in a.w_refs:
-                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj, nuisance, a.weights))
+                cfgs.append(write_config(prepare(a.out, seed, w_ref, a.segments), seed, obj, nuisance, a.weights,
+                                     a.method))
     with ThreadPoolExecutor(a.jobs) as pool:
         for cfg, wall, err in ([] if a.summary else pool.map(run_one, cfgs)):
             print(f"{cfg.parent.name}/{cfg.stem}: {wall:.0f} s{' FAILED: ' + err if err else ''}", flush=True)
@@ -208,6 +219,30 @@ def main(argv: list[str] | None = None) -> None:
                                                              f"{np.mean([r['half_width'] for r in rep]):.1f})"
                                                              if rep else ""))
         print(f"  {obj}: " + ", ".join(cells))
+    budget_table(cfgs)
+
+
+def budget_table(cfgs: list[Path]) -> None:
+    """The simulator calls of each run's model-error checks against its identification's (the design and EGO)."""
+    print("\nsimulator calls: model-error checks / identification (method)")
+    ratios = []
+    for cfg in cfgs:
+        path = cfg.parent / "runs" / cfg.stem / "result.json"
+        if not path.exists():
+            continue
+        res = json.loads(path.read_text())
+        me = res.get("model_error", {})
+        if me.get("method") == "linearised":
+            checks = int(me.get("budget", {}).get("total", 0))
+        else:
+            checks = sum(int(me.get(k, {}).get("n_simulations", 0)) for k in ("self_check", "nuisance")) \
+                + int(me.get("adequacy", {}).get("groups", {}).get("n_simulations", 0))
+        ident = int(res["n_simulator_calls"])
+        ratios.append(checks / max(ident, 1))
+        print(f"  {cfg.parent.name}/{cfg.stem}: {checks} / {ident} ({me.get('method', 'full')})")
+    if ratios:
+        print(f"  checks within the identification's calls in {sum(r <= 1 for r in ratios)}/{len(ratios)} runs; "
+              f"largest ratio {max(ratios):.2f}")
 
 
 def objectives_in(all_rows: list) -> list[str]:

@@ -145,8 +145,12 @@ def test_linearised_checks_within_budget(tmp_path):
         assert part["status"] == "done", part
     budget = report["budget"]
     assert budget["jacobian_reference_w0"] == 1 and budget["jacobian_measurement_w_opt"] == 1
-    assert budget["total"] == 2 + report["calibration"]["n_simulations"] <= 2 + opts.calibration.max_iterations
-    assert report["calibration"]["parameters"]["kalker_scale"]["status"] == "calibrated"
+    # the two Jacobians, the calibration's steps, and at the calibrated values one per date (one more where the
+    # calibrated shift is searched again)
+    assert budget["total"] == 2 + report["calibration"]["n_simulations"] + budget.get("jacobians_at_calibrated", 0)
+    assert budget["total"] <= 2 + opts.calibration.max_iterations + 3
+    entry = report["calibration"]["parameters"]["kalker_scale"]   # 0.78 ± 0.07 on seed 7: just not pinned down
+    assert abs(entry["estimate"] - 0.7) <= 2 * entry["standard_deviation"], entry
     assert trust["bias_bound"].shape == (problem.q,) and np.all(trust["bias_bound"] >= 0)
     for name, ok in trust["trustworthy"].items():
         assert ok == (name not in trust["reasons"])
@@ -177,6 +181,10 @@ def test_linearised_run_calibrates_the_mounts_and_corrects_w_opt(dates):
     lo, hi = result["bounds"]["c_yaw"]
     corrected = result["model_error"]["nuisance"]["w_opt_calibrated"]["c_yaw"]
     assert abs(corrected - c_yaw_true) / (hi - lo) < 0.03, (corrected, c_yaw_true, result["w_opt"]["c_yaw"])
+    # the reported value is the corrected one (no self-check here: the calibrated model's shift alone), and the
+    # interval around it holds the truth
+    assert result["w_corrected"]["c_yaw"] == pytest.approx(corrected, rel=1e-9)
+    assert result["interval"]["c_yaw"][0] <= c_yaw_true <= result["interval"]["c_yaw"][1], result["interval"]
     budget = result["model_error"]["budget"]
     assert budget["total"] <= result["n_simulator_calls"]
     assert "Model parameters calibrated at the reference date" in (out / "runs" / "linearised" / "report.md").read_text()

@@ -63,7 +63,7 @@ def _config(out: Path, nuisance: dict, path: str = "config.yaml") -> Path:
            "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 60},
            "design": {"n_initial": 6}, "ego": {"max_iter": 6},
            "identifiability": {"n_redraws": 6, "model_error": {
-               "self_check": {"enabled": False}, "adequacy": {"enabled": False},
+               "method": "full", "self_check": {"enabled": False}, "adequacy": {"enabled": False},
                "nuisance": {"parameters": nuisance, "max_evaluations": 16}}}}
     file = out / path
     file.write_text(yaml.safe_dump(cfg, sort_keys=False))

@@ -37,7 +37,7 @@ def two_dates(tmp_path_factory) -> Path:
     return out
 
 
-def _config(out: Path, **extra) -> Path:
+def _config(out: Path, method: str = "full", **extra) -> Path:
     cfg = {"name": "two-dates", "seed": 3,
            "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0,
                                                                 "vehicle": VEHICLE}},
@@ -48,7 +48,7 @@ def _config(out: Path, **extra) -> Path:
            "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
            "design": {"n_initial": 6}, "ego": {"max_iter": 2},
            "identifiability": {"n_redraws": 6, "model_error": {
-               "self_check": {"n_splits": 2, "max_evaluations": 8},
+               "method": method, "self_check": {"n_splits": 2, "max_evaluations": 8},
                "adequacy": {"group_evaluations": 4}}}} | extra
     path = out / "config.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
@@ -88,6 +88,29 @@ def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model
     # a second run reuses the reference-date simulation and the self-check from the ledger
     assert _cli("run", str(cfg), "--quiet") == 0
     assert json.loads((run / "result.json").read_text())["w_opt"] == result["w_opt"]
+
+
+def test_the_default_linearised_checks_cost_less_than_the_identification(two_dates):
+    """The default checks (linearised, the model parameters calibrated at the reference date) on the same two
+    dates: every required check ran, their simulator calls are fewer than the identification's, and the interval
+    is centred on the bias-corrected value."""
+    cfg = _config(two_dates, method="linearised", name="two-dates-linearised")
+    data = yaml.safe_load(cfg.read_text())
+    del data["identifiability"]["model_error"]["method"]           # the default
+    cfg.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert _cli("run", str(cfg), "--quiet") == 0
+    result = json.loads((two_dates / "runs" / "two-dates-linearised" / "result.json").read_text())
+    me = result["model_error"]
+    assert me["method"] == "linearised"
+    assert all(isinstance(v, bool) for v in result["trustworthy"].values())  # every check ran: yes or no
+    assert 0 < me["budget"]["total"] <= result["n_simulator_calls"], (me["budget"], result["n_simulator_calls"])
+    assert result["calibration"]["status"] == "done"
+    for n in result["parameters"]:
+        u, half = result["w_corrected_normalized"][n], me["half_width_percent"][n] / 100
+        assert result["interval_normalized"][n] == pytest.approx([max(u - half, 0.0), min(u + half, 1.0)], abs=1e-9)
+        assert me["correction"]["correction_percent"][n] == pytest.approx(
+            100 * (u - result["w_opt_normalized"][n]), abs=1e-6) or u in (0.0, 1.0)
+    assert "Bias correction" in (two_dates / "runs" / "two-dates-linearised" / "report.md").read_text()
 
 
 def test_the_shipped_two_date_config_validates_beside_generated_files(tmp_path):

@@ -107,9 +107,15 @@ class ModelErrorOptions(Section):
     widen: bool = Field(default=True, description="make the intervals bias-aware: widen them by the model-error "
                         "checks' bound on the bias (self-check bias, half the groups' spread, nuisance shifts)")
     method: Literal["full", "linearised"] = Field(
-        default="full", description="full: the checks re-identify w by simulation (self-check splits, data groups, "
-        "nuisance ends); linearised: the model parameters calibrated at the reference date and every check on the "
-        "spectra linearised at w0 and w_opt (one Jacobian per date, suspid.workflows.linearised)")
+        default="linearised", description="linearised: the model parameters calibrated at the reference date and "
+        "every check on the spectra linearised at w0 and w_opt (one Jacobian per date, suspid.workflows.linearised; "
+        "a few simulator calls, fewer than the identification's); full: the checks re-identify w by simulation "
+        "(self-check splits, data groups, nuisance ends: about 30 times the identification's simulations)")
+    correct: bool = Field(
+        default=True, description="linearised method: correct w_opt by the shift the model parameters calibrated "
+        "at the reference date give, centre the interval there with their posterior spread, and bound the rest "
+        "(the self-check's bias, half the groups' spread) in quadrature; false: keep w_opt and add every source as "
+        "a worst case (the self-check and the ends of each model parameter's range then flag on their own)")
     calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)

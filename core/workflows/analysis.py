@@ -208,9 +208,11 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error, retry_failed, sd, executor, phases)
     phases.done()
     interval_unit = verdict.interval_unit
+    correction = trust.get("correction")
+    u_est = u_opt if correction is None else np.clip(u_opt + correction, 0, 1)   # bias-corrected (linearised)
     if opts.model_error.widen and trust["bias_bound"] is not None:
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)
-        interval_unit = np.stack([np.clip(u_opt - half, 0, 1), np.clip(u_opt + half, 0, 1)], axis=1)
+        interval_unit = np.stack([np.clip(u_est - half, 0, 1), np.clip(u_est + half, 0, 1)], axis=1)
         imprecise(trust, names, verdict.identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
         trust["report"].update({"bias_bound_percent": {n: float(100 * v) for n, v in zip(names, trust["bias_bound"])},
                                 "half_width_percent": {n: float(100 * v) for n, v in zip(names, half)},
@@ -261,6 +263,12 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         result["w_ref"] = {n: float(v) for n, v in zip(names, w_ref)}
         result["w_ref_normalized"] = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
         result["errors_percent"] = errors_percent(problem, x_opt)
+    if correction is not None:
+        x_est = problem.from_unit(u_est)
+        result["w_corrected"] = {n: float(v) for n, v in zip(names, x_est)}
+        result["w_corrected_normalized"] = {n: float(v) for n, v in zip(names, u_est)}
+        if problem.w_ref is not None:
+            result["errors_percent_corrected"] = errors_percent(problem, x_est)
     if ego.n_refine:
         result["paper_loop"] = paper_loop(problem, ego)
     if fisher is not None:

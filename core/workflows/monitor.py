@@ -319,7 +319,8 @@ def monitor_rows(dated: Sequence[tuple[dt.date, dict[str, Any]]],
         for n in r["parameters"]:
             domain = acceptable.get(n)
             rows.append({
-                "date": d.isoformat(), "parameter": n, "unit": r["units"].get(n, ""), "value": r["w_opt"][n],
+                "date": d.isoformat(), "parameter": n, "unit": r["units"].get(n, ""),
+                "value": r.get("w_corrected", r["w_opt"])[n],
                 "interval_low": r["interval"][n][0], "interval_high": r["interval"][n][1],
                 "acceptable_low": domain[0] if domain else None, "acceptable_high": domain[1] if domain else None,
                 "identifiable": bool(r["identifiable"][n]),

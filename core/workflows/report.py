@@ -330,7 +330,17 @@ def model_error_section(result: dict[str, Any]) -> str:
     elif nu and "checks" not in me:
         out += ["", f"Nuisance parameters: {nu['status']}."]
     bound = me.get("bias_bound_percent")
-    if bound:
+    corr = me.get("correction")
+    if bound and corr:
+        out += ["", f"Bias correction: {corr['method']}; the equivalent bound on the remaining bias (the "
+                    f"self-check's bias and half the groups' spread in quadrature, with the model parameters' "
+                    f"posterior spread as one) and the interval's half-width, in % of the interval. A component "
+                    f"wider than ± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
+                markdown_table(["parameter", "correction (%)", "bias-corrected", "bound on the bias (%)",
+                                "half-width (%)"],
+                               [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}",
+                                 f"{bound[n]:.1f}", f"{me['half_width_percent'][n]:.1f}"] for n in names])]
+    elif bound:
         out += ["", f"Bound on the bias of w_opt (the self-check's |bias| + half the groups' spread + each nuisance "
                     f"parameter's larger |shift|, their signs unknown) and the bias-aware interval's half-width, "
                     f"in % of the interval. A component wider than ± {me['max_half_width_percent']:.0f} % is not "
@@ -396,15 +406,16 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
     rows = []
     for n in names:
         u = result["units"][n]
-        row = [n, u, result["w_opt"][n]]
+        row = [n, u, result["w_opt"][n]] + ([result["w_corrected"][n]] if "w_corrected" in result else [])
         if "w_ref" in result:
-            row += [result["w_ref"][n], f"{result['errors_percent'][n]:.2f}"]
+            row += [result["w_ref"][n], f"{result.get('errors_percent_corrected', result['errors_percent'])[n]:.2f}"]
         lo_i, hi_i = result["interval"][n]
         row += [f"[{lo_i:.4g}, {hi_i:.4g}]", "yes" if result["identifiable"][n] else
                 "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
                 trust_cell(result, n), f"{result['sensitivity']['total_sobol'][n]:.3f}"]
         rows.append(row)
-    header = ["parameter", "unit", "w_opt"] + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
+    header = ["parameter", "unit", "w_opt"] + (["bias-corrected"] if "w_corrected" in result else []) \
+        + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
         + ["interval", "identifiable", "trustworthy under model error", "total Sobol index"]
     refine = ""
     if result.get("refine_stop_reason"):
@@ -416,6 +427,12 @@ def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[s
                if result.get("interval_method", {}).get("widened_by_model_error") else "")
     reference_date = (", and over the reference date's segments with B fitted again on each resample"
                       if result.get("interval_method", {}).get("bootstrap_reference") else "")
+    if "w_corrected" in result:
+        widened = (", the bias-corrected value being w_opt + the shift the model parameters calibrated at the "
+                   "reference date give (the error column is its error); with their posterior spread added in "
+                   "quadrature, and the reference-date self-check's bias and half the data groups' spread, "
+                   "combined in quadrature, as a bound on the bias (Armstrong and Kolesár's fixed-length interval)")
+    centre = "the bias-corrected value" if "w_corrected" in result else "w_opt"
     text = f"""# suspid run `{config.name}`
 
 {verdict_markdown(rows_of(result), markdown_table, with_reference="w_ref" in result)}
@@ -431,7 +448,7 @@ Components marked **no** (not identifiable, or not trustworthy under model error
 their value is not to be reported. *not assessed*: no model-error check that ran flags the component, but
 the checks that would judge it did not all run (see "Model error"); its interval holds no bias those
 checks would have bounded.
-Intervals: w_opt ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
+Intervals: {centre} ± {result['interval_method']['n_sigmas']:g} standard deviations of the sandwich covariance
 H⁻¹ Σ_g H⁻¹ (H the Hessian of J at w_opt: curvatures from simulations, correlations from the metamodel, Σ_g the covariance of the gradient of J at w_opt under a
 bootstrap over segments, {result['interval_method']['bootstrap']}, with redrawn noise paths{reference_date}){widened}, clipped to the
 admissible box.
