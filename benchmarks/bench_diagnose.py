@@ -159,7 +159,7 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", 
             for case in cases or list(HE.CASES):
                 c = HE.CASES[case]
                 t0 = time.perf_counter()
-                path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref,
+                path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref, noise_asd=c.noise_asd,
                                   noise=_noise_options(floor), diagnose={"at": at})
                 d = suspid.diagnose(path).diagnosis
                 result_json = path.parent / "runs" / "config" / "before" / "result.json"
