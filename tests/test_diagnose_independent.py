@@ -285,3 +285,52 @@ def test_coupling_against_the_twin_sensor_removes_the_vehicles_own_coupling():
     assert rows0["bogie_front_lateral"]["significant"] and not rows0["bogie_rear_lateral"]["significant"]
     assert not any(r["significant"] for r in coupling_test(records(0.0, seed=2), channels, (0.4, math.inf),
                                                             model_coupling={c: 0.03 for c in channels}))
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_shared_tilt_under_sensor_noise_is_named(tmp_path, seed):
+    """4° on both bogies' lateral sensors (twins: their difference cancels it) and on the mid-car one, 0.005 m/s²
+    of white sensor noise: named from the coupling (instrumental variables against the model's coupling) on the
+    three channels, the angle within 10 %."""
+    d, _ = run_case(tmp_path, "shared-tilt", seed)
+    assert "sensor-tilt" in d["named_effects"], d["reason"]
+    tilt = next(e for e in d["effects"] if e["name"] == "sensor-tilt")["parameters"]
+    assert set(tilt["channels"]) == {"bogie_front_lateral", "bogie_rear_lateral", "carbody_middle_lateral"}, tilt
+    assert abs(tilt["angle_deg"] - 4.0) <= 0.4, tilt
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_lateral_bracket_is_never_named(tmp_path, seed):
+    """A bracket resonance (14 Hz) on one carbody lateral sensor: nothing named (no tilt on it or its untouched
+    twin), the resonance reported unexplained on its channel."""
+    d, _ = run_case(tmp_path, "bracket-lateral", seed)
+    assert d["named_effects"] == [], d["reason"]
+    hits = [u for u in d["unexplained"] if u["channel"] == "carbody_front_lateral"
+            and u["f_low_hz"] <= 14.0 <= u["f_high_hz"]]
+    assert hits and "no catalogue effect fits" in hits[0]["text"], d["unexplained"]
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_one_wheelset_polygon_is_named_with_its_order(tmp_path, seed):
+    d, _ = run_case(tmp_path, "polygon-one", seed)
+    assert "wheel-polygon" in d["named_effects"], d["reason"]
+    assert _main(d, "wheel-polygon") == 1, d["effects"]
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_channel_gain_is_reported(tmp_path, seed):
+    """+8 % on one channel (0.67 dB, below min_db in every cell): reported as a channel-level gain there."""
+    d, _ = run_case(tmp_path, "gain-8", seed)
+    gains = {g["channel"]: g for g in d["channel_gains"] if g["significant"]}
+    assert "bogie_rear_vertical" in gains, d["channel_gains"]
+    assert gains["bogie_rear_vertical"]["gain"] == pytest.approx(1.08, abs=0.03)
+    assert any(u.get("kind") == "channel-level gain" and u["channel"] == "bogie_rear_vertical"
+               for u in d["unexplained"])

@@ -273,6 +273,10 @@ def channel_correlation(noise_model, k: int) -> np.ndarray:
     return phi.T @ (lam[:, None] * phi) + np.diag(dd)
 
 
+FLAT_SIGMAS = 2.0
+"""A channel-level gain is flat: the rms of its band means about the channel mean within this many band null sd."""
+
+
 def channel_gains(dmap: DiscrepancyMap, noise_model, alpha: float) -> list[dict[str, Any]]:
     """Channel-level gains: a calibration error moves a channel's whole spectrum by 20 log10 g dB, which can stay
     below ``min_db`` in every cell and still be certain over the channel.
@@ -280,9 +284,11 @@ def channel_gains(dmap: DiscrepancyMap, noise_model, alpha: float) -> list[dict[
     Per channel: the mean m̄ of its mean residuals over every bin and speed group, against its null sd
     sqrt(Σ σ_b σ_b' R_bb') / n (σ the bins' null sd, R their correlation under the noise model: a model-form
     error moves whole spectra, so the bins are far from independent); two-sided, Bonferroni over the channels
-    at ``alpha``. A gain is flat: the spread of the channel's band means about m̄ is reported beside it.
+    at ``alpha``. A gain is flat: the rms of the channel's band means about m̄ must stay within
+    :data:`FLAT_SIGMAS` of their null sd (a resonance that lifts the channel's mean is not a gain).
 
-    :returns: per channel ``{channel, mean_db, sd_db, z, p, gain, significant, band_spread_db}``.
+    :returns: per channel ``{channel, mean_db, sd_db, z, p, gain, significant, band_spread_db, band_sd_db,
+        flat}``.
     """
     from scipy.stats import norm
 
@@ -298,9 +304,12 @@ def channel_gains(dmap: DiscrepancyMap, noise_model, alpha: float) -> list[dict[
         z = m / s
         p = float(2 * norm.sf(abs(z)))
         bands = (r[:, k] @ grid.average).ravel()
+        spread = float(np.sqrt(np.mean((bands - m) ** 2)))
+        band_sd = float(np.sqrt(np.mean((sd[:, k] @ grid.average) ** 2)))   # bins fully correlated: an upper bound
+        flat = spread <= FLAT_SIGMAS * band_sd
         out.append({"channel": grid.channels[k], "mean_db": round(m, 4), "sd_db": round(s, 4), "z": round(z, 3),
-                    "p": p, "gain": round(10 ** (m / 20.0), 4), "significant": bool(p < alpha / K),
-                    "band_spread_db": round(float(np.std(bands - m)), 4)})
+                    "p": p, "gain": round(10 ** (m / 20.0), 4), "significant": bool(p < alpha / K and flat),
+                    "band_spread_db": round(spread, 4), "band_sd_db": round(band_sd, 4), "flat": bool(flat)})
     return out
 
 
