@@ -220,3 +220,40 @@ def test_suspension_trust_is_not_assessed_without_the_identifications_checks():
     t = suspension_trust(["k1", "k2"], {"k1": True, "k2": False}, groups_ran=True)
     assert t["trustworthy"] == {"k1": None, "k2": False}
     assert "k1" in t["not_assessed"] and "k2" in t["reasons"]
+
+
+# ------------------------------------------------------------------------------------------ extension
+def test_a_tilt_corrected_in_the_records_extends_to_other_channels_never_twice_on_one():
+    """After the coupling route corrected bogie_front_lateral in the records, the model's sensor-tilt may still
+    be fitted on the other flagged lateral channel, and no starting point names the corrected one; the
+    corrected entry never goes into the model."""
+    from suspid.errors import ConfigError
+    from suspid.plugins.effects.catalogue import SensorTilt
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose.fit import EffectFitter
+    from suspid.workflows.diagnose.workflow import CORRECTED, _model_effects
+
+    channels = ["bogie_front_vertical", "bogie_front_lateral", "bogie_rear_vertical", "bogie_rear_lateral"]
+    f = np.linspace(0.5, 40.0, 50)
+    flat = np.zeros((1, 4, f.size))
+    disc = SimpleNamespace(spectra=lambda: {"freqs": f, "channels": channels, "measured": flat, "model": flat})
+    problem = SimpleNamespace(simulator=object(), segments=[SimpleNamespace(mean_speed=83.3)], channels=channels)
+    config = SimpleNamespace(source_file="c.yaml")
+    flagged = [("bogie_front_lateral", 10.0, 12.0, 83.3), ("bogie_rear_lateral", 10.0, 12.0, 83.3)]
+    tried = []
+
+    def refuse(spec):
+        tried.append(list(spec["channels"]))
+        raise ConfigError("not simulated here")
+
+    fitter = EffectFitter(config, problem, {}, disc, flagged, DiagnoseOptions(), blocked={"sensor-tilt":
+                                                                                        {"bogie_front_lateral"}})
+    fitter.simulator_with = refuse
+    fitter.fit(SensorTilt)
+    assert tried and all(t == ["bogie_rear_lateral"] for t in tried), tried
+    only_corrected = EffectFitter(config, problem, {}, disc, flagged[:1], DiagnoseOptions(),
+                                  blocked={"sensor-tilt": {"bogie_front_lateral"}}).fit(SensorTilt)
+    assert only_corrected.status.startswith("no starting point") and "bogie_front_lateral" in only_corrected.status
+    named = [("sensor-tilt", {"angle_deg": 4.0, "channels": ["bogie_front_lateral"], "applied": CORRECTED}, 2),
+             ("sensor-tilt", {"angle_deg": 3.0, "channels": ["bogie_rear_lateral"]}, 2)]
+    assert _model_effects(named, {}) == [named[1][:2]]
