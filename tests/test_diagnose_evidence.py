@@ -257,3 +257,13 @@ def test_a_tilt_corrected_in_the_records_extends_to_other_channels_never_twice_o
     named = [("sensor-tilt", {"angle_deg": 4.0, "channels": ["bogie_front_lateral"], "applied": CORRECTED}, 2),
              ("sensor-tilt", {"angle_deg": 3.0, "channels": ["bogie_rear_lateral"]}, 2)]
     assert _model_effects(named, {}) == [named[1][:2]]
+
+
+def test_reidentification_without_a_trust_verdict_is_not_assessed():
+    """A re-identification whose run judged no component: each is not assessed (None) with a reason, not yes."""
+    from suspid.workflows.diagnose.reidentify import Stage
+
+    stage = Stage("after-1", None, SimpleNamespace(), {}, np.zeros(1), {"w_opt": {"k1": 1.0, "k2": 2.0},
+                                                                        "trustworthy": {"k2": False}})
+    ident = stage.gap()["identified"]
+    assert ident["trustworthy"] == {"k1": None, "k2": False} and list(ident["not_assessed"]) == ["k1"]
