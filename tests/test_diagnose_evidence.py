@@ -267,3 +267,25 @@ def test_reidentification_without_a_trust_verdict_is_not_assessed():
                                                                         "trustworthy": {"k2": False}})
     ident = stage.gap()["identified"]
     assert ident["trustworthy"] == {"k1": None, "k2": False} and list(ident["not_assessed"]) == ["k1"]
+
+
+def test_a_correction_in_the_records_obeys_the_naming_rule_per_channel():
+    """The coupling route's rule on each corrected channel: its flagged cells shrink (when it has any), no new
+    ones beyond the allowance; a channel with none flagged that stays clean passes (a tilt the power map cannot
+    see)."""
+    from suspid.workflows.diagnose import make_cells
+    from suspid.workflows.diagnose.workflow import correction_evidence
+
+    grid = make_cells(["a_lateral", "b_lateral"], np.linspace(0.5, 30.0, 60), [80.0] * 4)
+    B = grid.band_edges.shape[0]
+    before, after = np.zeros(grid.n_cells, bool), np.zeros(grid.n_cells, bool)
+    before[[0, 1, 2]] = True                                  # three cells of a_lateral flagged
+    after[[0, 1, 2]] = True                                   # the correction leaves them: not what made them
+    ev, why = correction_evidence(grid, "a_lateral", before, after, 0.1)
+    assert ev == {"flagged_before": 3, "flagged_after": 3, "new_flagged": 0} and "does not shrink" in why
+    after[:] = False
+    after[0] = True
+    assert correction_evidence(grid, "a_lateral", before, after, 0.1)[1] is None
+    after[[B, B + 1]] = True                                  # two new cells on b_lateral
+    assert "new cells" in correction_evidence(grid, "b_lateral", before, after, 0.1)[1]
+    assert correction_evidence(grid, "b_lateral", before, np.zeros(grid.n_cells, bool), 0.1)[1] is None

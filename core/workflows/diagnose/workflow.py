@@ -385,7 +385,6 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
                               "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
                               "ranking": [], "local_model": None}
     dropped: list[str] = []
-    n0 = int(current.dmap.flagged.sum())
     while True:
         params = _tilt_parameters(tilted)
         named[:] = saved + [("sensor-tilt", params, 2)]
@@ -400,16 +399,11 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
                                                   out_dir, noise_path, fresh, progress, log)
         failed = {}
         for r in tilted:
-            mine = _channel_cells(grid, r["channel"])
-            b0, b1 = int((current.dmap.flagged & mine).sum()), int((stage.dmap.flagged & mine).sum())
-            new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
-            r_ev = {"flagged_before": b0, "flagged_after": b1, "new_flagged": new}
-            r.setdefault("evidence", {}).update(r_ev)
-            if new > max(1.0, opts.max_new_flagged * n0):
-                failed[r["channel"]] = f"its correction flags {new} new cells on {r['channel']}"
-            elif b0 > 0 and b1 >= b0:
-                failed[r["channel"]] = (f"its correction does not shrink the flagged cells of {r['channel']} "
-                                        f"({b0} → {b1}): the coupling is not what makes them differ")
+            evidence, why = correction_evidence(grid, r["channel"], current.dmap.flagged, stage.dmap.flagged,
+                                                opts.max_new_flagged)
+            r.setdefault("evidence", {}).update(evidence)
+            if why is not None:
+                failed[r["channel"]] = why
         if not failed:
             break
         for c, why in failed.items():
@@ -447,6 +441,23 @@ def _tilt_parameters(tilted: list[dict[str, Any]]) -> dict[str, Any]:
 
 CORRECTED = "data.corrections"
 """The ``applied`` mark of an effect corrected in the measured records, not added to the model."""
+
+
+def correction_evidence(grid: CellGrid, channel: str, before: np.ndarray, after: np.ndarray,
+                        max_new_flagged: float) -> tuple[dict[str, int], str | None]:
+    """The naming rule on one channel corrected in the records: its flagged cells (``before``, ``after``:
+    ``(n_cells,)`` bool) shrink when it has any, and at most ``max_new_flagged`` of all the cells flagged before
+    (one at least) are new there. Returns the counts and why the channel fails, or None."""
+    mine = _channel_cells(grid, channel)
+    b0, b1 = int((before & mine).sum()), int((after & mine).sum())
+    new = int((after & ~before & mine).sum())
+    evidence = {"flagged_before": b0, "flagged_after": b1, "new_flagged": new}
+    if new > max(1.0, max_new_flagged * int(before.sum())):
+        return evidence, f"its correction flags {new} new cells on {channel}"
+    if b0 > 0 and b1 >= b0:
+        return evidence, (f"its correction does not shrink the flagged cells of {channel} ({b0} → {b1}): the "
+                          f"coupling is not what makes them differ")
+    return evidence, None
 
 
 def _channel_cells(grid: CellGrid, channel: str) -> np.ndarray:
