@@ -314,9 +314,9 @@ def _reported_suspension(stage: Stage, config: Config, grid: CellGrid, null: Nul
             log(f"the re-identified suspension could not be simulated: {exc}")
     use_fit = D_reid is None or D_fit <= D_reid
     trust = suspension_trust(names, fit.identifiable or {}, fit.model_error is not None)
-    why = (f"D (the criterion the map and the naming rule test) {D_fit:.1f} at the joint fit"
-           + (f" against {D_reid:.1f} at the re-identification" if D_reid is not None else
-              ", no re-identification to compare"))
+    why = ("the lower D, the criterion the map and the naming rule test: " if D_reid is not None else "") + (
+        f"D {D_fit:.1f} at the joint fit" + (f", {D_reid:.1f} at the re-identification" if D_reid is not None else
+                                            ", no re-identification to compare"))
     return canonical({"source": "joint fit under D" if use_fit else "re-identification",
                       "why": why, "w": fit.w if use_fit else {**fit.w, **w_reid}, "D_joint_fit": D_fit,
                       "D_reidentified": D_reid, "w_reidentified": w_reid,
