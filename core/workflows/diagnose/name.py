@@ -278,8 +278,8 @@ FLAT_SIGMAS = 2.0
 
 
 def channel_gains(dmap: DiscrepancyMap, noise_model, alpha: float) -> list[dict[str, Any]]:
-    """Channel-level gains: a calibration error moves a channel's whole spectrum by 20 log10 g dB, which can stay
-    below ``min_db`` in every cell and still be certain over the channel.
+    """Channel-level gains: a calibration error g moves a channel's whole spectrum by 10 log10 g dB (Y = 5 log10
+    of the power, eq. 2), which can stay below ``min_db`` in every cell and still be certain over the channel.
 
     Per channel: the mean m̄ of its mean residuals over every bin and speed group, against its null sd
     sqrt(Σ σ_b σ_b' R_bb') / n (σ the bins' null sd, R their correlation under the noise model: a model-form
@@ -308,7 +308,7 @@ def channel_gains(dmap: DiscrepancyMap, noise_model, alpha: float) -> list[dict[
         band_sd = float(np.sqrt(np.mean((sd[:, k] @ grid.average) ** 2)))   # bins fully correlated: an upper bound
         flat = spread <= FLAT_SIGMAS * band_sd
         out.append({"channel": grid.channels[k], "mean_db": round(m, 4), "sd_db": round(s, 4), "z": round(z, 3),
-                    "p": p, "gain": round(10 ** (m / 20.0), 4), "significant": bool(p < alpha / K and flat),
+                    "p": p, "gain": round(10 ** (m / 10.0), 4), "significant": bool(p < alpha / K and flat),
                     "band_spread_db": round(spread, 4), "band_sd_db": round(band_sd, 4), "flat": bool(flat)})
     return out
 
