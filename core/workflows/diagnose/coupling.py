@@ -50,8 +50,9 @@ A channel is *tilted* when its coupling differs from the model's (Bonferroni ove
 channels at ``alpha``), its bands agree, and, with a twin, either the pair's difference
 is significant and this channel's own coupling is the further from the model's, or
 the twin is tilted alike (a shared tilt: both differ from the model, their difference
-does not). The angle is asin(β - β_model) (the calibration gains of both channels
-enter as their ratio).
+does not). Its estimate (``estimate``) is the pair's difference when its twin is not
+tilted (the difference removes what both ends share), else β - β_model. The angle is
+asin of it (the calibration gains of both channels enter as their ratio).
 """
 
 from __future__ import annotations
@@ -215,6 +216,13 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
         row["p"] = row["p_own"] if why is None else 1.0
         row["significant"] = bool(own_sig and why is None)
         row["note"] = why
+        row["estimate"] = "against the model's coupling"
+    for c, row in rows.items():
+        # a tilted channel whose twin is not tilted: the pair's difference is the better estimate (it removes the
+        # vehicle's own coupling and the estimation error both ends share: the same track under both)
+        if row["significant"] and row["twin"] is not None and not rows[row["twin"]]["significant"]:
+            row.update(beta=row["beta_pair"], se=row["se_pair"], t=row["t_pair"],
+                       estimate=f"against its twin {row['twin']}")
         row["angle_deg"] = math.degrees(math.asin(max(-1.0, min(1.0, row["beta"]))))
     return [rows[c] for c in lateral if c in rows]
 
