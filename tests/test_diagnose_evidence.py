@@ -291,3 +291,32 @@ def test_a_correction_in_the_records_obeys_the_naming_rule_per_channel():
     after[[B, B + 1]] = True                                  # two new cells on b_lateral
     assert "new cells" in correction_evidence(grid, "b_lateral", before, after, 0.1)[1]
     assert correction_evidence(grid, "b_lateral", before, np.zeros(grid.n_cells, bool), 0.1)[1] is None
+
+
+def test_a_level_both_twins_share_is_not_a_channel_gain():
+    """-0.6 dB on both bogie verticals (a level the model misses at a compromised suspension): each differs from the model
+    but not from its twin, no gain; +8 % on one of them only: a gain there."""
+    from suspid.method.noise import NoiseModel
+    from suspid.workflows.diagnose import calibrate_null, locate, make_cells
+    from suspid.workflows.diagnose.name import channel_gains
+
+    rng = np.random.default_rng(6)
+    f = np.linspace(0.5, 30.0, 60)
+    x = np.log2(f)
+    L = np.linalg.cholesky(np.exp(-0.5 * ((x[:, None] - x[None]) / 0.5) ** 2) + 0.3 * np.eye(f.size))
+    names = ["bogie_front_vertical", "bogie_rear_vertical", "carbody_middle_vertical"]
+    nm = NoiseModel().fit(0.3 * np.einsum("fg,vkg->vkf", L, rng.standard_normal((48, 3, f.size))),
+                          freqs=f, channels=names)
+    grid = make_cells(names, f, [80.0] * 40)
+    null = calibrate_null(grid, nm, 100, np.random.default_rng(2))
+    y_sim = rng.normal(size=(40, 3, f.size))
+    y_mes = y_sim + nm.sample(40, np.random.default_rng(7)) + nm.mean_
+    both = y_mes.copy()
+    both[:, :2] -= 0.6
+    gains = {g["channel"]: g for g in channel_gains(locate(grid, null, both, y_sim, nm.mean_), nm, 0.05)}
+    assert abs(gains["bogie_front_vertical"]["z"]) > 4 and gains["bogie_front_vertical"]["twin"] == "bogie_rear_vertical"
+    assert not any(g["significant"] for g in gains.values()), gains
+    one = y_mes.copy()
+    one[:, 0] += 10 * math.log10(1.08)
+    gains = {g["channel"]: g for g in channel_gains(locate(grid, null, one, y_sim, nm.mean_), nm, 0.05)}
+    assert gains["bogie_front_vertical"]["significant"] and not gains["bogie_rear_vertical"]["significant"], gains
