@@ -61,7 +61,7 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-from scipy.signal import csd, welch
+from scipy.signal import csd
 from scipy.stats import chi2
 from scipy.stats import t as student_t
 
@@ -233,36 +233,37 @@ def _estimate(records: Sequence, names: list[str], channel: str, f_band: tuple[f
     delete-one-record values. None when fewer than 3 records or 3 bins are usable."""
     k, kv = names.index(channel), names.index(vertical_partner(channel, names))
     kz = [names.index(z) for z in instruments(channel, names)]
-    recs = [r for r in records if np.asarray(r.accelerations).shape[1] >= 16]
-    if len(recs) < 3:
-        return None
-    fs = recs[0].fs
-    nper = min(min(np.asarray(r.accelerations).shape[1] for r in recs), int(round(segment_seconds * fs)))
     labels = list(groups) if groups is not None else [0] * len(records)
-    labels = [g for g, r in zip(labels, records) if np.asarray(r.accelerations).shape[1] >= 16]
-    keep = [i for i, r in enumerate(recs) if r.fs == fs]
-    recs, labels = [recs[i] for i in keep], [labels[i] for i in keep]
-    acc = [np.asarray(r.accelerations, float) for r in recs]
-    m = _min_len(acc)
-    X = np.array([a[k, :m] for a in acc])
-    f, s_xx = welch(X, fs=fs, nperseg=nper, axis=-1)
+    usable = [(r, g) for r, g in zip(records, labels) if np.asarray(r.accelerations).shape[1] >= 16]
+    if len(usable) < 3:
+        return None
+    fs = usable[0][0].fs
+    usable = [(r, g) for r, g in usable if r.fs == fs]
+    acc = [np.asarray(r.accelerations, float) for r, _ in usable]
+    labels = [g for _, g in usable]
+    nper = min(min(a.shape[1] for a in acc), int(round(segment_seconds * fs)))
+
+    def cross(i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Welch cross-spectra S_ij ``(n_records, F)`` of rows i and j of each record (its whole length)."""
+        out = [csd(a[i], a[j], fs=fs, nperseg=nper) for a in acc]
+        return out[0][0], np.array([c for _, c in out])
+
+    f, s_xx = cross(k, k)
+    s_xx = np.real(s_xx)
     use = (f >= f_band[0]) & (f <= f_band[1]) & (f > 0) & (s_xx.mean(axis=0) > 0)
     if use.sum() < 3:
         return None
     fu = f[use]
     edges = np.geomspace(fu[0], fu[-1] * (1 + 1e-9), n_bands + 1)
     band = np.clip(np.searchsorted(edges, fu, side="right") - 1, 0, n_bands - 1)
-    V = np.array([a[kv, :m] for a in acc])
     n_rec = len(acc)
     num, den = np.zeros(n_bands), np.zeros(n_bands)
     num_jk, den_jk = np.zeros((n_rec, n_bands)), np.zeros((n_rec, n_bands))
     sxx_mean = s_xx.mean(axis=0)[use]
     lab = np.array([str(g) for g in labels])
     for kzi in kz:
-        Z = np.array([a[kzi, :m] for a in acc])
-        _, s_zz = welch(Z, fs=fs, nperseg=nper, axis=-1)
-        _, s_xz = csd(X, Z, fs=fs, nperseg=nper, axis=-1)
-        _, s_vz = csd(V, Z, fs=fs, nperseg=nper, axis=-1)
+        s_zz = np.real(cross(kzi, kzi)[1])
+        s_xz, s_vz = cross(k, kzi)[1], cross(kv, kzi)[1]
         a, b = s_xz[:, use], s_vz[:, use]
         w = 1.0 / (sxx_mean * np.maximum(s_zz.mean(axis=0)[use], 1e-300))
         for g in np.unique(lab):
@@ -285,7 +286,3 @@ def _estimate(records: Sequence, names: list[str], channel: str, f_band: tuple[f
                 num_jk[sel, bb] += (Nj[:, on] * w[on]).sum(axis=1)
                 den_jk[sel, bb] += (Dj[:, on] * w[on]).sum(axis=1)
     return _Estimate(num, den, num_jk, den_jk)
-
-
-def _min_len(acc: list[np.ndarray]) -> int:
-    return min(a.shape[1] for a in acc)
