@@ -151,15 +151,15 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", 
     print(f"# bench_diagnose --independent --floor {floor} --at {at}  {datetime.date.today()}  {os.cpu_count()} cpus  load average {load:.2f}")
     print("| case (seed) | named (steps) | effect parameters | flagged before → after each step | "
           "errors before → after (% of interval; n.i.: not identifiable under the data-group check) | "
-          "unexplained (first) | s |")
-    print("|---|---|---|---|---|---|---|")
+          "unexplained (first) | channel-level gains | s |")
+    print("|---|---|---|---|---|---|---|---|")
     folder = contextlib.nullcontext(str(keep)) if keep is not None else tempfile.TemporaryDirectory()
     with folder as tmp:
         for seed in seeds:
             for case in cases or list(HE.CASES):
                 c = HE.CASES[case]
                 t0 = time.perf_counter()
-                path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref,
+                path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref, noise_asd=c.noise_asd,
                                   noise=_noise_options(floor), diagnose={"at": at})
                 d = suspid.diagnose(path).diagnosis
                 result_json = path.parent / "runs" / "config" / "before" / "result.json"
@@ -185,11 +185,13 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", 
                 errs = ", ".join(f"{n} {eb[n]:+.1f} → {ea[n]:+.1f}{mark[n]}" if n in ea else f"{n} {eb[n]:+.1f}{mark[n]}"
                                  for n in eb)
                 first = d["unexplained"][0]["text"] if d["unexplained"] else "-"
+                gains = ", ".join(f"{g['channel']} {100 * (g['gain'] - 1):+.1f} %"
+                                  for g in d.get("channel_gains") or [] if g["significant"]) or "-"
                 print(f"| {case} ({seed}) | {', '.join(d['named_effects']) or 'nothing'} | {params} | {seq} | "
-                      f"{errs} | {first} | {time.perf_counter() - t0:.0f} |", flush=True)
+                      f"{errs} | {first} | {gains} | {time.perf_counter() - t0:.0f} |", flush=True)
 
 
-SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg"}
+SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg", "applied"}
 """Effect parameters the table leaves out (fixed in the fits, or repeated)."""
 
 

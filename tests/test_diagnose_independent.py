@@ -126,7 +126,8 @@ def test_polygon_candidates_cover_sets_of_wheelsets():
 # ------------------------------------------------------------------------------------------ experiments
 def run_case(tmp_path: Path, case: str, seed: int, **kw) -> tuple[dict, dict]:
     c = HE.CASES[case]
-    path = HE.prepare(tmp_path / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref, **kw)
+    path = HE.prepare(tmp_path / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref,
+                      noise_asd=c.noise_asd, **kw)
     d = suspid.diagnose(path).diagnosis
     errors = HE.parameter_errors(d, path.parent / "measurement" / "truth.json",
                                  path.parent / "runs" / "config" / "before" / "result.json")
@@ -227,16 +228,17 @@ def test_coupling_test_reads_the_tilt_from_the_cross_spectrum():
     from suspid.workflows.diagnose.coupling import coupling_test
 
     rng = np.random.default_rng(0)
-    channels = ["bogie_front_vertical", "bogie_front_lateral"]
+    channels = ["bogie_front_vertical", "bogie_front_lateral", "bogie_rear_vertical"]
 
     def records(angle_deg):
         a = math.radians(angle_deg)
         out = []
         for _ in range(24):
-            v = np.convolve(rng.standard_normal(800), np.ones(5) / 5, "same")
+            s = np.convolve(rng.standard_normal(820), np.ones(5) / 5, "same")
+            v, z = s[:800], s[20:]                                 # z: the vertical further on (the instrument)
             lat = 0.5 * rng.standard_normal(800)                  # lateral above vertical: power hardly changes
             x = math.cos(a) * lat + math.sin(a) * v
-            out.append(SimpleNamespace(accelerations=np.array([v, x]), fs=100.0))
+            out.append(SimpleNamespace(accelerations=np.array([v, x, z]), fs=100.0))
         return out
 
     tilted = coupling_test(records(6.0), channels, (0.4, 40.0))[0]
@@ -247,8 +249,9 @@ def test_coupling_test_reads_the_tilt_from_the_cross_spectrum():
 
 def test_coupling_against_the_twin_sensor_removes_the_vehicles_own_coupling():
     """Both bogies couple lateral and vertical by the same amount on a set of segments (0.03, the order of the
-    independent train's, which shifts both bogies together); the front sensor is tilted by 6°. The raw β of the
-    front channel is off by the own coupling, its difference with the rear (its twin) is not; nothing is found
+    independent train's, which shifts both bogies together); the front sensor is tilted by 6°; each bogie's
+    vertical is the other's instrument. The raw β of the front channel is off by the own coupling, its
+    difference with the model's coupling (given as 0.03) and with the rear (its twin) is not; nothing is found
     on the untilted twin, and without the tilt nothing at all."""
     from types import SimpleNamespace
 
@@ -257,22 +260,77 @@ def test_coupling_against_the_twin_sensor_removes_the_vehicles_own_coupling():
     channels = ["bogie_front_vertical", "bogie_front_lateral", "bogie_rear_vertical", "bogie_rear_lateral"]
     assert twin("bogie_front_lateral", channels) == "bogie_rear_lateral" and twin("carbody_middle_x", channels) is None
 
-    def records(angle_deg, seed=1):
+    def records(angle_deg, seed=1, own=0.03):
         rng = np.random.default_rng(seed)
-        a, own = math.radians(angle_deg), 0.03
+        a = math.radians(angle_deg)
         out = []
         for _ in range(24):
+            s = np.convolve(rng.standard_normal(840), np.ones(5) / 5, "same")   # the track: the rear 0.2 s later
             rows = []
-            for tilt in (a, 0.0):
-                v = np.convolve(rng.standard_normal(800), np.ones(5) / 5, "same")
+            for tilt, v in ((a, s[20:820]), (0.0, s[:800])):
                 lat = 0.5 * rng.standard_normal(800) + own * v
                 rows += [v, math.cos(tilt) * lat + math.sin(tilt) * v]
             out.append(SimpleNamespace(accelerations=np.array(rows), fs=100.0))
         return out
 
-    rows = {r["channel"]: r for r in coupling_test(records(6.0), channels, (0.4, math.inf))}
+    rows = {r["channel"]: r for r in coupling_test(records(6.0), channels, (0.4, math.inf),
+                                                   model_coupling={c: 0.03 for c in channels})}
     front, rear = rows["bogie_front_lateral"], rows["bogie_rear_lateral"]
     assert front["significant"] and not rear["significant"] and front["twin"] == "bogie_rear_lateral"
     assert front["angle_deg"] == pytest.approx(6.0, rel=0.1)
     assert math.degrees(math.asin(front["beta_raw"])) == pytest.approx(6.0 + math.degrees(0.03), rel=0.1)
-    assert not any(r["significant"] for r in coupling_test(records(0.0, seed=2), channels, (0.4, math.inf)))
+    # against a model without the vehicle's coupling (0) the untilted rear differs from it, but not from its twin
+    # beyond the tilt: the pair says the front is the tilted one
+    rows0 = {r["channel"]: r for r in coupling_test(records(6.0), channels, (0.4, math.inf))}
+    assert rows0["bogie_front_lateral"]["significant"] and not rows0["bogie_rear_lateral"]["significant"]
+    assert not any(r["significant"] for r in coupling_test(records(0.0, seed=2), channels, (0.4, math.inf),
+                                                            model_coupling={c: 0.03 for c in channels}))
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_shared_tilt_under_sensor_noise_is_named(tmp_path, seed):
+    """4° on both bogies' lateral sensors (twins: their difference cancels it) and on the mid-car one, 0.005 m/s²
+    of white sensor noise: named from the coupling (instrumental variables against the model's coupling) on the
+    three channels, the angle within 10 %."""
+    d, _ = run_case(tmp_path, "shared-tilt", seed)
+    assert "sensor-tilt" in d["named_effects"], d["reason"]
+    tilt = next(e for e in d["effects"] if e["name"] == "sensor-tilt")["parameters"]
+    assert set(tilt["channels"]) == {"bogie_front_lateral", "bogie_rear_lateral", "carbody_middle_lateral"}, tilt
+    assert abs(tilt["angle_deg"] - 4.0) <= 0.4, tilt
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_lateral_bracket_is_never_named(tmp_path, seed):
+    """A bracket resonance (14 Hz) on one carbody lateral sensor: nothing named (no tilt on it or its untouched
+    twin), the resonance reported unexplained on its channel."""
+    d, _ = run_case(tmp_path, "bracket-lateral", seed)
+    assert d["named_effects"] == [], d["reason"]
+    hits = [u for u in d["unexplained"] if u["channel"] == "carbody_front_lateral"
+            and u["f_low_hz"] <= 14.0 <= u["f_high_hz"]]
+    assert hits and "no catalogue effect fits" in hits[0]["text"], d["unexplained"]
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_one_wheelset_polygon_is_named_with_its_order(tmp_path, seed):
+    d, _ = run_case(tmp_path, "polygon-one", seed)
+    assert "wheel-polygon" in d["named_effects"], d["reason"]
+    assert _main(d, "wheel-polygon") == 1, d["effects"]
+
+
+@pytest.mark.slow
+@pytest.mark.acceptance
+@pytest.mark.parametrize("seed", SEEDS)
+def test_independent_channel_gain_is_reported(tmp_path, seed):
+    """+8 % on one channel (0.67 dB, below min_db in every cell): reported as a channel-level gain there."""
+    d, _ = run_case(tmp_path, "gain-8", seed)
+    gains = {g["channel"]: g for g in d["channel_gains"] if g["significant"]}
+    assert "bogie_rear_vertical" in gains, d["channel_gains"]
+    assert gains["bogie_rear_vertical"]["gain"] == pytest.approx(1.08, abs=0.03)
+    assert any(u.get("kind") == "channel-level gain" and u["channel"] == "bogie_rear_vertical"
+               for u in d["unexplained"])

@@ -162,13 +162,14 @@ def simulate(w: Mapping[str, float] | None, hidden: Sequence = (), *, seed: int,
 
 def generate_date(out_dir: str | Path, w: Mapping[str, float] | None, hidden: Sequence = (), *, seed: int,
                   n_segments: int, speeds_kmh: Sequence[float] = (300.0,), length_m: float = 600.0,
-                  instrument_seed: int = 0, chainage_m: float = 10_000.0) -> Path:
+                  instrument_seed: int = 0, chainage_m: float = 10_000.0,
+                  instrument: TR.Instrument = TR.Instrument()) -> Path:
     """Write one date's files (``track/``, ``accelerations/``, ``truth.json``): ``n_segments`` per speed."""
     out = Path(out_dir)
     recs = []
     for i, kmh in enumerate(speeds_kmh):
         recs += simulate(w, hidden, seed=int(seed) * 10 + i, n_segments=n_segments, speed_mps=kmh / 3.6,
-                         length_m=length_m, instrument_seed=instrument_seed,
+                         length_m=length_m, instrument_seed=instrument_seed, instrument=instrument,
                          chainage_m=chainage_m + i * 100_000.0, prefix=f"v{int(kmh)}")
     for rec in recs:
         TR._write_atomic(out / "track" / f"{rec.name}.csv", TR._track_csv(rec))
@@ -189,7 +190,7 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
             n_reference: int = 48, speeds_kmh: Sequence[float] = (300.0,),
             w_ref: Mapping[str, float] | None = None, w_reference: Mapping[str, float] | None = None,
             identified: Sequence[str] = tuple(VERTICAL_W_REF), diagnose: Mapping | None = None,
-            ego: Mapping | None = None, noise: Mapping | None = None) -> Path:
+            ego: Mapping | None = None, noise: Mapping | None = None, noise_asd: float | None = None) -> Path:
     """Both dates (the reference date without ``hidden``, at ``w_reference``, default w0; the measurement date
     with it, at ``w_ref``, default w0 too), the reference noise model and a ``suspid diagnose`` config; returns
     its path.
@@ -200,17 +201,19 @@ def prepare(out_dir: str | Path, hidden: Sequence = (), *, seed: int = 3, n_segm
     experiments are about.
 
     The consumer side: uses suspid to fit the noise model (with the ``noise:`` options ``noise``, e.g. a
-    sensor-noise floor) and reads nothing of the truth.
+    sensor-noise floor) and reads nothing of the truth. ``noise_asd``: the sensors' white noise (m/s²/√Hz) on
+    both dates (default: :class:`.train.Instrument`'s).
     """
     from .protocol import fit_reference_noise, write_config
     import yaml
 
     out = Path(out_dir).resolve()
     w_mes = dict(w_ref or {})
+    inst = TR.Instrument() if noise_asd is None else TR.Instrument(noise_asd=noise_asd)
     ref = generate_date(out / "reference", w_reference, (), seed=2 * seed + 1, n_segments=n_reference,
-                        speeds_kmh=speeds_kmh, instrument_seed=seed)
+                        speeds_kmh=speeds_kmh, instrument_seed=seed, instrument=inst)
     mes = generate_date(out / "measurement", w_mes, hidden, seed=2 * seed + 2, n_segments=n_segments,
-                        speeds_kmh=speeds_kmh, instrument_seed=seed, chainage_m=200_000.0)
+                        speeds_kmh=speeds_kmh, instrument_seed=seed, chainage_m=200_000.0, instrument=inst)
     noise_path = fit_reference_noise(ref, out / "noise.npz", spectra=SPECTRA, noise=noise)
     path = write_config(out / "config.yaml", mes, noise_path, seed=seed, objective="likelihood", n_initial=16,
                         max_iter=20, identified=tuple(identified))
@@ -251,7 +254,13 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     case = CASES[a.case]
     print(prepare(a.out_dir, case.hidden, seed=a.seed, n_segments=a.segments, n_reference=a.segments + 8,
-                  speeds_kmh=case.speeds, w_ref=VERTICAL_W_REF if a.damaged else case.w_ref))
+                  speeds_kmh=case.speeds, w_ref=VERTICAL_W_REF if a.damaged else case.w_ref,
+                  noise_asd=case.noise_asd))
+
+
+SENSOR_NOISE_ASD = 7.5e-4
+"""White sensor noise, m/s²/√Hz: 0.005 m/s² rms in the 0-40 Hz band the anti-alias filter passes (a
+realistic floor for service accelerometers and their cabling; the instrument's default is a quiet laboratory's)."""
 
 
 class Case(NamedTuple):
@@ -261,6 +270,7 @@ class Case(NamedTuple):
     hidden: tuple
     speeds: tuple[float, ...]
     w_ref: Mapping[str, float] | None = None
+    noise_asd: float | None = None
 
 
 CASES: dict[str, Case] = {
@@ -273,6 +283,13 @@ CASES: dict[str, Case] = {
     "tilt": Case((SensorTilt("bogie_front_lateral", 6.0),), (300.0,)),
     "polygon": Case((WheelPolygon(1, 1.0e-4, (2, 3)),), (200.0, 300.0)),
     "bending+tilt": Case((FlexibleCarbody(9.5, 0.02), SensorTilt("bogie_front_lateral", 6.0)), (300.0,)),
+    "shared-tilt": Case(tuple(SensorTilt(c, 4.0) for c in ("bogie_front_lateral", "bogie_rear_lateral",
+                                                            "carbody_middle_lateral")), (300.0,),
+                        noise_asd=SENSOR_NOISE_ASD),
+    "bracket-lateral": Case((BracketResonance("carbody_front_lateral", 14.0, 0.05),), (300.0,),
+                            noise_asd=SENSOR_NOISE_ASD),
+    "polygon-one": Case((WheelPolygon(1, 1.0e-4, (3,), (0.3,)),), (200.0, 300.0)),
+    "gain-8": Case((CalibrationGain(("bogie_rear_vertical",), 1.08),), (300.0,)),
 }
 """The experiments (``other-suspension``: no hidden effect, the measurement date at :data:`VERTICAL_W_REF`)."""
 

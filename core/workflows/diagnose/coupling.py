@@ -2,31 +2,57 @@
 
 Method: ``docs/diagnose.md``, "Sensor tilt from the coupling".
 
-A lateral accelerometer tilted by α reads x = cos α a_lat + sin α a_vert. The
-vertical channel at the same point reads v = a_vert. If a_lat and a_vert were
-uncorrelated, the regression of x on v would be H(f) = S_vx / S_vv = sin α at
-every frequency: a real constant. The power spectrum of x changes by
-sin²α V / L only, invisible where the lateral motion dominates (0.1-0.4 dB for
-6-10° on a bogie); the cross-spectrum shows sin α directly.
+A lateral accelerometer tilted by α reads x = cos α a_lat + sin α a_vert + n_x. The
+vertical channel at the same point reads v = a_vert + n_v, n_x and n_v the sensors'
+own noise. If a_lat and a_vert were uncorrelated, x = sin α v + ... would have the real
+constant coupling H(f) = sin α at every frequency. The power spectrum of x changes by
+sin²α V / L only, invisible where the lateral motion dominates; the cross-spectrum
+shows sin α directly.
 
-Per segment i: β_i = Σ_f Re S_vx,i / S̄_xx ÷ Σ_f S_vv,i / S̄_xx over the band
-(a weighted least-squares estimate of the constant H, weights 1 / S̄_xx, S̄_xx the
-mean over the segments: a segment's own S_xx would correlate with its cross-spectrum).
+**Errors in variables.** The regression of x on v, S_vx / S_vv, is biased toward zero
+by the sensor noise of the regressor: S_vv = S_aa + S_nn. Where the vertical signal is
+near the noise floor (a carbody's vertical above 15 Hz), most of the weight goes to
+bins where the estimate is noise: on the independent train with 0.005 m/s² of white
+sensor noise the mid-car coefficient came out 0.003 for a true 0.070. The estimator
+here is an *instrumental variable*: every other vertical channel z of the vehicle (the
+twin sensor's, the other points of the same body, the bogies') sees the same track, so
+it correlates with a_vert, and its own sensor noise is independent of n_v and n_x.
+Per speed group g, frequency f and instrument z:
 
-A real vehicle has a lateral-vertical coupling of its own (asymmetric contact
-geometry, gauge, creep): on the independent train β of an untilted bogie
-sensor is ±0.02 from one set of track segments to another, a sixth of a 6°
-tilt, and the same set moves both bogies' β together (their per-segment β
-correlate by 0.9: the same track, the same dynamics). So a lateral channel with
-a *twin* (the same sensor on the other bogie or carbody end: ``front`` and
-``rear`` swapped in its name) is tested on the paired difference
-d_i = β_i - β_twin,i: the coupling the twin does not have. Of a pair whose
-difference is significant, the channel with the larger |mean β| is the
-tilted one and its estimate is ±mean d (a tilt shared by both twins is taken
-for the vehicle's own coupling). A channel without a twin is tested on its own
-β. The estimate's standard error comes from the spread over segments, t with
-v - 1 degrees of freedom, Bonferroni over the tests at ``alpha``. The angle is
-asin β (the calibration gains of both channels enter as their ratio).
+    β = Σ w_zf Re(S_xz conj S_vz)  ÷  Σ w_zf |S_vz|²,     w_zf = 1 / (S̄_xx S̄_zz)
+
+with S_xz, S_vz the cross-spectra summed over the group's records and the products of
+a record with *itself* left out (Σ_{i≠j} a_i conj b_j: a record's own cross-spectra
+share their estimation noise, whose product would bring back a bias of order
+S_nn S_zz / (records × windows)). The records of a group are independent stretches of
+track at one speed, so each cross-spectrum has one expectation across them. β is the
+coupling of x with the part of v the vehicle's other sensors share: sin α plus the
+vehicle's own lateral-vertical coupling, whatever the sensor noise.
+
+**Uncertainty.** The delete-one-record jackknife over all records (the instrument sums
+recomputed without the record), t with n - 1 degrees of freedom.
+
+**What it is tested against.**
+
+- *The model's own coupling* β_model (``model_coupling``; 0 for a vehicle model whose
+  vertical and lateral motions are uncoupled, a symmetric linear one): a tilt shared by
+  both twins shows here, where it cancels in their difference.
+- *The twin* (the same sensor at the other end: ``front`` and ``rear`` swapped): the
+  paired difference d = β - β_twin over the same deletions, which removes the part of
+  the vehicle's own coupling both ends share.
+- *A reference date* (``reference``): its coupling, by the same estimator, subtracted.
+- *Constancy over frequency*: a tilt is a constant; a bracket resonance or the
+  vehicle's own coupling is not. β is estimated in ``n_bands`` frequency bands and their
+  spread about the common value is tested (χ² on the jackknife covariance of the band
+  deviations); a channel whose bands disagree is not taken for a tilt.
+
+A channel is *tilted* when its coupling differs from the model's (Bonferroni over the
+channels at ``alpha``), its bands agree, and, with a twin, either the pair's difference
+is significant and this channel's own coupling is the further from the model's, or
+the twin is tilted alike (a shared tilt: both differ from the model, their difference
+does not). Its estimate (``estimate``) is the pair's difference when its twin is not
+tilted (the difference removes what both ends share), else β - β_model. The angle is
+asin of it (the calibration gains of both channels enter as their ratio).
 """
 
 from __future__ import annotations
@@ -35,7 +61,8 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-from scipy.signal import csd, welch
+from scipy.signal import csd
+from scipy.stats import chi2
 from scipy.stats import t as student_t
 
 from suspid.data.corrections import vertical_partner
@@ -50,84 +77,212 @@ def twin(channel: str, channels: Sequence[str]) -> str | None:
     return None
 
 
+def instruments(channel: str, channels: Sequence[str]) -> list[str]:
+    """The vertical channels other than ``channel``'s own vertical: its instruments."""
+    own = vertical_partner(channel, channels)
+    return [c for c in channels if "vertical" in c and c != own]
+
+
+class _Estimate:
+    """β of one channel in bands, with every delete-one-record value (jackknife).
+
+    :ivar num, den: ``(n_bands,)`` the estimator's sums; :ivar num_jk, den_jk: ``(n_records, n_bands)`` the
+        same sums without each record.
+    """
+
+    def __init__(self, num: np.ndarray, den: np.ndarray, num_jk: np.ndarray, den_jk: np.ndarray) -> None:
+        self.num, self.den, self.num_jk, self.den_jk = num, den, num_jk, den_jk
+
+    @property
+    def n(self) -> int:
+        return int(self.num_jk.shape[0])
+
+    def beta(self) -> float:
+        return float(self.num.sum() / self.den.sum()) if self.den.sum() > 0 else 0.0
+
+    def beta_jk(self) -> np.ndarray:
+        """``(n_records,)`` β without each record."""
+        return self.num_jk.sum(axis=1) / np.where(self.den_jk.sum(axis=1) > 0, self.den_jk.sum(axis=1), np.nan)
+
+    def bands(self) -> np.ndarray:
+        return self.num / np.where(self.den > 0, self.den, np.nan)
+
+    def bands_jk(self) -> np.ndarray:
+        return self.num_jk / np.where(self.den_jk > 0, self.den_jk, np.nan)
+
+
+def _jackknife_se(values_jk: np.ndarray) -> float:
+    """Jackknife standard error of a statistic from its delete-one values ``(n,)``."""
+    v = values_jk[np.isfinite(values_jk)]
+    n = v.size
+    return float(math.sqrt((n - 1) / n * np.sum((v - v.mean()) ** 2))) if n >= 3 else math.inf
+
+
+def _jackknife_cov(values_jk: np.ndarray) -> np.ndarray:
+    """Jackknife covariance ``(p, p)`` of a vector statistic from its delete-one values ``(n, p)``."""
+    n = values_jk.shape[0]
+    d = values_jk - values_jk.mean(axis=0)
+    return (n - 1) / n * d.T @ d
+
+
 def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[float, float], alpha: float = 0.05,
-                  segment_seconds: float = 2.56, reference: Sequence | None = None) -> list[dict[str, Any]]:
-    """The coupling of each lateral channel with the vertical channel at its point.
+                  segment_seconds: float = 2.56, reference: Sequence | None = None,
+                  groups: Sequence | None = None, reference_groups: Sequence | None = None,
+                  model_coupling: dict[str, float] | None = None, n_bands: int = 4) -> list[dict[str, Any]]:
+    """The coupling of each lateral channel with the vertical channel at its point (module docstring).
 
     :param records: responses with ``accelerations`` ``(n_channels, n_t)`` m/s² and ``fs`` Hz, channels in the
         order of ``channels``.
     :param f_band: ``(f_min, f_max)`` Hz, the band the estimate uses (clipped to the records' Nyquist frequency).
-    :param reference: records of the reference date: their coupling, by the same estimator, is subtracted with
-        its standard error.
-    :returns: per lateral channel with a vertical partner: ``{channel, vertical, twin, beta, se, t, p,
-        angle_deg, significant, n_segments, beta_raw, beta_reference}``; ``beta`` is the estimate tested
-        (against the twin when there is one, ``beta_raw`` the channel's own).
+    :param reference: records of the reference date: their coupling is subtracted with its standard error.
+    :param groups: ``(n_records,)`` the speed group of each record (records of one group have one
+        cross-spectrum in expectation); default: one group.
+    :param model_coupling: the model's own coupling per lateral channel (default 0).
+    :param n_bands: bands (equal in log frequency) of the constancy test.
+    :returns: per lateral channel with a vertical partner and instruments: ``{channel, vertical, twin,
+        instruments, beta, se, t, p, angle_deg, significant, n_segments, beta_raw, se_raw, beta_model,
+        beta_reference, t_own, beta_pair, se_pair, t_pair, bands, constancy_p, constant, note}``; ``beta`` is the
+        estimate of sin α (the coupling beyond the model's and the reference date's), ``beta_raw`` the
+        channel's own coupling.
     """
     names = list(channels)
-    lateral = [c for c in names if vertical_partner(c, names) is not None]
-    betas = {c: _betas(records, names.index(c), names.index(vertical_partner(c, names)), f_band, segment_seconds)
-             for c in lateral}
-    ref = ({c: _betas(reference, names.index(c), names.index(vertical_partner(c, names)), f_band, segment_seconds)
+    lateral = [c for c in names if vertical_partner(c, names) is not None and instruments(c, names)]
+    model_coupling = dict(model_coupling or {})
+    est = {c: _estimate(records, names, c, f_band, segment_seconds, groups, n_bands) for c in lateral}
+    ref = ({c: _estimate(reference, names, c, f_band, segment_seconds, reference_groups, n_bands)
             for c in lateral} if reference is not None else {})
-    out = []
+    rows: dict[str, dict[str, Any]] = {}
     for c in lateral:
-        b = betas[c]
-        if b.size < 3:
+        e = est[c]
+        if e is None or e.n < 3:
             continue
-        t_name = twin(c, lateral)
-        paired = t_name is not None and betas[t_name].size == b.size
-        has_ref = ref.get(c) is not None and ref[c].size >= 3
-        if paired and has_ref and ref[t_name].size != ref[c].size:
-            paired = False                       # pair both dates or neither
-        d = b - betas[t_name] if paired else b
-        beta, se, n = float(d.mean()), float(d.std(ddof=1) / math.sqrt(d.size)), d.size
-        b0 = None
-        if has_ref:
-            d0 = ref[c] - ref[t_name] if paired else ref[c]
-            b0 = float(d0.mean())
-            beta, se = beta - b0, math.hypot(se, float(d0.std(ddof=1) / math.sqrt(d0.size)))
-            n = min(n, d0.size)
-        t = beta / se if se > 0 else 0.0
-        p = float(2 * student_t.sf(abs(t), n - 1))
-        # of a pair, the tilted one is the channel whose own coupling (beyond the reference date's) is further
-        # from zero; the vehicle's coupling of opposite sign and about half the tilt's can mislead this for
-        # small tilts (docs/diagnose.md, Limits)
-        own = abs(b.mean() - (ref[c].mean() if has_ref else 0.0))
-        own_twin = abs(betas[t_name].mean() - (ref[t_name].mean() if has_ref else 0.0)) if paired else 0.0
-        candidate = not paired or own >= own_twin
-        out.append({"channel": c, "vertical": vertical_partner(c, names), "twin": t_name if paired else None,
-                    "beta": beta, "se": se, "t": t, "p": p if candidate else 1.0,
-                    "angle_deg": math.degrees(math.asin(max(-1.0, min(1.0, beta)))), "n_segments": int(b.size),
-                    "beta_raw": float(b.mean()), "beta_reference": b0,
-                    "note": None if candidate else f"its twin {t_name} is the further from zero: the pair's "
-                                                   f"difference is tested there"})
-    tests = len(out) - sum(1 for r in out if r["twin"] is not None) // 2
-    for row in out:
-        row["significant"] = bool(row["p"] < alpha / max(1, tests))
-    return out
+        b_raw, se_raw = e.beta(), _jackknife_se(e.beta_jk())
+        b0, se0 = model_coupling.get(c, 0.0), 0.0
+        r = ref.get(c)
+        if r is not None and r.n >= 3:
+            b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
+        beta, se = b_raw - b0, math.hypot(se_raw, se0)
+        n = e.n if r is None else min(e.n, r.n)
+        t_own = beta / se if se > 0 else 0.0
+        # constancy: the band estimates about their common value
+        bands, bands_jk = e.bands(), e.bands_jk()
+        ok = np.isfinite(bands) & np.all(np.isfinite(bands_jk), axis=0)
+        constancy_p = 1.0
+        if ok.sum() >= 2:
+            dev = bands[ok] - b_raw
+            dev_jk = bands_jk[:, ok] - e.beta_jk()[:, None]
+            cov = _jackknife_cov(dev_jk)
+            stat = float(dev @ np.linalg.pinv(cov, rcond=1e-10) @ dev)
+            constancy_p = float(chi2.sf(stat, int(ok.sum()) - 1))
+        rows[c] = {"channel": c, "vertical": vertical_partner(c, names), "twin": None,
+                   "instruments": instruments(c, names), "beta": beta, "se": se, "t": t_own,
+                   "p_own": float(2 * student_t.sf(abs(t_own), max(n - 1, 1))), "n_segments": e.n,
+                   "beta_raw": b_raw, "se_raw": se_raw, "beta_model": model_coupling.get(c, 0.0),
+                   "beta_reference": None if r is None else r.beta(), "t_own": t_own,
+                   "bands": [None if not math.isfinite(v) else float(v) for v in bands],
+                   "constancy_p": constancy_p, "beta_pair": None, "se_pair": None, "t_pair": None,
+                   "p_pair": None, "note": None}
+    for c, row in rows.items():
+        t_name = twin(c, list(rows))
+        if t_name is None or est[t_name].n != est[c].n:
+            continue
+        d = est[c].beta() - est[t_name].beta()
+        d_jk = est[c].beta_jk() - est[t_name].beta_jk()
+        se_d = _jackknife_se(d_jk)
+        if ref.get(c) is not None and ref.get(t_name) is not None and ref[c].n == ref[t_name].n:
+            d -= ref[c].beta() - ref[t_name].beta()
+            se_d = math.hypot(se_d, _jackknife_se(ref[c].beta_jk() - ref[t_name].beta_jk()))
+        t_pair = d / se_d if se_d > 0 else 0.0
+        row.update(twin=t_name, beta_pair=d, se_pair=se_d, t_pair=t_pair,
+                   p_pair=float(2 * student_t.sf(abs(t_pair), max(row["n_segments"] - 1, 1))))
+    tests = max(1, len(rows))
+    level = alpha / tests
+    for c, row in rows.items():
+        row["constant"] = bool(row["constancy_p"] >= alpha)
+        own_sig = row["p_own"] < level
+        why = None
+        if row["twin"] is not None:
+            other = rows[row["twin"]]
+            pair_sig = row["p_pair"] < level
+            other_sig = other["p_own"] < level
+            if pair_sig and abs(row["beta"]) < abs(other["beta"]):
+                why = (f"the pair differs, and its twin {row['twin']} is the further from the model's coupling: "
+                       f"the twin is the candidate")
+            elif not pair_sig and not other_sig and own_sig:
+                why = f"its twin {row['twin']} differs from the model's coupling neither alone nor in the pair"
+        if not row["constant"]:
+            why = (f"its coupling is not constant over frequency (p {row['constancy_p']:.2g}): not a tilt (a "
+                   f"resonance of the sensor or the vehicle's own coupling)") + (f"; {why}" if why else "")
+        row["p"] = row["p_own"] if why is None else 1.0
+        row["significant"] = bool(own_sig and why is None)
+        row["note"] = why
+        row["estimate"] = "against the model's coupling"
+    for c, row in rows.items():
+        # a tilted channel whose twin is not tilted: the pair's difference is the better estimate (it removes the
+        # vehicle's own coupling and the estimation error both ends share: the same track under both)
+        if row["significant"] and row["twin"] is not None and not rows[row["twin"]]["significant"]:
+            row.update(beta=row["beta_pair"], se=row["se_pair"], t=row["t_pair"],
+                       estimate=f"against its twin {row['twin']}")
+        row["angle_deg"] = math.degrees(math.asin(max(-1.0, min(1.0, row["beta"]))))
+    return [rows[c] for c in lateral if c in rows]
 
 
-def _betas(records: Sequence, k: int, kv: int, f_band: tuple[float, float], segment_seconds: float) -> np.ndarray:
-    """β_i of every record (see the module docstring). The weights 1 / S_xx come from the mean of S_xx over all
-    records: a record's own S_xx correlates with its cross-spectrum and would bias β_i towards 0."""
-    spectra = []
-    for r in records:
-        x, y = np.asarray(r.accelerations[k], float), np.asarray(r.accelerations[kv], float)
-        n = min(x.size, int(round(segment_seconds * r.fs)))
-        if n < 16:
-            continue
-        f, s_xx = welch(x, fs=r.fs, nperseg=n)
-        _, s_vv = welch(y, fs=r.fs, nperseg=n)
-        _, s_vx = csd(y, x, fs=r.fs, nperseg=n)
-        spectra.append((f, s_xx, s_vv, np.real(s_vx)))
-    if not spectra:
-        return np.array([])
-    f0 = spectra[0][0]
-    spectra = [s for s in spectra if s[0].shape == f0.shape and np.allclose(s[0], f0)]
-    use = (f0 >= f_band[0]) & (f0 <= f_band[1]) & (f0 > 0)
-    mean_xx = np.mean([s[1] for s in spectra], axis=0)
-    use &= mean_xx > 0
+def _estimate(records: Sequence, names: list[str], channel: str, f_band: tuple[float, float],
+              segment_seconds: float, groups: Sequence | None, n_bands: int) -> _Estimate | None:
+    """The instrumental-variable sums of ``channel`` (module docstring), in ``n_bands`` bands, with their
+    delete-one-record values. None when fewer than 3 records or 3 bins are usable."""
+    k, kv = names.index(channel), names.index(vertical_partner(channel, names))
+    kz = [names.index(z) for z in instruments(channel, names)]
+    labels = list(groups) if groups is not None else [0] * len(records)
+    usable = [(r, g) for r, g in zip(records, labels) if np.asarray(r.accelerations).shape[1] >= 16]
+    if len(usable) < 3:
+        return None
+    fs = usable[0][0].fs
+    usable = [(r, g) for r, g in usable if r.fs == fs]
+    acc = [np.asarray(r.accelerations, float) for r, _ in usable]
+    labels = [g for _, g in usable]
+    nper = min(min(a.shape[1] for a in acc), int(round(segment_seconds * fs)))
+
+    def cross(i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """Welch cross-spectra S_ij ``(n_records, F)`` of rows i and j of each record (its whole length)."""
+        out = [csd(a[i], a[j], fs=fs, nperseg=nper) for a in acc]
+        return out[0][0], np.array([c for _, c in out])
+
+    f, s_xx = cross(k, k)
+    s_xx = np.real(s_xx)
+    use = (f >= f_band[0]) & (f <= f_band[1]) & (f > 0) & (s_xx.mean(axis=0) > 0)
     if use.sum() < 3:
-        return np.array([])
-    w = 1.0 / mean_xx[use]
-    return np.array([float(np.sum(c[use] * w) / np.sum(v[use] * w)) for _, _, v, c in spectra])
+        return None
+    fu = f[use]
+    edges = np.geomspace(fu[0], fu[-1] * (1 + 1e-9), n_bands + 1)
+    band = np.clip(np.searchsorted(edges, fu, side="right") - 1, 0, n_bands - 1)
+    n_rec = len(acc)
+    num, den = np.zeros(n_bands), np.zeros(n_bands)
+    num_jk, den_jk = np.zeros((n_rec, n_bands)), np.zeros((n_rec, n_bands))
+    sxx_mean = s_xx.mean(axis=0)[use]
+    lab = np.array([str(g) for g in labels])
+    for kzi in kz:
+        s_zz = np.real(cross(kzi, kzi)[1])
+        s_xz, s_vz = cross(k, kzi)[1], cross(kv, kzi)[1]
+        a, b = s_xz[:, use], s_vz[:, use]
+        w = 1.0 / (sxx_mean * np.maximum(s_zz.mean(axis=0)[use], 1e-300))
+        for g in np.unique(lab):
+            sel = lab == g
+            A, B = a[sel].sum(axis=0), b[sel].sum(axis=0)
+            dn = np.real(a[sel] * np.conj(b[sel]))                   # (n_g, F) a record with itself
+            dd = np.abs(b[sel]) ** 2
+            N_f = np.real(A * np.conj(B)) - dn.sum(axis=0)
+            D_f = np.abs(B) ** 2 - dd.sum(axis=0)
+            # without record i of the group: sums (A - a_i), (B - b_i), its own product removed
+            Nj = np.real((A - a[sel]) * np.conj(B - b[sel])) - (dn.sum(axis=0) - dn)
+            Dj = np.abs(B - b[sel]) ** 2 - (dd.sum(axis=0) - dd)
+            for bb in range(n_bands):
+                on = band == bb
+                nb, db = float((w * N_f)[on].sum()), float((w * D_f)[on].sum())
+                num[bb] += nb
+                den[bb] += db
+                num_jk[~sel, bb] += nb                    # a record of another group: this group's sums whole
+                den_jk[~sel, bb] += db
+                num_jk[sel, bb] += (Nj[:, on] * w[on]).sum(axis=1)
+                den_jk[sel, bb] += (Dj[:, on] * w[on]).sum(axis=1)
+    return _Estimate(num, den, num_jk, den_jk)

@@ -101,9 +101,10 @@ class EffectFitter:
 
     def __init__(self, config: Config, problem, w: dict[str, float], discrepancy: Discrepancy,
                  flagged: list[tuple[str, float, float, float]], options: DiagnoseOptions,
-                 log: Callable[[str], None] = lambda s: None) -> None:
+                 log: Callable[[str], None] = lambda s: None, blocked: dict[str, set[str]] | None = None) -> None:
         self.config, self.problem, self.w, self.disc, self.flagged, self.opts, self.log = (
             config, problem, dict(w), discrepancy, flagged, options, log)
+        self.blocked = {k: set(v) for k, v in (blocked or {}).items()}
         self.sim_cls = type(problem.simulator)
         self.file = str(config.source_file)
         self._sims: dict[str, Any] = {}
@@ -145,8 +146,12 @@ class EffectFitter:
                                                                    if k in cls.Options.model_fields},
                                                          key: start.pop(key)})
             starts = list(extra) + list(starts)
+        blocked = self.blocked.get(cls.name, set())
+        if blocked:        # the effect is already applied on these channels: never a second time there
+            starts = [s for s in starts if not set(s.get("channels") or ()) & blocked]
         if not starts:
-            return Candidate(cls.name, "no starting point in the flagged cells", signature=sigs)
+            return Candidate(cls.name, "no starting point in the flagged cells"
+                             + (f" outside {', '.join(sorted(blocked))}" if blocked else ""), signature=sigs)
         defaults = cls.defaults()
         fitted = list(cls.fitted)
         structural = sorted({k for s in starts for k in s if k not in fitted})

@@ -50,8 +50,14 @@ class Stage:
         if self.fit is not None:
             out["suspension_fit"] = self.fit.as_dict()
         if self.result is not None:
-            out["identified"] = {"w": self.result.get("w_opt"), "errors_percent": self.result.get("errors_percent"),
-                                 "trustworthy": self.result.get("trustworthy")}
+            # the re-identification's trust as its run judged it: yes only where every required check ran there,
+            # a component it did not judge is not assessed (None), never yes
+            w_opt = self.result.get("w_opt") or {}
+            trust = self.result.get("trustworthy") or {}
+            out["identified"] = {"w": w_opt, "errors_percent": self.result.get("errors_percent"),
+                                 "trustworthy": {n: trust.get(n) for n in w_opt},
+                                 "not_assessed": self.result.get("not_assessed_reasons") or {
+                                     n: ["the identification reported no trust"] for n in w_opt if trust.get(n) is None}}
         return out
 
 

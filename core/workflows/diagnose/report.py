@@ -210,6 +210,8 @@ Unexplained at the end:
 
 {_suspension_text(gb, ga)}
 
+{reported_suspension_text(diagnosis.get("suspension"))}
+
 Method: `docs/diagnose.md`.
 """
     return write_text(out_dir / "diagnosis.md", text)
@@ -265,3 +267,16 @@ def _suspension_text(gb: dict, ga: dict | None) -> str:
             f"admissible interval) {start}; errors in % of the interval where the truth is known.\n\n"
             + markdown_table(["parameter", "before: fitted", "before: identified", "after: fitted",
                               "after: identified"], rows))
+
+
+def reported_suspension_text(reported: dict | None) -> str:
+    """Which suspension the diagnosis reports (the joint fit under D or the re-identification), why, and its
+    trust per component (no, or not assessed: never yes without the identification's checks)."""
+    if not reported:
+        return ""
+    trust = reported.get("trustworthy") or {}
+    words = {True: "yes", False: "no", None: "not assessed"}
+    rows = [[n, f"{v:.5g}", words[trust.get(n)]] for n, v in (reported.get("w") or {}).items()]
+    return (f"Reported suspension: the **{reported['source']}** ({reported['why']}). Trust: not assessed unless a "
+            "check that ran flags a component (the reference-date self-check and the adequacy test do not run on "
+            "the diagnosis's models).\n\n" + markdown_table(["parameter", "value", "trustworthy"], rows))

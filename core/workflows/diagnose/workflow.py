@@ -19,6 +19,7 @@ import numpy as np
 from suspid import registry
 from suspid.config import Config, load_config
 from suspid.data.corrections import untilt
+from suspid.errors import SimulatorError
 from suspid.infra.files import canonical, write_json
 from suspid.infra.ledger import stable_hash
 from suspid.infra.seeds import rng as named_rng
@@ -26,13 +27,16 @@ from suspid.infra.threads import single_blas_thread
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.method.spectra import compute_spectra
 from suspid.workflows.problem import read_measurements
+from suspid.workflows.tasks import simulate_spectra
+from suspid.workflows.trust import checks_report, trust_states
 
 from .cells import CellGrid, make_cells
 from .coupling import coupling_test
 from .fit import Discrepancy
 from .joint import check_groups, fit_jointly
 from .locate import locate
-from .name import Ranking, _supported_effects, check_after_joint_fit, rank_effects, unexplained_regions
+from .name import (Ranking, _supported_effects, channel_gains, check_after_joint_fit, rank_effects,
+                   unexplained_regions)
 from .null import NullCalibration, calibrate_null
 from .reidentify import Stage, make_stage, write_augmented
 from .report import write_diagnosis_report
@@ -113,8 +117,12 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
             log(f"step {step}: {int(current.dmap.flagged.sum())} flagged cells; ranking the effects")
             t_rank = time.perf_counter()
             cfg_now = _with_effects(config, _model_effects(named, in_data))
+            # an effect named on some channels may extend to others (a tilt corrected in the records on some
+            # lateral channels, in the model on others), never twice on one channel
+            corrected = {c["channel"] for c in _corrections(in_data)}
             rk = rank_effects(cfg_now, current.problem, current.w, current.y_sim, current.dmap, null, opts, log,
-                              exclude=[n for n, _, _ in named])
+                              exclude=[n for n, p, _ in named if p.get("applied") != CORRECTED],
+                              blocked={"sensor-tilt": corrected})
             rank_s += time.perf_counter() - t_rank
             rankings.append(rk)
             log(f"step {step}: named {rk.named or 'nothing'} ({rk.reason})")
@@ -160,6 +168,10 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     last = steps[-1]
     unexplained = last["unexplained"] if last["named"] is None else (
         unexplained_regions(current.dmap, [], None) if current.dmap.flagged.any() else [])
+    with single_blas_thread():
+        gains = _channel_gains(config, current, named, in_data, grid, null, log)
+    unexplained = list(unexplained) + [_gain_region(g, grid) for g in gains if g["significant"]]
+    reported = _reported_suspension(current, config, grid, null, log)
     diagnosis = {
         "name": config.name,
         "config": str(config.source_file),
@@ -181,6 +193,8 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
                       "share_flagged_after": s.get("gap_after", {}).get("share_flagged"),
                       "integrated_db_hz_after": s.get("gap_after", {}).get("integrated_db_hz")} for s in steps],
         "unexplained": unexplained,
+        "channel_gains": gains,
+        "suspension": reported,
         "joint_fit": ("together: the suspension and the continuous parameters of every named effect fitted at once "
                       "by least squares on D (the whitened mean residuals the map tests), from the "
                       + ("fitted identified suspension and the effects' fits at it; then the augmented model "
@@ -218,6 +232,121 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
     return DiagnosisResult(out_dir, json.loads(json.dumps(diagnosis)))
 
 
+def _channel_gains(config: Config, stage: Stage, named, in_data, grid: CellGrid, null: NullCalibration,
+                   log: Callable[[str], None], max_channels: int = 2) -> list[dict[str, Any]]:
+    """Channel-level gains (:func:`.name.channel_gains`), each measured at a suspension fitted under D without
+    the bins that would bias it: the flagged cells left unexplained (a bracket resonance the fit compromises
+    with moved the bogie verticals by -0.2 dB, z -4 to -5) and, for each significant channel (the
+    ``max_channels`` strongest), that channel's own bins (a fit with them absorbs part of the gain: +8 % read as
+    +5 %). A gain is reported when it is significant at the final model and stays so at both fits;
+    ``gain_at_final_model`` keeps the first reading.
+    """
+    opts = config.diagnose
+    problem = stage.problem
+    if stage.fit is None or not opts.reidentify:
+        return channel_gains(stage.dmap, problem.noise_model, opts.alpha)
+    effects = _model_effects(named, in_data)
+    fixed = {n for n, _ in effects}
+    sim = getattr(stage.fit, "simulator", None)
+    unexplained = grid.cell_to_bins(stage.dmap.flagged.astype(float)) > 0         # (G, K, F)
+
+    def fit_without(mask: np.ndarray):
+        disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, np.zeros(grid.n_cells, bool),
+                           stage.y_sim)
+        disc.scale = np.where(mask, np.inf, disc.scale)
+        fit = fit_jointly(config, problem, disc, stage.w, effects, fixed,
+                          max_evaluations=opts.joint_max_evaluations // 2, simulator=sim)
+        return fit, locate(grid, null, problem.y_mes, problem.noise_model.effective(fit.y_sim), null.noise_mean,
+                           opts.alpha, opts.min_db)
+
+    dmap = stage.dmap
+    if unexplained.any():
+        _, dmap = fit_without(unexplained)
+    first = {g["channel"]: g for g in channel_gains(stage.dmap, problem.noise_model, opts.alpha)}
+    gains = channel_gains(dmap, problem.noise_model, opts.alpha)
+    # significant at the final model too: a fit that leaves cells out can move a channel it barely constrains
+    # (without the unexplained cells of a bending's remainder, the mid-car vertical sat +1.4 dB off, z 3.3,
+    # against +1.1 dB, z 2.6, at the final model)
+    strong = sorted([g for g in gains if g["significant"] and first[g["channel"]]["significant"]],
+                    key=lambda g: -abs(g["z"]))[:max_channels]
+    for g in gains:
+        g["gain_at_final_model"] = first[g["channel"]]["gain"]
+        g["z_at_final_model"] = first[g["channel"]]["z"]
+        if g["significant"] and g not in strong:
+            g["significant"] = False                                  # not confirmed: not reported
+    for g in strong:
+        k = grid.channels.index(g["channel"])
+        mask = unexplained.copy()
+        mask[:, k, :] = True
+        fit, dmap_k = fit_without(mask)
+        again = channel_gains(dmap_k, problem.noise_model, opts.alpha)[k]
+        log(f"channel-level gain on {g['channel']}: {g['gain']:.4f}, {again['gain']:.4f} at the suspension fitted "
+            f"without it (z {again['z']:.1f})")
+        g.update({k_: again[k_] for k_ in ("gain", "mean_db", "sd_db", "z", "p", "band_spread_db", "band_sd_db",
+                                           "flat", "significant")})
+        g["refit_without_channel"] = {"w": fit.w, "D": round(fit.D, 3), "status": fit.status}
+    return gains
+
+
+def _gain_region(gain: dict[str, Any], grid: CellGrid) -> dict[str, Any]:
+    """A channel-level gain as an unexplained region: the whole channel, every speed."""
+    pct = 100.0 * (gain["gain"] - 1.0)
+    return {"channel": gain["channel"], "speed_kmh": None, "f_low_hz": round(float(grid.band_edges[0, 0]), 4),
+            "f_high_hz": round(float(grid.band_edges[-1, 1]), 4), "magnitude_db": gain["mean_db"],
+            "best_effect": None, "kind": "channel-level gain", "gain": gain["gain"],
+            "text": f"channel-level gain on {gain['channel']}: {pct:+.1f} % ({gain['mean_db']:+.2f} ± "
+                    f"{gain['sd_db']:.2f} dB over the whole channel, z {gain['z']:.1f}, band spread "
+                    f"{gain['band_spread_db']:.2f} dB); no catalogue effect fits: a calibration of that sensor"}
+
+
+def suspension_trust(names: list[str], identifiable: Mapping[str, bool], groups_ran: bool) -> dict[str, Any]:
+    """Trust per component of a suspension the diagnosis fitted (:func:`suspid.workflows.trust.trust_states`):
+    no where the data-group check flags it; otherwise not assessed, since the reference-date self-check and the
+    adequacy test do not run on the diagnosis's models."""
+    checks = {"groups": "done" if groups_ran else "not run",
+              "self_check": "not run on the diagnosis's models", "adequacy": "not run on the diagnosis's models"}
+    flags = [[] if identifiable.get(n, True) else ["data groups: the parts of the data disagree or the bias-aware "
+                                                   "half-width exceeds max_half_width"] for n in names]
+    return {**trust_states(names, flags, checks), "checks": checks_report(checks)}
+
+
+def _reported_suspension(stage: Stage, config: Config, grid: CellGrid, null: NullCalibration,
+                         log: Callable[[str], None]) -> dict[str, Any] | None:
+    """Which suspension the diagnosis reports, and why: the joint fit under D, or the re-identification with the
+    configured objective (``stage.result``), whichever has the lower D (the criterion the map and the naming
+    test; the identification's objective compares densities and can sit where the mean spectrum is not
+    matched), with its trust per component: no when the data-group check flags it, otherwise not assessed
+    (the reference-date self-check and the adequacy test do not run on the diagnosis's models).
+    """
+    fit = stage.fit
+    if fit is None:
+        return None
+    problem = stage.problem
+    names = list(problem.names)
+    disc = Discrepancy(grid, null, problem.y_mes, problem.noise_model, np.zeros(grid.n_cells, bool), fit.y_sim)
+    D_fit = disc.D0
+    D_reid, w_reid = None, None
+    if stage.result is not None and stage.result.get("w_opt"):
+        w_reid = {n: float(stage.result["w_opt"][n]) for n in names if n in stage.result["w_opt"]}
+        effects = {f"{n}/{q}": float(p[q]) for n, p in fit.effects for q in registry.get("effect", n).fitted}
+        try:
+            y = simulate_spectra(fit.simulator, {**fit.w, **w_reid, **effects}, problem.segments, config.spectra)[0]
+            D_reid = Discrepancy(grid, null, problem.y_mes, problem.noise_model, np.zeros(grid.n_cells, bool),
+                                 y).D0
+        except SimulatorError as exc:       # a re-identified vehicle the simulator cannot run: not comparable
+            log(f"the re-identified suspension could not be simulated: {exc}")
+    use_fit = D_reid is None or D_fit <= D_reid
+    trust = suspension_trust(names, fit.identifiable or {}, fit.model_error is not None)
+    why = ("the lower D, the criterion the map and the naming rule test: " if D_reid is not None else "") + (
+        f"D {D_fit:.1f} at the joint fit" + (f", {D_reid:.1f} at the re-identification" if D_reid is not None else
+                                            ", no re-identification to compare"))
+    return canonical({"source": "joint fit under D" if use_fit else "re-identification",
+                      "why": why, "w": fit.w if use_fit else {**fit.w, **w_reid}, "D_joint_fit": D_fit,
+                      "D_reidentified": D_reid, "w_reidentified": w_reid,
+                      "trustworthy": trust["trustworthy"], "not_assessed": trust["not_assessed"],
+                      "reasons": trust["reasons"], "checks": trust["checks"]})
+
+
 def _eligible(config: Config, problem, name: str) -> bool:
     names = config.diagnose.effects if config.diagnose.effects is not None else registry.names("effect")
     supported = _supported_effects(problem.simulator)
@@ -229,22 +358,31 @@ def _coupling(config: Config, problem, log: Callable[[str], None]) -> tuple[list
     no records for a numerical experiment: its data are spectra."""
     if config.data.source != "measured" or config.data.measurements is None:
         return None, []
-    _, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels,
-                                   accept=config.data.accept, strict=config.data.strict)
+    segments, records = read_measurements(config.data.measurements, config.data.track_file, problem.channels,
+                                          accept=config.data.accept, strict=config.data.strict)
     records = untilt(records, config.data.corrections, problem.channels, error=config.error)
     opts = config.diagnose
-    reference = None
+    reference, ref_groups = None, None
     if opts.coupling_reference is not None:
-        _, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track, problem.channels,
-                                         accept=config.data.accept, strict=config.data.strict)
+        ref_segments, reference = read_measurements(opts.coupling_reference, opts.coupling_reference_track,
+                                                    problem.channels, accept=config.data.accept,
+                                                    strict=config.data.strict)
+        ref_groups = _speed_groups(ref_segments)
     # every frequency of the records up to their Nyquist frequency: the coupling is a property of the sensor,
-    # and the bins above the spectra band (where the vertical often dominates a bogie's lateral) weigh most
+    # and the bins above the spectra band (where the vertical often dominates a bogie's lateral) weigh most.
+    # The model's own coupling is 0: the simulators' vertical and lateral motions are uncoupled (symmetric linear
+    # vehicles, independent vertical and cross-level track inputs)
     rows = coupling_test(records, problem.channels, (config.spectra.f_min_hz, math.inf), opts.alpha,
-                         reference=reference)
+                         reference=reference, groups=_speed_groups(segments), reference_groups=ref_groups)
     for r in rows:
         log(f"coupling {r['channel']} <- {r['vertical']}: beta {r['beta']:.4f} ± {r['se']:.4f} "
             f"(t {r['t']:.1f}){' significant' if r['significant'] else ''}")
     return rows, records
+
+
+def _speed_groups(segments) -> list[float]:
+    """The speed group (m/s, rounded as the cells' groups) of each segment."""
+    return [round(float(s.mean_speed), 3) for s in segments]
 
 
 def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str, Any]]],
@@ -256,48 +394,98 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
 
     Each tilted channel is rotated back by its own angle asin β (``data.corrections``); the model is unchanged
     (a tilt mixes two channels whose reference-date model errors differ: :mod:`suspid.data.corrections`). The
-    suspension is fitted again on the corrected data; the tilt is retracted when more than ``max_new_flagged``
-    (one at least) new cells are flagged on the tilted channels. The main parameter is the angle, weighted by
-    1/se² over the tilted channels.
+    suspension is fitted again on the corrected data. The naming rule of every route applies per tilted
+    channel: the correction must shrink the flagged cells of that channel (when it has any) and flag no more
+    than ``max_new_flagged`` (one at least) new ones there; a channel that fails is dropped and the others are
+    corrected again. The generic alternative (the vehicle's own coupling, a resonance of the sensor) is what the
+    coupling test already weighed (against the model's coupling, the twin, constancy over frequency). The main
+    parameter is the angle, weighted by 1/se² over the tilted channels.
     """
     opts = config.diagnose
-    w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
-    angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
-    params = {"angle_deg": angle, "channels": [r["channel"] for r in tilted],
-              "angles_deg": {r["channel"]: r["angle_deg"] for r in tilted}}
-    reason = ("sensor-tilt from the coupling of vertical into lateral at the same point: " + "; ".join(
-        f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle {abs(r['angle_deg']):.2f}°)"
-        for r in tilted) + "; corrected in the measured records (data.corrections)")
-    record: dict[str, Any] = {"step": step, "named": "sensor-tilt", "route": "coupling", "reason": reason,
+    saved = list(named)
+    record: dict[str, Any] = {"step": step, "named": "sensor-tilt", "route": "coupling",
                               "applied": "data.corrections: the tilted channels' records rotated back",
                               "coupling": coupling, "gap_before": current.gap(), "unexplained": [],
                               "ranking": [], "local_model": None}
-    log(f"step {step}: {reason}")
-    saved = list(named)
-    named.append(("sensor-tilt", params, 2))
-    in_data["sensor-tilt"] = [{"channel": r["channel"], "tilt_deg": float(r["angle_deg"]), "vertical": r["vertical"]}
-                              for r in tilted]
-    corrected = Stage(current.label, current.config, _corrected_problem(config, current.problem, records, in_data),
-                      current.w, current.y_sim, current.result, fit=current.fit)
-    _locate(corrected, grid, null, opts.alpha)
-    stage, record["joint_fit"] = _add_and_fit(config, named, in_data, None, corrected, step, grid, null, out_dir,
-                                              noise_path, fresh, progress, log)
-    n0 = int(current.dmap.flagged.sum())
-    mine = np.array([grid.channels[grid.index(c)[1]] in params["channels"] for c in range(grid.n_cells)])
-    new = int((stage.dmap.flagged & ~current.dmap.flagged & mine).sum())
-    n1 = int(stage.dmap.flagged.sum())
-    if new > max(1.0, opts.max_new_flagged * n0):
-        named[:] = saved
-        in_data.pop("sensor-tilt")
-        record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
-                      reason=f"{reason}; retracted: with it {new} new cells are flagged on the tilted channels "
-                             f"({n0} → {n1} in all)",
-                      unexplained=unexplained_regions(current.dmap, [], None))   # what stays flagged, as it is
-        return record, None
+    dropped: list[str] = []
+    while True:
+        params = _tilt_parameters(tilted)
+        named[:] = saved + [("sensor-tilt", params, 2)]
+        in_data["sensor-tilt"] = [{"channel": r["channel"], "tilt_deg": float(r["angle_deg"]),
+                                   "vertical": r["vertical"]} for r in tilted]
+        log(f"step {step}: sensor-tilt from the coupling on {', '.join(params['channels'])}")
+        corrected = Stage(current.label, current.config,
+                          _corrected_problem(config, current.problem, records, in_data),
+                          current.w, current.y_sim, current.result, fit=current.fit)
+        _locate(corrected, grid, null, opts.alpha)
+        stage, record["joint_fit"] = _add_and_fit(config, named, in_data, None, corrected, step, grid, null,
+                                                  out_dir, noise_path, fresh, progress, log)
+        failed = {}
+        for r in tilted:
+            evidence, why = correction_evidence(grid, r["channel"], current.dmap.flagged, stage.dmap.flagged,
+                                                opts.max_new_flagged)
+            r.setdefault("evidence", {}).update(evidence)
+            if why is not None:
+                failed[r["channel"]] = why
+        if not failed:
+            break
+        for c, why in failed.items():
+            log(f"step {step}: sensor-tilt on {c} dropped: {why}")
+            dropped.append(f"{c}: {why}")
+        tilted = [r for r in tilted if r["channel"] not in failed]
+        if not tilted:
+            named[:] = saved
+            in_data.pop("sensor-tilt", None)
+            record.update(named=None, retracted="sensor-tilt", gap_retracted=stage.gap(),
+                          reason="sensor-tilt from the coupling retracted: " + "; ".join(dropped),
+                          unexplained=unexplained_regions(current.dmap, [], None))   # what stays flagged, as it is
+            return record, None
+    record["reason"] = ("sensor-tilt from the coupling of vertical into lateral at the same point (instrumental "
+                        "variables, against the model's own coupling and the twin's): " + "; ".join(
+                            f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle "
+                            f"{abs(r['angle_deg']):.2f}°, flagged cells there {r['evidence']['flagged_before']} → "
+                            f"{r['evidence']['flagged_after']})" for r in tilted)
+                        + "; corrected in the measured records (data.corrections)"
+                        + (f"; dropped: {'; '.join(dropped)}" if dropped else ""))
+    log(f"step {step}: {record['reason']}")
     record["named_parameters"] = canonical(params)
     record["effects_after"] = [{"name": n, "parameters": canonical(p)} for n, p, _ in named]
     record["gap_after"] = stage.gap()
     return record, stage
+
+
+def _tilt_parameters(tilted: list[dict[str, Any]]) -> dict[str, Any]:
+    """The coupling route's sensor-tilt: the angle weighted by 1/se² over the channels, each channel's own."""
+    w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
+    angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
+    return {"angle_deg": angle, "channels": [r["channel"] for r in tilted],
+            "angles_deg": {r["channel"]: r["angle_deg"] for r in tilted}, "applied": CORRECTED}
+
+
+CORRECTED = "data.corrections"
+"""The ``applied`` mark of an effect corrected in the measured records, not added to the model."""
+
+
+def correction_evidence(grid: CellGrid, channel: str, before: np.ndarray, after: np.ndarray,
+                        max_new_flagged: float) -> tuple[dict[str, int], str | None]:
+    """The naming rule on one channel corrected in the records: its flagged cells (``before``, ``after``:
+    ``(n_cells,)`` bool) shrink when it has any, and at most ``max_new_flagged`` of all the cells flagged before
+    (one at least) are new there. Returns the counts and why the channel fails, or None."""
+    mine = _channel_cells(grid, channel)
+    b0, b1 = int((before & mine).sum()), int((after & mine).sum())
+    new = int((after & ~before & mine).sum())
+    evidence = {"flagged_before": b0, "flagged_after": b1, "new_flagged": new}
+    if new > max(1.0, max_new_flagged * int(before.sum())):
+        return evidence, f"its correction flags {new} new cells on {channel}"
+    if b0 > 0 and b1 >= b0:
+        return evidence, (f"its correction does not shrink the flagged cells of {channel} ({b0} → {b1}): the "
+                          f"coupling is not what makes them differ")
+    return evidence, None
+
+
+def _channel_cells(grid: CellGrid, channel: str) -> np.ndarray:
+    """``(n_cells,)`` bool: the cells of ``channel``."""
+    return np.array([grid.channels[grid.index(c)[1]] == channel for c in range(grid.n_cells)])
 
 
 def _corrections(in_data: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any]]:
@@ -307,7 +495,7 @@ def _corrections(in_data: dict[str, list[dict[str, Any]]]) -> list[dict[str, Any
 
 def _model_effects(named, in_data) -> list[tuple[str, dict[str, Any]]]:
     """The named effects that go into the simulator (not those corrected in the data)."""
-    return [(n, p) for n, p, _ in named if n not in in_data]
+    return [(n, p) for n, p, _ in named if p.get("applied") != CORRECTED]
 
 
 def _corrected_problem(config: Config, problem, records: list, in_data: dict[str, list[dict[str, Any]]]):
@@ -386,7 +574,7 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
                       max_evaluations=opts.joint_max_evaluations, log=log)
     _check_groups(config, problem, disc, fit, log)
     refitted = dict(fit.effects)
-    named[:] = [(n, refitted.get(n, p), k) for n, p, k in named]
+    named[:] = [(n, p if p.get("applied") == CORRECTED else refitted.get(n, p), k) for n, p, k in named]
     result = None
     if opts.at == "identified":
         run_dir = out_dir / "steps" / str(step)
