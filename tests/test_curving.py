@@ -228,7 +228,7 @@ def test_track_files_keep_curvature_and_cant(tmp_path, suffix):
     write_track_csv(straight, tmp_path / "s.csv")
     assert read_track(tmp_path / "s.csv")[0].curvature is None
     bad = TrackSegment("b", seg.distance, seg.irregularities, seg.speed, cant=seg.cant[:-1])
-    with pytest.raises(DataError, match="cant must have one value per distance sample"):
+    with pytest.raises(DataError, match="cant must be one finite value per distance sample"):
         write_track_csv(bad, tmp_path / "b.csv")
 
 

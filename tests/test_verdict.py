@@ -216,10 +216,11 @@ def test_terminal_table_and_report_show_units_nominal_change_trust_and_verdict(s
 
 
 def test_every_phase_after_the_optimiser_is_shown(small_run):
-    """The analysis (intervals, identifiability, the model-error checks that run) and the report each show a
-    phase on the progress display (about 3.5 of 4.3 minutes of a measured two-date run used to show nothing)."""
+    """The analysis (intervals, identifiability, the model-error checks that run: the linearised ones by
+    default) and the report each show a phase on the progress display (about 3.5 of 4.3 minutes of a
+    measured two-date run used to show nothing)."""
     seen = [name.split(" (")[0] for name in RecordedPhases.seen]
-    assert seen == ["intervals", "identifiability", "self-check", "adequacy", "data groups", "figures and report"]
+    assert seen == ["intervals", "identifiability", "model error", "figures and report"]
 
 
 def test_notebook_summary_html_rows_and_dataframe(small_run, monkeypatch):
