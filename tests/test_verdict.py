@@ -109,6 +109,16 @@ def test_rows_from_a_result_kind_level_and_a_localisation_with_group_names():
     assert rows_of(json.loads(json.dumps(block))) == rows
 
 
+def test_the_identified_value_is_the_bias_corrected_one_when_the_checks_gave_it():
+    """With the model-error checks' correction the interval is centred on w_corrected: the verdict judges that
+    value, not w_opt (which would put -30 % beside an interval of -17 to -11 %)."""
+    corrected = _result(w_corrected={"c_yaw": 258e3, "c_sec_y": 29e3, "k_sec_z": 200e3},
+                        interval={"c_yaw": [249e3, 267e3], "c_sec_y": [27e3, 31e3], "k_sec_z": [150e3, 250e3]})
+    row = verdict_rows(corrected, PARAMETERS, {"c_yaw": DAMPER})[0]
+    assert row.value == 258e3 and row.change_percent == pytest.approx(-14.0) and row.verdict == "ok"
+    assert verdict_rows(_result(), PARAMETERS, {"c_yaw": DAMPER})[0].value == 210e3
+
+
 def test_measured_data_tables_have_no_w_ref_columns():
     """Without a known truth (measured data) the table has no w_ref or error columns; with it, both."""
     rows = verdict_rows(_result(), PARAMETERS, {"c_yaw": DAMPER})

@@ -248,6 +248,9 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], lim
     localisation: rows with ``group``, ``value`` SI, ``interval``, and optionally ``evidence``,
     ``alternatives``, ``identifiable``, ``trustworthy``, ``reasons``.
 
+    A parameter's identified value is the bias-corrected one where the model-error checks gave it
+    (``w_corrected``, the centre of its interval), else w_opt.
+
     :param parameters: the simulator's parameters (nominal values, units, descriptions).
     :param localisation: the localisation's rows (or a mapping with them under ``rows``); default
         ``result["localisation"]`` when the result has one.
@@ -261,7 +264,8 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], lim
         t = trust_word(trust.get(n))
         reasons = (result.get("non_identifiable_reasons", {}).get(n, []) if not result["identifiable"][n]
                    else result.get("untrustworthy_reasons", {}).get(n, []) if t == "no" else [])
-        rows.append(_row(n, result["w_opt"][n], result["interval"][n], result["identifiable"][n], t, reasons,
+        value = (result.get("w_corrected") or result["w_opt"])[n]   # the interval's centre: bias-corrected if it was
+        rows.append(_row(n, value, result["interval"][n], result["identifiable"][n], t, reasons,
                          result.get("units", {}).get(n, ""), params, limits, "identification", w_ref.get(n), errors.get(n)))
     for item in localisation_items(localisation if localisation is not None else result.get("localisation")):
         name = str(item["group"])
