@@ -11,6 +11,7 @@ import numpy as np
 from suspid import registry
 from suspid.infra.files import pyplot, save_figure, write_text
 from suspid.workflows.report import markdown_table
+from suspid.workflows.trust import trust_word
 
 from .fit import Candidate
 from .locate import DiscrepancyMap
@@ -275,8 +276,7 @@ def reported_suspension_text(reported: dict | None) -> str:
     if not reported:
         return ""
     trust = reported.get("trustworthy") or {}
-    words = {True: "yes", False: "no", None: "not assessed"}
-    rows = [[n, f"{v:.5g}", words[trust.get(n)]] for n, v in (reported.get("w") or {}).items()]
+    rows = [[n, f"{v:.5g}", trust_word(trust.get(n))] for n, v in (reported.get("w") or {}).items()]
     return (f"Reported suspension: the **{reported['source']}** ({reported['why']}). Trust: not assessed unless a "
             "check that ran flags a component (the reference-date self-check and the adequacy test do not run on "
             "the diagnosis's models).\n\n" + markdown_table(["parameter", "value", "trustworthy"], rows))

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
+from suspid.elements import kind_of
 from suspid.infra.threads import single_blas_thread
 
 from .model import GEOMETRY, LinearSystem, TrainModel
@@ -54,12 +55,8 @@ LINEAR = frozenset({
     "k_prim_x", "c_prim_x", "k_prim_y", "k_prim_z", "c_prim_z", "k_sec_x", "k_sec_y", "k_sec_z", "c_sec_z",
     "k_sec_z_s", "c_sec_y", "c_yaw", "k_yaw_s", "k_trac", "k_arb", "conicity", "kalker_scale", "m_track",
     "k_track", "c_track", "k_art", "c_art", "c_ic"})
-"""Parameters on which M, K, D and G depend affinely (one linearisation per derivative suffices)."""
-
-def _kind(name: str) -> str:
-    """An element group (``c_yaw[bogie1]``, :mod:`suspid.elements`) is as linear as its kind."""
-    return name.split("[", 1)[0]
-
+"""Parameters on which M, K, D and G depend affinely (one linearisation per derivative suffices); an element
+group (``c_yaw[bogie1]``) is as linear as its kind (:func:`suspid.elements.kind_of`)."""
 
 LINEAR_STEP = 1e-2
 """Relative step of the one-sided difference of the matrices for :data:`LINEAR` parameters (exact: affine)."""
@@ -97,7 +94,7 @@ def _difference(a: LinearSystem, b: LinearSystem, h: float) -> MatrixDerivative:
 
 
 def _step(name: str, x: float) -> float:
-    rel = LINEAR_STEP if _kind(name) in LINEAR else CENTRAL_STEP
+    rel = LINEAR_STEP if kind_of(name) in LINEAR else CENTRAL_STEP
     return rel * abs(x) if x != 0 else rel
 
 
@@ -118,7 +115,7 @@ def _single(model: TrainModel, values: dict[str, float], speed: float, name: str
     """One parameter's derivative: one-sided for :data:`LINEAR`, central otherwise."""
     h = _step(name, float(values[name]))
     plus = _linearised(model, values, speed, base, {name: h}, repr(name))
-    if _kind(name) in LINEAR:
+    if kind_of(name) in LINEAR:
         return _difference(plus, base, h)
     minus = _linearised(model, values, speed, base, {name: -h}, repr(name))
     return _difference(plus, minus, 2 * h)
@@ -140,9 +137,9 @@ def _groups(names: list[str], patterns: list[Pattern]) -> list[list[int]]:
     sizes = [sum(int(m.sum()) for m in pat) for pat in patterns]
     groups: list[list[int]] = []
     used: list[list[np.ndarray]] = []
-    for i in sorted(range(len(names)), key=lambda i: (_kind(names[i]) not in LINEAR, -sizes[i])):
+    for i in sorted(range(len(names)), key=lambda i: (kind_of(names[i]) not in LINEAR, -sizes[i])):
         for g, union in zip(groups, used):
-            if (_kind(names[g[0]]) in LINEAR) == (_kind(names[i]) in LINEAR) and \
+            if (kind_of(names[g[0]]) in LINEAR) == (kind_of(names[i]) in LINEAR) and \
                     not any(np.any(u & m) for u, m in zip(union, patterns[i])):
                 g.append(i)
                 for u, m in zip(union, patterns[i]):
@@ -184,7 +181,7 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
             steps = {names[i]: _step(names[i], float(values[names[i]])) for i in group}
             what = ", ".join(map(repr, steps))
             plus = _linearised(model, values, speed, base, steps, what)
-            if _kind(names[group[0]]) in LINEAR:
+            if kind_of(names[group[0]]) in LINEAR:
                 low, scale = base, 1.0
             else:
                 low, scale = _linearised(model, values, speed, base, {n: -h for n, h in steps.items()}, what), 2.0
