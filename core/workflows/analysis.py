@@ -24,7 +24,7 @@ from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bi
 from suspid.method.jacobian import fisher_identifiability, fisher_information
 from suspid.method.noise import refit_gaussian, reference_paths
 from suspid.optimize.ego import EGOResult
-from suspid.workflows.evaluation import j_of_spectra
+from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
@@ -155,8 +155,8 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
         b = model.sample(v, rng)
         i_mes = rng.integers(0, v, v)
         i_mod = i_mes if paired else rng.integers(0, v, v)
-        y_mes = problem.y_mes[i_mes]
-        J = lambda y: j_of_spectra(problem, y[i_mod], b, y_mes, model)[0]  # noqa: E731
+        fn = objective_on(problem, b, problem.y_mes[i_mes], model)   # this replicate's J, built once
+        J = lambda y: fn.evaluate(y[i_mod])[0]  # noqa: E731
         grads[k] = [(J(yp) - J(ym)) / step[i] if step[i] > 0 else 0.0  # both sides failed: no gradient
                     for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
         j_opt[k] = J(y_opt)

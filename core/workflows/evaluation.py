@@ -33,13 +33,25 @@ from suspid.workflows.tasks import SpectraTask, in_process
 def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = None,
                  y_mes: np.ndarray | None = None, noise_model: NoiseModel | None = None) -> tuple[float, np.ndarray]:
     """J = Σ α_k Ψ_k (eq. 5) with Y_mod = y_sim + b (by default the run's fixed paths and measured spectra);
-    the sensor-noise floor is ``noise_model``'s (by default the run's)."""
+    the sensor-noise floor is ``noise_model``'s (by default the run's).
+
+    With the defaults this is the run's own J, :attr:`Problem.objective_function` (built once per run);
+    other paths, spectra or noise model (a bootstrap replicate) make a J of their own.
+    """
+    if b is None and y_mes is None and noise_model is None:
+        return problem.objective_function.evaluate(y_sim)
+    return objective_on(problem, b, y_mes, noise_model).evaluate(y_sim)
+
+
+def objective_on(problem: Problem, b: np.ndarray | None = None, y_mes: np.ndarray | None = None,
+                 noise_model: NoiseModel | None = None) -> ObjectiveFunction:
+    """J of eq. 5 with the run's objective plugin and weights on other data: noise paths ``b``
+    ``(v, n_channels, n_freqs)`` dB, measured spectra ``y_mes`` (same shape) and ``noise_model``'s floor
+    (each by default the run's)."""
     model = problem.noise_model if noise_model is None else noise_model
-    fn = ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
-                           problem.b if b is None else b, weights=problem.weights, channels=problem.channels,
-                           floor=model.floor_)
-    J, psi = fn.evaluate(y_sim)
-    return J, psi
+    return ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
+                             problem.b if b is None else b, weights=problem.weights, channels=problem.channels,
+                             floor=model.floor_)
 
 
 def simulate_spectra_task(task: tuple) -> np.ndarray:

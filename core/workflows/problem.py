@@ -38,7 +38,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.infra.seeds import seed_for
 from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
 from suspid.method.noise import NoiseModel, fit_noise_model, modelled_spectra
-from suspid.method.objective import reference_weights
+from suspid.method.objective import ObjectiveFunction, reference_weights
 from suspid.method.spectra import SpectraOptions, compute_spectra, grid_lines
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -134,6 +134,14 @@ class Problem:
     def segments_digest(self) -> str:
         """Content hash of the measurement-date segments, computed once per run."""
         return segments_digest(self.segments)
+
+    @cached_property
+    def objective_function(self) -> ObjectiveFunction:
+        """The run's J (eq. 5): the measured spectra, the fixed noise paths b_i, the objective plugin, the
+        weights α_k and the noise model's floor, built once per problem (a problem made by
+        :func:`dataclasses.replace`, e.g. with corrected y_mes, builds its own)."""
+        return ObjectiveFunction(self.objective, self.y_mes, self.freqs, self.b, weights=self.weights,
+                                 channels=self.channels, floor=self.noise_model.floor_)
 
 
 def _cached_spectra(ledger: Ledger, key: str, make: Callable[[], tuple[np.ndarray, np.ndarray]]
