@@ -1,7 +1,7 @@
 """What the identified w_opt is worth: errors, identifiability, intervals, sensitivity.
 
-:func:`analyse` turns the EGO result into the JSON-able dict of
-``result.json``: w_opt in SI and normalised units, the errors against a known
+:func:`analyse` turns the EGO result into the typed :class:`~suspid.workflows.results.Analysis`, the first
+keys of ``result.json``: w_opt in SI and normalised units, the errors against a known
 w_ref (numerical experiment), the identifiability verdict and the intervals of
 :mod:`suspid.method.identifiability`, whose sandwich covariance needs the noise
 in the gradient of J at w_opt (:func:`gradient_noise`).
@@ -33,6 +33,7 @@ from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import calibration_result, linearised_model_error
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
+from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
 from suspid.elements import declared_parameters
 
 
@@ -174,8 +175,9 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
             failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
             executor: Executor | None = None, phases: Phases | None = None,
-            spectra_model: SpectraModel | None = None) -> dict[str, Any]:
-    """w_opt, errors against w_ref, identifiability, intervals and sensitivity, as a JSON-able dict.
+            spectra_model: SpectraModel | None = None) -> Analysis:
+    """w_opt, errors against w_ref, identifiability, intervals, trust and sensitivity (the first keys of
+    ``result.json``: :meth:`Analysis.to_json`).
 
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
@@ -220,59 +222,55 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
     sampling_si = problem.from_unit(verdict.interval_unit.T).T
     units = {p.name: p.unit for p in declared_parameters(problem.simulator)}
-    result: dict[str, Any] = {
-        "name": config.name,
-        "parameters": names,
-        "units": {n: units.get(n, "") for n in names},
-        "bounds": {n: [float(a), float(b)] for n, a, b in zip(names, lo, hi)},
-        "w_opt": {n: float(v) for n, v in zip(names, x_opt)},
-        "w_opt_normalized": {n: float(v) for n, v in zip(names, u_opt)},
-        "identifiable": {n: bool(v) for n, v in zip(names, verdict.identifiable)},
-        "non_identifiable_reasons": {n: r for n, r in zip(names, verdict.reasons) if r},
-        "correlated_with": {n: c for n, c in zip(names, verdict.correlated_with) if c},
-        "interval": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_si)},
-        "interval_normalized": {n: [float(a), float(b)] for n, (a, b) in zip(names, interval_unit)},
-        "interval_sampling": {n: [float(a), float(b)] for n, (a, b) in zip(names, sampling_si)},
-        "trustworthy": trust["trustworthy"],
-        "untrustworthy_reasons": trust["reasons"],
-        "not_assessed_reasons": trust["not_assessed"],
-        "model_error": trust["report"],
-        "calibration": calibration_result(trust["report"]),
-        "interval_method": {"sigma_J": sigma_J, "n_redraws": opts.n_redraws, "step": opts.step,
-                            "bootstrap": opts.bootstrap,
-                            "bootstrap_reference": bool(opts.bootstrap_reference and problem.reference
-                                                        and config.noise.path is None),
-                            "widened_by_model_error": bool(opts.model_error.widen and trust["bias_bound"] is not None),
-                            "n_sigmas": opts.n_sigmas,
-                            "covariance_normalized": verdict.covariance.tolist()},
-        "sensitivity": {
-            "total_sobol": {n: float(v) for n, v in zip(names, verdict.total_index)},
-            "first_sobol": {n: float(v) for n, v in zip(names, verdict.first_index)},
-            "lengthscales": None if verdict.lengthscales is None
-            else {n: float(v) for n, v in zip(names, np.ravel(verdict.lengthscales))},
-        },
-        "J_max": float(ego.y_opt),
-        "objective": config.objective.plugin,
-        "surrogate": config.surrogate.plugin,
-        "simulator": config.simulator.plugin,
-        "seed": config.seed,
-        "failed_points": failed,
-    }
+    result = Analysis(
+        name=config.name,
+        parameters=names,
+        units={n: units.get(n, "") for n in names},
+        bounds={n: (float(a), float(b)) for n, a, b in zip(names, lo, hi)},
+        w_opt={n: float(v) for n, v in zip(names, x_opt)},
+        w_opt_normalized={n: float(v) for n, v in zip(names, u_opt)},
+        identifiable={n: bool(v) for n, v in zip(names, verdict.identifiable)},
+        non_identifiable_reasons={n: r for n, r in zip(names, verdict.reasons) if r},
+        correlated_with={n: c for n, c in zip(names, verdict.correlated_with) if c},
+        interval={n: (float(a), float(b)) for n, (a, b) in zip(names, interval_si)},
+        interval_normalized={n: (float(a), float(b)) for n, (a, b) in zip(names, interval_unit)},
+        interval_sampling={n: (float(a), float(b)) for n, (a, b) in zip(names, sampling_si)},
+        trustworthy=trust["trustworthy"],
+        untrustworthy_reasons=trust["reasons"],
+        not_assessed_reasons=trust["not_assessed"],
+        model_error=trust["report"],
+        calibration=calibration_result(trust["report"]),
+        interval_method=IntervalMethod(
+            sigma_J=sigma_J, n_redraws=opts.n_redraws, step=opts.step, bootstrap=opts.bootstrap,
+            bootstrap_reference=bool(opts.bootstrap_reference and problem.reference and config.noise.path is None),
+            widened_by_model_error=bool(opts.model_error.widen and trust["bias_bound"] is not None),
+            n_sigmas=opts.n_sigmas, covariance_normalized=verdict.covariance.tolist()),
+        sensitivity=Sensitivity(
+            total_sobol={n: float(v) for n, v in zip(names, verdict.total_index)},
+            first_sobol={n: float(v) for n, v in zip(names, verdict.first_index)},
+            lengthscales=None if verdict.lengthscales is None
+            else {n: float(v) for n, v in zip(names, np.ravel(verdict.lengthscales))}),
+        J_max=float(ego.y_opt),
+        objective=config.objective.plugin,
+        surrogate=config.surrogate.plugin,
+        simulator=config.simulator.plugin,
+        seed=config.seed,
+        failed_points=[FailedPoint(**f) for f in failed],
+        identifiability_method=fisher,
+    )
     if problem.w_ref is not None:
         w_ref = np.array([problem.w_ref[n] for n in names])
-        result["w_ref"] = {n: float(v) for n, v in zip(names, w_ref)}
-        result["w_ref_normalized"] = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
-        result["errors_percent"] = errors_percent(problem, x_opt)
+        result.w_ref = {n: float(v) for n, v in zip(names, w_ref)}
+        result.w_ref_normalized = {n: float(v) for n, v in zip(names, problem.to_unit(w_ref))}
+        result.errors_percent = errors_percent(problem, x_opt)
     if correction is not None:
         x_est = problem.from_unit(u_est)
-        result["w_corrected"] = {n: float(v) for n, v in zip(names, x_est)}
-        result["w_corrected_normalized"] = {n: float(v) for n, v in zip(names, u_est)}
+        result.w_corrected = {n: float(v) for n, v in zip(names, x_est)}
+        result.w_corrected_normalized = {n: float(v) for n, v in zip(names, u_est)}
         if problem.w_ref is not None:
-            result["errors_percent_corrected"] = errors_percent(problem, x_est)
+            result.errors_percent_corrected = errors_percent(problem, x_est)
     if ego.n_refine:
-        result["paper_loop"] = paper_loop(problem, ego)
-    if fisher is not None:
-        result["identifiability_method"] = fisher
+        result.paper_loop = paper_loop(problem, ego)
     return result
 
 
@@ -316,19 +314,16 @@ def fisher_verdict(problem: Problem, spectra_model: SpectraModel, x_opt: np.ndar
     return replace(verdict, identifiable=identifiable, reasons=reasons), figures
 
 
-def paper_loop(problem: Problem, ego: EGOResult) -> dict[str, Any]:
+def paper_loop(problem: Problem, ego: EGOResult) -> PaperLoop:
     """Where the paper's loop stood when it stopped, before the local refinement (``ego.refine``)."""
     names = problem.names
     n_loop = ego.n_evaluations - ego.n_refine
     best = int(np.argmax(ego.y[:n_loop]))
     x = np.asarray(ego.X[best], float)
-    out: dict[str, Any] = {
-        "n_iterations": n_loop - ego.n_initial, "n_simulator_calls": n_loop, "J_max": float(ego.y[best]),
-        "w_opt": {n: float(v) for n, v in zip(names, x)},
-        "w_opt_normalized": {n: float(v) for n, v in zip(names, problem.to_unit(x))}}
-    if problem.w_ref is not None:
-        out["errors_percent"] = errors_percent(problem, x)
-    return out
+    return PaperLoop(n_iterations=n_loop - ego.n_initial, n_simulator_calls=n_loop, J_max=float(ego.y[best]),
+                     w_opt={n: float(v) for n, v in zip(names, x)},
+                     w_opt_normalized={n: float(v) for n, v in zip(names, problem.to_unit(x))},
+                     errors_percent=None if problem.w_ref is None else errors_percent(problem, x))
 
 
 def errors_percent(problem: Problem, x_si: np.ndarray) -> dict[str, float]:
