@@ -85,6 +85,8 @@ class Config(Section):
     source_file: Path | None = Field(default=None, exclude=True)
     _lines: dict[tuple, int] = PrivateAttr(default_factory=dict)  # YAML line of each key path
     _notes: list[str] = PrivateAttr(default_factory=list)  # what the dry run changed (validate and report.md say it)
+    _raw: dict[str, Any] | None = PrivateAttr(default=None)  # the data it was validated from (Config.with_)
+    _base_dir: Path | None = PrivateAttr(default=None)         # where that data's relative paths resolve
 
     @model_validator(mode="after")
     def _derive_seeds(self) -> "Config":
@@ -107,6 +109,15 @@ class Config(Section):
     def error(self, message: str, key: str) -> ConfigError:
         """A one-line :class:`ConfigError` naming this config's file, ``key`` and its YAML line."""
         return key_error(message, key, self.file, self._lines)
+
+    def with_(self, *updates: Mapping[str, Any], **keys: Any) -> "Config":
+        """A copy with ``updates`` (``{"key.path": value}`` mappings with typed values, applied in order), then
+        ``keys`` (top-level keys) set, validated again as the config was loaded (:func:`derive`): seeds derived
+        anew, plugins' options checked, nothing read from a file.
+
+        :raises ConfigError: the derived config is invalid (naming the key).
+        """
+        return derive(self, *updates, keys)
 
     @property
     def file(self) -> str:
@@ -238,31 +249,36 @@ def apply_overrides(data: dict[str, Any], overrides: Sequence[str], file: str) -
         if "=" not in item:
             raise ConfigError(f"--set expects key.path=value, got '{item}'", file=file)
         key, raw = item.split("=", 1)
-        parts = key.strip().split(".")
-        if not all(parts):
-            raise ConfigError(f"--set has an empty key in '{key}'", file=file, key=key)
         try:
             value = parse_yaml(raw) if raw.strip() else ""
         except yaml.YAMLError:
             value = raw
-        node: Any = data
-        for depth, part in enumerate(parts[:-1]):
-            here = ".".join(parts[: depth + 1])
-            if isinstance(node, dict):
-                node = node.setdefault(part, {})
-            elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
-                node = node[int(part)]
-            else:
-                raise ConfigError(f"--set {key}: '{here}' is not a mapping that can hold '{parts[depth + 1]}'",
-                                  file=file, key=key)
-        last = parts[-1]
-        if isinstance(node, dict):
-            node[last] = value
-        elif isinstance(node, list) and last.isdigit() and int(last) < len(node):
-            node[int(last)] = value
-        else:
-            raise ConfigError(f"--set {key}: the parent of '{last}' is not a mapping", file=file, key=key)
+        set_path(data, key, value, file)
     return data
+
+
+def set_path(data: dict[str, Any], key: str, value: Any, file: str) -> None:
+    """Set ``key`` (``a.b.0.c``: mappings and list indices) of ``data`` to ``value`` in place."""
+    parts = key.strip().split(".")
+    if not all(parts):
+        raise ConfigError(f"--set has an empty key in '{key}'", file=file, key=key)
+    node: Any = data
+    for depth, part in enumerate(parts[:-1]):
+        here = ".".join(parts[: depth + 1])
+        if isinstance(node, dict):
+            node = node.setdefault(part, {})
+        elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        else:
+            raise ConfigError(f"--set {key}: '{here}' is not a mapping that can hold '{parts[depth + 1]}'",
+                              file=file, key=key)
+    last = parts[-1]
+    if isinstance(node, dict):
+        node[last] = value
+    elif isinstance(node, list) and last.isdigit() and int(last) < len(node):
+        node[int(last)] = value
+    else:
+        raise ConfigError(f"--set {key}: the parent of '{last}' is not a mapping", file=file, key=key)
 
 
 def override_arguments(mapping: Mapping[str, Any]) -> list[str]:
@@ -319,15 +335,46 @@ def load_config(source: str | Path | Mapping[str, Any], overrides: Sequence[str]
         data, lines = read_yaml(path)
         folder = path.resolve().parent
     data = apply_overrides(data, overrides, file)
+    return _validated(data, file, path, lines, folder, check_plugins)
+
+
+def _validated(data: dict[str, Any], file: str, path: Path | None, lines: dict[tuple, int], folder: Path,
+               check_plugins: bool) -> Config:
+    """``data`` (a config as read, overrides applied) validated into a :class:`Config` (:func:`load_config`)."""
     try:
         config = Config.model_validate(data, context={"base_dir": folder})
     except ValidationError as exc:
         raise_validation_error(exc, Config, file, lines)
     config.source_file = path.resolve() if path is not None else None
     config._lines = lines
+    config._raw = copy.deepcopy(data)
+    config._base_dir = folder
     if check_plugins:
         check_config_plugins(config)
     return config
+
+
+def loaded(source: str | Path | Mapping[str, Any], overrides: Sequence[str], config: Config) -> Config:
+    """``config`` when it can be derived (:meth:`Config.with_`), else the same config loaded again from
+    ``source`` with ``overrides`` (a config built without :func:`load_config`)."""
+    return config if config._raw is not None else load_config(source, overrides)
+
+
+def derive(config: Config, *updates: Mapping[str, Any]) -> Config:
+    """``config`` with ``updates`` (``"key.path" -> value``, typed values: no YAML text; one mapping after the
+    other, each in order) applied to the data it was loaded from, validated again as :func:`load_config` validates (seeds derived, plugins' options
+    checked): what ``load_config(source, overrides)`` with those keys set gives, without reading the file
+    again. :meth:`Config.with_` calls it.
+
+    :raises ConfigError: the derived config is invalid (naming the key).
+    """
+    if config._raw is None:
+        raise ConfigError("this config was not loaded by load_config: it cannot be derived", file=config.file)
+    data = copy.deepcopy(config._raw)
+    for mapping in updates:
+        for path, value in mapping.items():
+            set_path(data, path, copy.deepcopy(value), config.file)
+    return _validated(data, config.file, config.source_file, config._lines, config._base_dir, check_plugins=True)
 
 
 def plugin_class(kind: str, section: PluginSection, key: str, config: Config) -> type:

@@ -7,6 +7,7 @@ import json
 import pytest
 
 import suspid
+from suspid.errors import ConfigError, DataError
 from suspid.method import objective as objective_module
 
 
@@ -21,9 +22,11 @@ def small_config(tmp_path, **extra):
     return cfg | extra
 
 
-def test_the_run_builds_its_objective_function_once(tmp_path, monkeypatch):
-    """Every evaluation of J (design, EGO, the intervals' ±h points, the report) goes through the problem's
-    one ObjectiveFunction; the bootstrap replicates of the intervals, J on resampled data, build one each."""
+@pytest.fixture(scope="module")
+def identified(tmp_path_factory):
+    """One small identification, counting the ObjectiveFunctions built while it runs: ``(result, y_mes of
+    each ObjectiveFunction built, run folder)``."""
+    tmp_path = tmp_path_factory.mktemp("typed")
     built = []
     original = objective_module.ObjectiveFunction.__init__
 
@@ -31,9 +34,88 @@ def test_the_run_builds_its_objective_function_once(tmp_path, monkeypatch):
         built.append(y_mes)
         original(self, objective, y_mes, *args, **kwargs)
 
-    monkeypatch.setattr(objective_module.ObjectiveFunction, "__init__", counting)
-    r = suspid.identify(small_config(tmp_path))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(objective_module.ObjectiveFunction, "__init__", counting)
+        r = suspid.identify(small_config(tmp_path))
+    return r, built, tmp_path / "run"
+
+
+def test_the_run_builds_its_objective_function_once(identified):
+    """Every evaluation of J (design, EGO, the intervals' ±h points, the report) goes through the problem's
+    one ObjectiveFunction; the bootstrap replicates of the intervals, J on resampled data, build one each."""
+    r, built, _ = identified
     own = [y for y in built if y is r.problem.y_mes]
     assert len(own) == 1
     assert r.n_simulator_calls >= 6
-    assert len(built) == 1 + r.result["interval_method"]["n_redraws"]
+    assert len(built) == 1 + r.interval_method.n_redraws
+
+
+def test_result_json_is_the_serialisation_of_the_typed_result(identified):
+    """result.json is IdentificationResult.to_json(), versioned; it reads back to an equal typed result."""
+    from suspid.workflows.results import Analysis, IntervalMethod
+
+    r, _, run = identified
+    saved = json.loads((run / "result.json").read_text())
+    assert saved["schema_version"] == suspid.IdentificationResult.SCHEMA_VERSION == 1
+    assert r.to_json() == saved
+    loaded = suspid.IdentificationResult.load(run)
+    assert loaded == r                                  # every typed field, nested records included
+    assert isinstance(loaded.interval_method, IntervalMethod) and isinstance(r, Analysis)
+    assert loaded.interval_method.n_redraws == 6
+    assert loaded.intervals["k_sec_z"] == tuple(saved["interval"]["k_sec_z"])
+    assert json.dumps(loaded.to_json()) == json.dumps(saved)   # the same keys in the same order
+    c = {c.name: c for c in r.components}
+    assert c["k_sec_z"].w_ref == 380.0e3 and c["k_sec_z"].interval == r.interval["k_sec_z"]
+    assert c["c_sec_z"].error_percent == r.errors_percent["c_sec_z"]
+
+
+def test_old_and_newer_result_files_load(identified):
+    """A result.json written before schema_version (and before the verdict) loads, its unknown keys kept;
+    one of a newer schema is refused with the remedy."""
+    r, _, run = identified
+    old = {k: v for k, v in r.to_json().items() if k not in ("schema_version", "nominal", "verdict", "anytime")}
+    old["a_key_of_another_version"] = {"x": 1}
+    loaded = suspid.IdentificationResult.from_dict(old, run)
+    assert loaded.w_opt == r.w_opt and loaded.verdict == [] and loaded.anytime is None
+    assert loaded.extra == {"a_key_of_another_version": {"x": 1}}
+    assert loaded.to_json()["a_key_of_another_version"] == {"x": 1}
+    with pytest.raises(DataError, match="upgrade suspid"):
+        suspid.IdentificationResult.from_dict({**r.to_json(), "schema_version": 99}, run)
+
+
+STUDY = """\
+name: st
+seed: 3
+simulator: {plugin: exudyn-train, options: {solver: frequency}}
+parameters: {k_sec_z: {}, c_sec_z: {}}
+data: {track: {n_segments: 6, length_m: 800.0}}
+study:
+  variants:
+    - {name: a, set: {objective.plugin: likelihood, data.track.length_m: 900.0}}
+    - {name: b, set: {design: {n_initial: 7}}}
+  seeds: [1, 2]
+"""
+
+
+def test_derived_configs_are_typed_copies_equal_to_the_string_overrides(tmp_path):
+    """A study's variants are the config with typed keys set (Config.with_), validated again: the same
+    configs, seeds derived anew, as reloading the file with ``--set`` strings gave."""
+    from suspid.config import load_config, override_arguments
+    from suspid.workflows.study import study_variants
+
+    path = tmp_path / "st.yaml"
+    path.write_text(STUDY)
+    config = load_config(path, ["ego.max_iter=3"])
+    runs = study_variants(path, ["ego.max_iter=3"], config)
+    assert [r.label for r in runs] == ["a-seed1", "b-seed1", "a-seed2", "b-seed2"]
+    for r, v in zip(runs, [*config.study.variants] * 2):
+        extra = {"output.dir": str(config.run_dir() / "variants" / r.label), "name": f"st-{r.label}",
+                 "seed": r.seed}
+        reloaded = load_config(path, ["ego.max_iter=3", *override_arguments(v.set), *override_arguments(extra)])
+        assert r.config.model_dump() == reloaded.model_dump()
+        assert r.config.source_file == reloaded.source_file
+    assert runs[0].config.design.seed != runs[2].config.design.seed       # derived from each run's own seed
+    assert runs[0].config.objective.plugin == "likelihood" and runs[1].config.design.n_initial == 7
+    assert config.with_(seed=1).ego.max_iter == 3 and config.seed == 3    # a copy: the original unchanged
+    with pytest.raises(ConfigError, match="design.n_initial"):
+        config.with_({"design.n_initial": -1})

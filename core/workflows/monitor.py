@@ -86,7 +86,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from suspid import registry
-from suspid.config import Config, build_simulator, identified_bounds, load_config, override_arguments
+from suspid.config import Config, build_simulator, identified_bounds, loaded
 from suspid.errors import ConfigError
 from suspid.infra.files import atomic_open, pyplot, save_figure, write_json, write_text
 from suspid.infra.lock import open_run_dir
@@ -239,8 +239,8 @@ def identify_reference(source: ConfigSource, overrides: Sequence[str], config: C
     ``noise_model.npz`` written there.
     """
     ref_dir = config.run_dir() / "reference"
-    ref_cfg = load_config(source, [*overrides, *override_arguments({"monitor": None, "output.dir": str(ref_dir),
-                                                           "name": f"{config.name}-reference"})])
+    ref_cfg = loaded(source, overrides, config).with_({"monitor": None, "output.dir": str(ref_dir),
+                                                       "name": f"{config.name}-reference"})
     with registry.get("executor", ref_cfg.executor.plugin)(**ref_cfg.executor.options) as executor, \
             open_run_dir(ref_dir, config_name=ref_cfg.name, config_file=ref_cfg.source_file, fresh=fresh,
                          log=log) as ledger:
@@ -268,6 +268,7 @@ def monitor_dates(source: ConfigSource, overrides: Sequence[str], config: Config
         per_date = [(c.date, _flatten(c.data, "data"), None, f"monitor.campaigns.{i}.data")
                     for i, c in enumerate(opts.campaigns)]
     base_dir = config.run_dir()
+    base = loaded(source, overrides, config)
     plans = []
     for d, data, loss, key in per_date:
         label = d.isoformat()
@@ -276,7 +277,7 @@ def monitor_dates(source: ConfigSource, overrides: Sequence[str], config: Config
         if data.get("data.source", config.data.source) == "experiment":
             extra["data.track.seed"] = seed_for(config.seed, f"monitor-{label}")  # own track realisations
         try:
-            cfg = load_config(source, [*overrides, *override_arguments(extra), *override_arguments(data)])
+            cfg = base.with_(extra, data)
         except ConfigError as exc:
             if exc.key and exc.key.startswith("data.") and key.startswith("monitor.campaigns"):
                 raise where.error(f"{exc.detail} (date {label})", f"{key}{exc.key[len('data'):]}") from None

@@ -37,7 +37,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from suspid.config import Config, load_config, override_arguments
+from suspid.config import Config, loaded
 from suspid.infra.files import atomic_open, write_json, write_text
 from suspid.workflows.identify import IdentificationResult, run
 from suspid.sections import StudyOptions
@@ -70,15 +70,18 @@ class StudyRun:
 
 def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[str],
                    config: Config) -> list[StudyRun]:
-    """The configs of every variant (each validated), in order.
+    """The configs of every variant (each validated), in order: ``config`` with the variant's keys set
+    (:meth:`~suspid.config.Config.with_`).
 
-    :param source: the config file (or mapping) the variants are derived from.
+    :param source: the config file (or mapping) ``config`` was loaded from (read only when ``config`` was
+        not made by :func:`~suspid.config.load_config`).
     :param overrides: the ``--set`` overrides of the study itself.
     :raises ConfigError: the config has no ``study:`` section, or a variant's config is invalid.
     """
     if config.study is None:
         raise config.error("this config has no 'study:' section listing variants", "study")
     out = []
+    base = loaded(source, overrides, config)
     base_dir = config.run_dir()
     for seed in config.study.seeds or [None]:
         for v in config.study.variants:
@@ -86,8 +89,7 @@ def study_variants(source: str | Path | Mapping[str, Any], overrides: Sequence[s
             extra = {"output.dir": str(base_dir / "variants" / label), "name": f"{config.name}-{label}"}
             if seed is not None:
                 extra["seed"] = seed
-            out.append(StudyRun(label, v.name, seed, load_config(source, [*overrides, *override_arguments(v.set),
-                                                                          *override_arguments(extra)])))
+            out.append(StudyRun(label, v.name, seed, base.with_(v.set, extra)))
     return out
 
 
