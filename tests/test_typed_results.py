@@ -119,3 +119,75 @@ def test_derived_configs_are_typed_copies_equal_to_the_string_overrides(tmp_path
     assert config.with_(seed=1).ego.max_iter == 3 and config.seed == 3    # a copy: the original unchanged
     with pytest.raises(ConfigError, match="design.n_initial"):
         config.with_({"design.n_initial": -1})
+
+
+def test_study_and_monitor_files_are_their_results_serialisation(identified, tmp_path):
+    """study.json and monitor.json read back to equal typed results; monitor.json is versioned and keeps
+    its layout (rows in date order, the summary's keys)."""
+    import datetime as dt
+
+    from suspid.sections import MonitorOptions
+    from suspid.workflows.monitor import MonitorResult, MonitorRow, write_monitor
+    from suspid.workflows.study import StudyResult
+
+    r, _, _ = identified
+    study = StudyResult(tmp_path, {"a": r})
+    (tmp_path / "study.json").write_text(json.dumps(study.to_json()))
+    again = StudyResult.load(tmp_path)
+    assert again.variants["a"].to_json() == r.to_json() and again.variants["a"].run_dir == tmp_path / "variants" / "a"
+
+    opts = MonitorOptions.model_validate({"acceptable": {"c_sec_z": [15.0e3, 25.0e3]},
+                                          "scenario": {"parameter": "c_sec_z", "loss": 0.4, "n_dates": 2,
+                                                       "start": dt.date(2026, 1, 15)}})
+    dated = [(dt.date(2026, 1, 15), r.to_json()), (dt.date(2026, 2, 14), r.to_json())]
+    summary = write_monitor(tmp_path, "mon", dated, opts, tmp_path / "ref.npz", {"2026-01-15": 0.0,
+                                                                                 "2026-02-14": 0.4})
+    saved = json.loads((tmp_path / "monitor.json").read_text())
+    assert saved == summary and saved["schema_version"] == MonitorResult.SCHEMA_VERSION
+    assert list(saved)[:9] == ["name", "dates", "parameters", "reference_noise_model", "acceptable", "alerts",
+                               "first_warnings", "scenario", "rows"]
+    m = MonitorResult.from_json(saved, monitor_dir=tmp_path)
+    assert m.to_json() == saved and m.summary == saved
+    assert m.date_labels == ["2026-01-15", "2026-02-14"] and m.scenario.losses["2026-02-14"] == 0.4
+    assert isinstance(m.rows[0], MonitorRow) and m.rows[0].parameter == "k_sec_z"
+    assert m.rows[1].status == saved["rows"][1]["status"] and m.alerts == saved["alerts"]
+    old = {k: v for k, v in saved.items() if k != "schema_version"}
+    assert MonitorResult.from_json(old).rows == m.rows
+
+
+def test_diagnosis_json_is_the_diagnosis_result_serialisation(tmp_path):
+    """diagnosis.json is DiagnosisResult.to_json() (canonical: sorted keys), versioned; it reads back equal."""
+    from suspid.sections import DiagnoseOptions
+    from suspid.workflows.diagnose.result import (DiagnosisResult, DiagnosisStatistics, NamedEffect, SequenceRow,
+                                                  joint_fit_text)
+
+    opts = DiagnoseOptions()
+    gap = {"share_flagged": 0.25, "integrated_db_hz": 3.5, "w": {"k_sec_z": 4.0e5}}
+    d = DiagnosisResult(
+        name="bending", config=str(tmp_path / "bending.yaml"), base_model="nominal",
+        flagged=[{"channel": "carbody_middle_vertical", "f_low_hz": 8.0, "f_high_hz": 11.0, "sign": 1,
+                  "magnitude_db": 2.5, "test": "mean", "z": 6.1, "q": 1e-6, "speed_kmh": 300.0}],
+        ranking=[{"effect": "carbody-bending", "score": 12.0, "parameters": {"frequency_hz": 9.5}}],
+        generic_bumps={}, local_model=None, coupling=None, named="carbody-bending",
+        named_effects=["carbody-bending"], reason="named", named_parameters={"frequency_hz": 9.5},
+        effects=[NamedEffect(name="carbody-bending", parameters={"frequency_hz": 9.5, "damping": 0.02})],
+        steps=[{"step": 1, "named": "carbody-bending"}],
+        sequence=[SequenceRow(step=1, named="carbody-bending", share_flagged_before=0.25, share_flagged_after=0.0,
+                              integrated_db_hz_after=0.1)],
+        unexplained=[], channel_gains=[], suspension=None, joint_fit=joint_fit_text(opts), gap_before=gap,
+        gap_after=None, augmented_config=None,
+        statistics=DiagnosisStatistics(n_cells=40, bands_hz=[[0.4, 0.8]], min_db=opts.min_db,
+                                       noise_mean_by_speed={}, n_bootstrap=100, kappa_median=1.1,
+                                       kappa_raw_median=None, bootstrap_null_rate_at_5pct=0.04, alpha=opts.alpha,
+                                       penalty_per_parameter=7.0, margin=opts.margin,
+                                       min_explained=opts.min_explained, max_new_flagged=opts.max_new_flagged),
+        map_before=[], map_after=None, wall_time_s=1.5, ranking_time_s=0.5, out_dir=tmp_path)
+    data = d.to_json()
+    assert list(data) == sorted(data) and data["schema_version"] == 1
+    assert data["statistics"]["fdr"] == "Benjamini-Yekutieli" and data["effects"][0]["name"] == "carbody-bending"
+    (tmp_path / "diagnosis.json").write_text(json.dumps(data))
+    loaded = DiagnosisResult.load(tmp_path)
+    assert loaded == d and loaded.diagnosis == data and loaded.named_effects == ["carbody-bending"]
+    old = {k: v for k, v in data.items() if k != "schema_version"}
+    assert DiagnosisResult.from_json(old, out_dir=tmp_path) == d
+    assert joint_fit_text(opts.model_copy(update={"reidentify": False})).startswith("none")

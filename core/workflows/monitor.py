@@ -79,7 +79,8 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -93,6 +94,7 @@ from suspid.infra.lock import open_run_dir
 from suspid.infra.seeds import seed_for
 from suspid.sections import W_REF_MEASURED, MonitorOptions, Scenario
 from suspid.workflows.identify import IdentificationResult, run
+from suspid.workflows.records import Record, key
 from suspid.workflows.problem import build_problem
 from suspid.workflows.report import markdown_table, trust_word
 
@@ -111,18 +113,73 @@ class DatePlan:
     loss: float | None = None
 
 
-@dataclass
-class MonitorResult:
-    """A finished monitor: its folder, the ``monitor.json`` summary (rows, alerts) and each date's result."""
+@dataclass(kw_only=True)
+class MonitorRow(Record):
+    """One (date, parameter) of a monitor: the value, its interval and acceptable domain (SI), its trust and
+    status (module docstring), and the truth of a numerical experiment (else None)."""
 
-    monitor_dir: Path
-    summary: dict[str, Any]
-    dates: dict[str, IdentificationResult]
+    date: str
+    parameter: str
+    unit: str
+    value: float
+    interval_low: float
+    interval_high: float
+    acceptable_low: float | None
+    acceptable_high: float | None
+    identifiable: bool
+    trustworthy: str
+    status: str
+    w_ref: float | None
+
+
+@dataclass(kw_only=True)
+class MonitorScenario(Record):
+    """The synthetic degradation of a monitor: the parameter, its loss at the last date, the loss per date."""
+
+    parameter: str
+    loss: float
+    losses: dict[str, float]
+
+
+@dataclass(kw_only=True)
+class MonitorResult(Record):
+    """A finished monitor: what ``monitor.json`` holds (its serialisation, versioned), its folder and each
+    date's identification.
+
+    :ivar date_labels: the dates (ISO), in order (``monitor.json``'s ``dates``).
+    :ivar alerts: parameter -> the first date it left its acceptable domain.
+    :ivar first_warnings: parameter -> the first date its interval overlapped an edge of the domain (or left it).
+    :ivar rows: one :class:`MonitorRow` per date and parameter, in date order.
+    :ivar dates: date (ISO) -> :class:`~suspid.workflows.identify.IdentificationResult` (not in the file).
+    """
+
+    SCHEMA_VERSION = 1
+
+    name: str
+    date_labels: list[str] = key("dates")
+    parameters: list[str]
+    reference_noise_model: str
+    acceptable: dict[str, list[float | None]]
+    alerts: dict[str, str]
+    first_warnings: dict[str, str]
+    scenario: MonitorScenario | None = key(record=MonitorScenario)
+    rows: list[MonitorRow] = key(items=MonitorRow)
+    monitor_dir: Path = field(default=Path("."), metadata={"json": False})
+    dates: dict[str, IdentificationResult] = field(default_factory=dict, metadata={"json": False})
 
     @property
-    def alerts(self) -> dict[str, str]:
-        """Parameter -> the first date it left its acceptable domain."""
-        return dict(self.summary["alerts"])
+    def summary(self) -> dict[str, Any]:
+        """The content of ``monitor.json`` (:meth:`to_json`)."""
+        return self.to_json()
+
+    @classmethod
+    def load(cls, monitor_dir: str | Path) -> "MonitorResult":
+        """Read a finished monitor's ``monitor.json`` and its dates' ``result.json``."""
+        monitor_dir = Path(monitor_dir)
+        data = json.loads((monitor_dir / "monitor.json").read_text(encoding="utf-8"))
+        dates = {d: IdentificationResult.load(monitor_dir / "dates" / d) for d in data["dates"]
+                 if (monitor_dir / "dates" / d / "result.json").is_file()}
+        return cls.from_json(data, monitor_dir=monitor_dir, dates=dates)
 
 
 def monitor_options(config: Config) -> MonitorOptions:
@@ -374,14 +431,14 @@ def run_monitor(source: ConfigSource, overrides: Sequence[str], config: Config, 
     monitor_dir.mkdir(parents=True, exist_ok=True)
     summary = write_monitor(monitor_dir, config.name, dated, opts, noise_model,
                             {p.date.isoformat(): p.loss for p in plans if p.loss is not None})
-    return MonitorResult(monitor_dir, summary, results)
+    return MonitorResult.from_json(summary, monitor_dir=monitor_dir, dates=results)
 
 
 def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, dict[str, Any]]],
                   opts: MonitorOptions, noise_model: Path, losses: Mapping[str, float] | None = None) -> dict:
     """monitor.csv, monitor.json, monitor.md and one monitor_<parameter>.png per parameter.
 
-    :returns: the monitor.json summary.
+    :returns: the monitor.json summary (:meth:`MonitorResult.to_json`).
     """
     acceptable = {n: list(v) for n, v in opts.acceptable.items()}
     rows = monitor_rows(dated, acceptable)
@@ -393,11 +450,12 @@ def write_monitor(monitor_dir: Path, name: str, dated: Sequence[tuple[dt.date, d
         writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
-    summary = {"name": name, "dates": [d.isoformat() for d, _ in dated], "parameters": names,
-               "reference_noise_model": str(noise_model), "acceptable": acceptable, "alerts": alerts,
-               "first_warnings": warnings, "scenario": None if opts.scenario is None else
-               {"parameter": opts.scenario.parameter, "loss": opts.scenario.loss, "losses": dict(losses or {})},
-               "rows": rows}
+    summary = MonitorResult(
+        name=name, date_labels=[d.isoformat() for d, _ in dated], parameters=names,
+        reference_noise_model=str(noise_model), acceptable=acceptable, alerts=alerts, first_warnings=warnings,
+        scenario=None if opts.scenario is None else MonitorScenario(
+            parameter=opts.scenario.parameter, loss=opts.scenario.loss, losses=dict(losses or {})),
+        rows=[MonitorRow(**r) for r in rows]).to_json()
     write_json(monitor_dir / "monitor.json", summary)
 
     figures = [figure_monitor(monitor_dir / f"monitor_{n}.png", n, units.get(n, ""),

@@ -31,6 +31,7 @@ error is reported. Outputs (statistics in :mod:`suspid.workflows.study_stats`):
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -51,11 +52,30 @@ from suspid.workflows.study_stats import anytime_errors
 class StudyResult:
     """A finished study: its folder (``study.csv``, ``study.md``, ``study.json``, the figure) and every variant.
 
+    ``study.json`` is its serialisation (:meth:`to_json`): ``label -> result.json`` of each run, each
+    versioned by its own ``schema_version``.
+
     :ivar variants: label -> :class:`~suspid.workflows.identify.IdentificationResult`, in run order.
     """
 
     study_dir: Path
     variants: dict[str, IdentificationResult]
+
+    def to_json(self) -> dict[str, Any]:
+        """The content of ``study.json``: each run's result, by label, in run order."""
+        return {label: r.to_json() for label, r in self.variants.items()}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], study_dir: str | Path) -> "StudyResult":
+        """The study of a ``study.json``'s content (each run's folder: ``variants/<label>/`` of ``study_dir``)."""
+        study_dir = Path(study_dir)
+        return cls(study_dir, {label: IdentificationResult.from_dict(r, study_dir / "variants" / label)
+                               for label, r in data.items()})
+
+    @classmethod
+    def load(cls, study_dir: str | Path) -> "StudyResult":
+        """Read a finished study's ``study.json``."""
+        return cls.from_json(json.loads((Path(study_dir) / "study.json").read_text(encoding="utf-8")), study_dir)
 
 
 @dataclass
