@@ -39,6 +39,8 @@ _LAZY = {name: "suspid.api" for name in ("Validation", "diagnose", "identify", "
                                           "monitor", "segments", "simulate", "stability", "study", "validate",
                                           "indicators", "fleet_import", "fleet_demo", "dashboard")}
 _LAZY["IdentificationResult"] = "suspid.workflows.identify"
+_LAZY |= {"StudyResult": "suspid.workflows.study", "MonitorResult": "suspid.workflows.monitor",
+          "DiagnosisResult": "suspid.workflows.diagnose"}
 
 __all__ = ["PROJECT_NAME", "hookimpl", "hookspec", "__version__", *_LAZY]
 

@@ -99,6 +99,24 @@ def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], no
     return data
 
 
+def augmented_config(config: Config, effects: list[tuple[str, dict[str, Any]]], out_dir: Path, noise_path: Path,
+                     path: Path | None = None, run_dir: Path | None = None,
+                     corrections: list[dict[str, Any]] = ()) -> Config:
+    """The augmented model's config as a typed copy of ``config`` (:meth:`~suspid.config.Config.with_`: the
+    named effects, the sensor corrections and the base run's noise model set, validated again), with
+    ``augmented.yaml`` written beside it for the user (:func:`write_augmented`) and named as its source: the
+    file is not read back."""
+    path = write_augmented(config, effects, out_dir, noise_path, path, run_dir, corrections)
+    data = augmented_data(config, effects, noise_path, run_dir or out_dir / "after", corrections)
+    keys = {"simulator.options.effects": data["simulator"]["options"]["effects"], "noise.path": data["noise"]["path"],
+            "name": data["name"], "output": data["output"]}
+    if corrections:
+        keys["data.corrections"] = data["data"]["corrections"]
+    derived = config.with_(keys)
+    derived.source_file = path.resolve()   # the run directory's owner is that file, as when it was read back
+    return derived
+
+
 def write_augmented(config: Config, effects: Candidate | list[tuple[str, dict[str, Any]]], out_dir: Path,
                     noise_path: Path, path: Path | None = None, run_dir: Path | None = None,
                     corrections: list[dict[str, Any]] = ()) -> Path:

@@ -10,14 +10,13 @@ import json
 import math
 import shutil
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from suspid import registry
-from suspid.config import Config, load_config
+from suspid.config import Config
 from suspid.data.corrections import untilt
 from suspid.errors import SimulatorError
 from suspid.infra.files import canonical, write_json
@@ -38,26 +37,9 @@ from .locate import locate
 from .name import (Ranking, _supported_effects, channel_gains, check_after_joint_fit, rank_effects,
                    unexplained_regions)
 from .null import NullCalibration, calibrate_null
-from .reidentify import Stage, make_stage, write_augmented
+from .reidentify import Stage, augmented_config, make_stage, write_augmented
 from .report import write_diagnosis_report
-
-
-@dataclass
-class DiagnosisResult:
-    """A finished diagnosis: its folder and the content of ``diagnosis.json``."""
-
-    out_dir: Path
-    diagnosis: dict[str, Any]
-
-    @property
-    def named(self) -> str | None:
-        """The first named effect, or None."""
-        return self.diagnosis["named"]
-
-    @property
-    def named_effects(self) -> list[str]:
-        """Every named effect, in the order they were named."""
-        return list(self.diagnosis["named_effects"])
+from .result import DiagnosisResult, DiagnosisStatistics, NamedEffect, SequenceRow, joint_fit_text
 
 
 def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str], config: Config, *,
@@ -172,64 +154,49 @@ def run_diagnose(source: str | Path | Mapping[str, Any], overrides: Sequence[str
         gains = _channel_gains(config, current, named, in_data, grid, null, log)
     unexplained = list(unexplained) + [_gain_region(g, grid) for g in gains if g["significant"]]
     reported = _reported_suspension(current, config, grid, null, log)
-    diagnosis = {
-        "name": config.name,
-        "config": str(config.source_file),
-        "base_model": opts.at,
-        "flagged": [{k: r[k] for k in ("channel", "f_low_hz", "f_high_hz", "sign", "magnitude_db", "test", "z", "q",
-                                       "speed_kmh")} for r in before.dmap.rows(only_flagged=True)],
-        "ranking": next((s["ranking"] for s in steps if s.get("ranking")), []),
-        "generic_bumps": {str(p): b.as_dict() for p, b in first.bumps.items()},
-        "local_model": next((s["local_model"] for s in steps if s.get("local_model")), None),
-        "coupling": coupling,
-        "named": named[0][0] if named else None,
-        "named_effects": [n for n, _, _ in named],
-        "reason": steps[0]["reason"],
-        "named_parameters": canonical(named[0][1]) if named else None,
-        "effects": [{"name": n, "parameters": canonical(p)} for n, p, _ in named],
-        "steps": steps,
-        "sequence": [{"step": s["step"], "named": s["named"],
-                      "share_flagged_before": s["gap_before"]["share_flagged"],
-                      "share_flagged_after": s.get("gap_after", {}).get("share_flagged"),
-                      "integrated_db_hz_after": s.get("gap_after", {}).get("integrated_db_hz")} for s in steps],
-        "unexplained": unexplained,
-        "channel_gains": gains,
-        "suspension": reported,
-        "joint_fit": ("together: the suspension and the continuous parameters of every named effect fitted at once "
-                      "by least squares on D (the whitened mean residuals the map tests), from the "
-                      + ("fitted identified suspension and the effects' fits at it; then the augmented model "
-                         "identified with the configured objective (after/)" if opts.at == "identified" else
-                         "nominal suspension and the effects' fits at it")) if opts.reidentify
-        else "none: reidentify is false, the effects are fitted at the base parameters",
-        "gap_before": before.gap(),
-        "gap_after": after.gap() if after is not None else None,
-        "augmented_config": str(aug_path) if aug_path is not None else None,
-        "statistics": {
-            "cells": "speed group x channel x band", "n_cells": grid.n_cells,
-            "bands_hz": grid.band_edges.round(4).tolist(),
-            "statistic": "per cell: band mean of r = y_mes - y_sim - mu_B (mean test), sum of squared "
-                         "standardised bin means (shape test), largest standardised bin mean (peak test); "
-                         "p = min(1, 3 min(p_mean, p_shape, p_peak))",
-            "null": "mean: N(0, kappa_c^2 s_c^2), s_c from the noise covariance; shape: a_c chi2(nu_c); "
-                    "peak: Bonferroni over the band's bins; kappa, a_c, nu_c from a parametric bootstrap; each "
-                    "test against a discrepancy of min_db (|mean| <= min_db), the shape test on the excesses",
-            "min_db": opts.min_db,
-            "noise_mean_by_speed": problem.noise_model.speed_coverage(grid.speeds),
-            "n_bootstrap": null.n_bootstrap, "kappa_median": float(np.median(null.kappa)),
-            "kappa_raw_median": None if null.kappa_raw is None else float(np.median(null.kappa_raw)),
-            "bootstrap_null_rate_at_5pct": null.null_rate, "fdr": "Benjamini-Yekutieli", "alpha": opts.alpha,
-            "penalty_per_parameter": math.log(grid.n_cells // grid.band_edges.shape[0] * grid.freqs.size),
-            "margin": opts.margin,
-            "min_explained": opts.min_explained, "max_new_flagged": opts.max_new_flagged},
-        "map_before": before.dmap.rows(),
-        "map_after": after.dmap.rows() if after is not None else None,
-        "wall_time_s": None, "ranking_time_s": round(rank_s, 2),
-    }
-    diagnosis["wall_time_s"] = round(time.perf_counter() - t_start, 2)
-    diagnosis = canonical(diagnosis)
+    out = DiagnosisResult(
+        name=config.name,
+        config=str(config.source_file),
+        base_model=opts.at,
+        flagged=[{k: r[k] for k in ("channel", "f_low_hz", "f_high_hz", "sign", "magnitude_db", "test", "z", "q",
+                                    "speed_kmh")} for r in before.dmap.rows(only_flagged=True)],
+        ranking=next((s["ranking"] for s in steps if s.get("ranking")), []),
+        generic_bumps={str(p): b.as_dict() for p, b in first.bumps.items()},
+        local_model=next((s["local_model"] for s in steps if s.get("local_model")), None),
+        coupling=coupling,
+        named=named[0][0] if named else None,
+        named_effects=[n for n, _, _ in named],
+        reason=steps[0]["reason"],
+        named_parameters=canonical(named[0][1]) if named else None,
+        effects=[NamedEffect(name=n, parameters=canonical(p)) for n, p, _ in named],
+        steps=steps,
+        sequence=[SequenceRow(step=s["step"], named=s["named"],
+                              share_flagged_before=s["gap_before"]["share_flagged"],
+                              share_flagged_after=s.get("gap_after", {}).get("share_flagged"),
+                              integrated_db_hz_after=s.get("gap_after", {}).get("integrated_db_hz")) for s in steps],
+        unexplained=unexplained,
+        channel_gains=gains,
+        suspension=reported,
+        joint_fit=joint_fit_text(opts),
+        gap_before=before.gap(),
+        gap_after=after.gap() if after is not None else None,
+        augmented_config=str(aug_path) if aug_path is not None else None,
+        statistics=DiagnosisStatistics(
+            n_cells=grid.n_cells, bands_hz=grid.band_edges.round(4).tolist(), min_db=opts.min_db,
+            noise_mean_by_speed=problem.noise_model.speed_coverage(grid.speeds),
+            n_bootstrap=null.n_bootstrap, kappa_median=float(np.median(null.kappa)),
+            kappa_raw_median=None if null.kappa_raw is None else float(np.median(null.kappa_raw)),
+            bootstrap_null_rate_at_5pct=null.null_rate, alpha=opts.alpha,
+            penalty_per_parameter=math.log(grid.n_cells // grid.band_edges.shape[0] * grid.freqs.size),
+            margin=opts.margin, min_explained=opts.min_explained, max_new_flagged=opts.max_new_flagged),
+        map_before=before.dmap.rows(),
+        map_after=after.dmap.rows() if after is not None else None,
+        wall_time_s=round(time.perf_counter() - t_start, 2), ranking_time_s=round(rank_s, 2),
+        out_dir=out_dir)
+    diagnosis = out.to_json()
     write_json(out_dir / "diagnosis.json", diagnosis)
     write_diagnosis_report(out_dir, diagnosis, before, after, first.candidates, first.bumps)
-    return DiagnosisResult(out_dir, json.loads(json.dumps(diagnosis)))
+    return DiagnosisResult.from_json(json.loads(json.dumps(diagnosis)), out_dir=out_dir)
 
 
 def _channel_gains(config: Config, stage: Stage, named, in_data, grid: CellGrid, null: NullCalibration,
@@ -561,9 +528,8 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
     """
     opts = config.diagnose
     if not opts.reidentify:
-        aug = load_config(write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
-                                          path=out_dir / "steps" / f"augmented-{step}.yaml",
-                                          corrections=_corrections(in_data)))
+        aug = augmented_config(config, _model_effects(named, in_data), out_dir, noise_path,
+                               path=out_dir / "steps" / f"augmented-{step}.yaml", corrections=_corrections(in_data))
         stage = Stage(f"after-{step}", aug, current.problem, current.w,
                       cand.y_sim if cand is not None else current.y_sim, None)
         _locate(stage, grid, null, opts.alpha)
@@ -576,16 +542,12 @@ def _add_and_fit(config: Config, named: list[tuple[str, dict[str, Any], int]],
     refitted = dict(fit.effects)
     named[:] = [(n, p if p.get("applied") == CORRECTED else refitted.get(n, p), k) for n, p, k in named]
     result = None
+    aug = augmented_config(config, _model_effects(named, in_data), out_dir, noise_path,
+                           path=out_dir / "steps" / f"augmented-{step}.yaml", run_dir=out_dir / "steps" / str(step),
+                           corrections=_corrections(in_data))
     if opts.at == "identified":
-        run_dir = out_dir / "steps" / str(step)
-        path = write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
-                               path=out_dir / "steps" / f"augmented-{step}.yaml", run_dir=run_dir,
-                               corrections=_corrections(in_data))
-        result = make_stage(f"identified-{step}", load_config(path), True, run_dir, fresh=fresh,
+        result = make_stage(f"identified-{step}", aug, True, out_dir / "steps" / str(step), fresh=fresh,
                             progress=progress, log=log).result
-    aug = load_config(write_augmented(config, _model_effects(named, in_data), out_dir, noise_path,
-                                      path=out_dir / "steps" / f"augmented-{step}.yaml",
-                                      run_dir=out_dir / "steps" / str(step), corrections=_corrections(in_data)))
     stage = Stage(f"after-{step}", aug, problem, fit.w, fit.y_sim, result, fit=fit)
     _locate(stage, grid, null, opts.alpha)
     return stage, {"mode": "together (least squares on D)", **fit.as_dict()}
