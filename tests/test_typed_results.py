@@ -191,3 +191,27 @@ def test_diagnosis_json_is_the_diagnosis_result_serialisation(tmp_path):
     old = {k: v for k, v in data.items() if k != "schema_version"}
     assert DiagnosisResult.from_json(old, out_dir=tmp_path) == d
     assert joint_fit_text(opts.model_copy(update={"reidentify": False})).startswith("none")
+
+
+def test_the_augmented_model_is_a_typed_copy_and_its_file_reproduces_it(tmp_path):
+    """The diagnosis's augmented config is the config with the effects set (not augmented.yaml read back), and
+    the augmented.yaml written for the user loads to the same config: the same synthetic track (its seed still
+    derived from the run seed) and the base run's noise model."""
+    from suspid.config import load_config
+    from suspid.workflows.diagnose.reidentify import augmented_config
+    from suspid.workflows.problem import segments_digest, synthetic_track
+
+    path = tmp_path / "st.yaml"
+    path.write_text(STUDY.split("study:")[0])
+    config = load_config(path)
+    noise = tmp_path / "noise_model.npz"
+    noise.write_bytes(b"")
+    effects = [("carbody-bending", {"frequency_hz": 9.5, "damping": 0.02})]
+    aug = augmented_config(config, effects, tmp_path / "out", noise, path=tmp_path / "out" / "augmented.yaml")
+    read = load_config(tmp_path / "out" / "augmented.yaml")
+    assert aug.model_dump() == read.model_dump() and aug.source_file == read.source_file
+    assert aug.simulator.options["effects"][-1]["frequency_hz"] == 9.5 and aug.noise.path == noise
+    assert aug.name == "st-augmented" and aug.output.dir == tmp_path / "out" / "after"
+    track = segments_digest(synthetic_track(config, "measurement"))
+    assert segments_digest(synthetic_track(aug, "measurement")) == track
+    assert segments_digest(synthetic_track(read, "measurement")) == track

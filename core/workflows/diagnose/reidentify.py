@@ -87,6 +87,8 @@ def augmented_data(config: Config, effects: list[tuple[str, dict[str, Any]]], no
     """The config (as data) with ``effects`` ``[(name, parameters)]`` appended to the simulator's effects,
     ``corrections`` to ``data.corrections`` and the base run's noise model; its output in ``run_dir``."""
     data = config.model_dump(mode="json", exclude={"source_file"})
+    if "seed" not in config.data.track.model_fields_set:   # derived from the run seed: written, it would be fixed
+        data["data"]["track"].pop("seed", None)            # at its default, and the file run on another track
     options = dict(data["simulator"].get("options") or {})
     options["effects"] = list(options.get("effects") or []) + [{"name": name, **canonical(params)}
                                                                for name, params in effects]
