@@ -81,6 +81,14 @@ def test_old_and_newer_result_files_load(identified):
     assert loaded.to_json()["a_key_of_another_version"] == {"x": 1}
     with pytest.raises(DataError, match="upgrade suspid"):
         suspid.IdentificationResult.from_dict({**r.to_json(), "schema_version": 99}, run)
+    newer = run.parent / "newer"
+    newer.mkdir(exist_ok=True)
+    (newer / "result.json").write_text(json.dumps({**r.to_json(), "schema_version": 99}))
+    with pytest.raises(DataError, match=f"^{newer / 'result.json'}: .*schema_version 99 is newer"):
+        suspid.IdentificationResult.load(newer)
+    (newer / "study.json").write_text(json.dumps({"a": {**r.to_json(), "schema_version": 99}}))
+    with pytest.raises(DataError, match=f"^{newer / 'study.json'}: "):
+        suspid.StudyResult.load(newer)
 
 
 STUDY = """\

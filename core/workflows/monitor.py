@@ -79,7 +79,6 @@ from __future__ import annotations
 
 import csv
 import datetime as dt
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -176,10 +175,10 @@ class MonitorResult(Record):
     def load(cls, monitor_dir: str | Path) -> "MonitorResult":
         """Read a finished monitor's ``monitor.json`` and its dates' ``result.json``."""
         monitor_dir = Path(monitor_dir)
-        data = json.loads((monitor_dir / "monitor.json").read_text(encoding="utf-8"))
-        dates = {d: IdentificationResult.load(monitor_dir / "dates" / d) for d in data["dates"]
-                 if (monitor_dir / "dates" / d / "result.json").is_file()}
-        return cls.from_json(data, monitor_dir=monitor_dir, dates=dates)
+        out = cls.load_file(monitor_dir / "monitor.json", monitor_dir=monitor_dir)
+        out.dates = {d: IdentificationResult.load(monitor_dir / "dates" / d) for d in out.date_labels
+                     if (monitor_dir / "dates" / d / "result.json").is_file()}
+        return out
 
 
 def monitor_options(config: Config) -> MonitorOptions:

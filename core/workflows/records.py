@@ -6,19 +6,23 @@ reads it back. A field is described by :func:`key` when its JSON key differs fro
 is left out of the file while its value is None (a finding that only some runs have), when its value is
 a nested record (or a list of them), or when it is not part of the file at all (a live run's objects).
 
-Files written before a key existed still load: a missing key reads as the field's default (None where
-it has none). Keys a record does not know are kept, and written back after its own.
+A record with a ``SCHEMA_VERSION`` writes it as the file's last key, ``schema_version``. Files written
+before a key (or the version) existed still load: a missing key reads as the field's default (None where
+it has none). Keys a record does not know are kept, and written back after its own. A file of a newer
+version than the code's is refused (:class:`~suspid.errors.DataError`: upgrade suspid).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 from dataclasses import MISSING, dataclass, field
+from pathlib import Path
 from typing import Any, Callable, ClassVar, Mapping
 
 from suspid.errors import DataError
 
-__all__ = ["Record", "key", "pairs"]
+__all__ = ["Record", "key", "pairs", "read_json"]
 
 
 def key(name: str | None = None, *, omit_none: bool = False, record: type | None = None,
@@ -39,6 +43,17 @@ def key(name: str | None = None, *, omit_none: bool = False, record: type | None
     if default_factory is not MISSING:
         return field(default_factory=default_factory, metadata=meta, **live)
     return field(default=default, metadata=meta, **live)
+
+
+def read_json(path: Path) -> dict[str, Any]:
+    """The JSON object of a result file.
+
+    :raises DataError: the file is missing or not JSON, naming it.
+    """
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise DataError(f"{path}: cannot read it as a result file ({exc})") from None
 
 
 def pairs(mapping: Mapping[str, Any] | None) -> dict[str, tuple[float, float]] | None:
@@ -92,6 +107,15 @@ class Record:
             if f.metadata.get("json", True):
                 keys.add(f.metadata.get("key") or f.name)
         return keys
+
+    @classmethod
+    def load_file(cls, path: Path, **live: Any) -> "Record":
+        """The record of a JSON file (:meth:`from_json`); a newer version or a bad file is a one-line
+        :class:`~suspid.errors.DataError` naming the file."""
+        try:
+            return cls.from_json(read_json(path), **live)
+        except DataError as exc:
+            raise DataError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], **live: Any) -> "Record":

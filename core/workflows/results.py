@@ -9,7 +9,6 @@ the version existed included. Per-parameter quantities are ``name -> value`` map
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field, fields
 from html import escape
 from pathlib import Path
@@ -236,7 +235,7 @@ class IdentificationResult(Analysis):
     def load(cls, run_dir: str | Path) -> "IdentificationResult":
         """Read the ``result.json`` of a finished run."""
         run_dir = Path(run_dir)
-        return cls.from_dict(json.loads((run_dir / "result.json").read_text(encoding="utf-8")), run_dir)
+        return cls.load_file(run_dir / "result.json", run_dir=run_dir)
 
     @property
     def intervals(self) -> dict[str, tuple[float, float]]:

@@ -31,7 +31,6 @@ error is reported. Outputs (statistics in :mod:`suspid.workflows.study_stats`):
 from __future__ import annotations
 
 import csv
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
@@ -39,7 +38,9 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from suspid.config import Config, loaded
+from suspid.errors import DataError
 from suspid.infra.files import atomic_open, write_json, write_text
+from suspid.workflows.records import read_json
 from suspid.workflows.identify import IdentificationResult, run
 from suspid.sections import StudyOptions
 from suspid.workflows.report import figure_parameters, markdown_table
@@ -75,7 +76,11 @@ class StudyResult:
     @classmethod
     def load(cls, study_dir: str | Path) -> "StudyResult":
         """Read a finished study's ``study.json``."""
-        return cls.from_json(json.loads((Path(study_dir) / "study.json").read_text(encoding="utf-8")), study_dir)
+        path = Path(study_dir) / "study.json"
+        try:
+            return cls.from_json(read_json(path), study_dir)
+        except DataError as exc:
+            raise DataError(str(exc) if str(path) in str(exc) else f"{path}: {exc}") from None
 
 
 @dataclass

@@ -7,7 +7,6 @@ The maps, rankings and steps keep the layout of the modules that make them (:mod
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -142,5 +141,4 @@ class DiagnosisResult(Record):
     def load(cls, out_dir: str | Path) -> "DiagnosisResult":
         """Read the ``diagnosis.json`` of a finished diagnosis."""
         out_dir = Path(out_dir)
-        data = json.loads((out_dir / "diagnosis.json").read_text(encoding="utf-8"))
-        return cls.from_json(data, out_dir=out_dir)
+        return cls.load_file(out_dir / "diagnosis.json", out_dir=out_dir)
