@@ -82,13 +82,15 @@ def cases() -> dict[str, dict]:
     return out
 
 
-def _kill_midway(path: Path, out: Path, n_evaluations: int) -> None:
-    """Start ``suspid run`` on ``path`` and SIGKILL it (and its workers) once the ledger holds evaluations."""
+def _kill_midway(path: Path, out: Path, n_evaluations: int) -> int:
+    """Start ``suspid run`` on ``path`` and SIGKILL it (and its workers) once the ledger holds
+    ``n_evaluations`` evaluations; returns how many it held then."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen([sys.executable, "-m", "suspid", "run", str(path)], env=env, start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     import sqlite3
     t0 = time.time()
+    n = 0
     try:
         while time.time() - t0 < 600 and proc.poll() is None:
             time.sleep(0.5)
@@ -106,6 +108,7 @@ def _kill_midway(path: Path, out: Path, n_evaluations: int) -> None:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+    return n
 
 
 def run_case(name: str, cfg: dict, tmp: Path) -> dict:
@@ -115,11 +118,14 @@ def run_case(name: str, cfg: dict, tmp: Path) -> dict:
     if name == "sigkill-resume":
         path = tmp / f"{name}.yaml"
         path.write_text(yaml.safe_dump(cfg, sort_keys=False))
-        _kill_midway(path, out, 16)   # the noise model's and the data's evaluations come first
+        killed_at = _kill_midway(path, out, 8)   # mid-EGO: 6 design points, then EGO's
     t0 = time.perf_counter()
     res = suspid.identify(str(path) if name == "sigkill-resume" else cfg).to_dict()
     row = {k: res.get(k) for k in KEYS}
     row["seconds"] = round(time.perf_counter() - t0, 1)
+    if name == "sigkill-resume":
+        row["killed_after_evaluations"] = killed_at
+        row["simulated_after_resume"] = res.get("n_simulator_calls_this_session")
     return row
 
 
@@ -140,7 +146,10 @@ def main() -> int:
                 previous = json.loads(args.record.read_text()) if args.record.exists() else {}
                 args.record.write_text(json.dumps({**previous, name: rows[name]}, indent=1))
             print(f"{name}: J_max {rows[name]['J_max']:.10g}, {rows[name]['n_simulator_calls']} calls, "
-                  f"{rows[name]['stop_reason']}, {rows[name]['seconds']} s", flush=True)
+                  f"{rows[name]['stop_reason']}, {rows[name]['seconds']} s"
+                  + (f", killed after {rows[name]['killed_after_evaluations']} evaluations, "
+                     f"{rows[name]['simulated_after_resume']} simulated after the resume"
+                     if "killed_after_evaluations" in rows[name] else ""), flush=True)
     if args.record:
         return 0
     before = json.loads(args.compare.read_text())
