@@ -112,7 +112,7 @@ def test_a_ledger_written_by_the_previous_suspid_is_migrated_and_its_run_resumes
     import yaml
 
     import suspid
-    from suspid.infra.ledger import SCHEMA_VERSION
+    from suspid.infra.ledger import SCHEMA_VERSION, check_ledger_file, count_finished
 
     data = Path(__file__).parent / "data" / "ledger_v1"
     run_dir = tmp_path / "run"
@@ -121,6 +121,8 @@ def test_a_ledger_written_by_the_previous_suspid_is_migrated_and_its_run_resumes
     config = yaml.safe_load((data / "config.yaml").read_text())
     config["output"] = {"dir": str(run_dir)}
     expected = json.loads((data / "expected.json").read_text())
+    check_ledger_file(run_dir / "ledger.sqlite")   # validate's check accepts it and changes nothing
+    assert count_finished(run_dir / "ledger.sqlite") == 8
     led = Ledger(run_dir / "ledger.sqlite")
     assert led.get_meta("schema_version") == str(SCHEMA_VERSION) == "2"
     runs = {run for run, _, _ in led.all_iterations()}

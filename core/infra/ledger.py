@@ -162,8 +162,8 @@ def check_ledger_file(path: str | Path) -> None:
     """Check, without changing anything, that ``path`` is absent, empty or a sound suspid ledger.
 
     :raises LedgerError: not an SQLite database, damaged (``PRAGMA quick_check``),
-        other tables (not a suspid ledger), or another ``schema_version``; one line
-        naming the file and the remedy.
+        other tables (not a suspid ledger), or a ``schema_version`` other than this one's
+        and 1 (which the run migrates); one line naming the file and the remedy.
     """
     path = Path(path)
     if not _check_header(path):
@@ -173,7 +173,7 @@ def check_ledger_file(path: str | Path) -> None:
     except sqlite3.Error as exc:
         raise LedgerError(f"{path}: cannot open the run ledger ({_reason(exc)}); {_REMEDY}") from None
     try:
-        _check_connection(conn, path)
+        _check_connection(conn, path, migrate=False)   # a version-1 ledger is migrated when the run opens it
     finally:
         conn.close()
 
@@ -192,8 +192,9 @@ def _check_header(path: Path) -> bool:
     return True
 
 
-def _check_connection(conn: sqlite3.Connection, path: Path) -> bool:
-    """Integrity, tables and schema version of an open ledger (see :func:`check_ledger_file`).
+def _check_connection(conn: sqlite3.Connection, path: Path, migrate: bool = True) -> bool:
+    """Integrity, tables and schema version of an open ledger (see :func:`check_ledger_file`); a
+    version-1 ledger is migrated (:func:`migrate_v1`) when ``migrate``, else accepted as it is.
 
     :returns: True when the ledger is complete (every table and its schema version), False when it
         still has to be created.
@@ -223,7 +224,8 @@ def _check_connection(conn: sqlite3.Connection, path: Path) -> bool:
     if row is None:
         return False   # created, schema version not yet written
     if row[0] == "1":
-        migrate_v1(conn, path)
+        if migrate:
+            migrate_v1(conn, path)
         return True
     if row[0] != str(SCHEMA_VERSION):
         newer = row[0].isdigit() and int(row[0]) > SCHEMA_VERSION
