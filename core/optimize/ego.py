@@ -1,14 +1,17 @@
 """Efficient Global Optimization (EGO) of an expensive objective J (paper §3.2, eq. 9).
 
-The paper's loop (see :mod:`suspid.optimize.loop`) behind an **ask/tell**
-interface, so that an outside process (a batch of simulations on another
-machine, a queue) can drive it::
+The paper's loop (see :mod:`suspid.optimize.loop`) on the one ask/tell state
+machine (:class:`suspid.optimize.trials.TrialLoop`), so that an outside process
+(a batch of simulations on another machine, a queue) can drive it::
 
     opt = EGO(bounds, ego=EGOOptions(max_iter=40), design=DesignOptions(n_initial=10))
     while not opt.done:
-        X = opt.ask()             # (n_points, q) SI points to evaluate next, the initial design first
-        opt.tell(X, values)       # (n_points,) their J; None or NaN where the evaluation failed
-    result = opt.result()         # an EGOResult
+        trials = opt.ask_trials()                          # the initial design first; t.x SI, t.u in [0, 1]^q
+        opt.tell_trials([t.id for t in trials], values)    # their J by trial id; None or NaN where it failed
+    result = opt.result()                                  # an EGOResult
+
+``ask()`` and ``tell(X, values)`` are the same with arrays of SI points, for a caller
+that holds points rather than trials.
 
 :func:`run_ego` and :func:`maximize` are thin loops over the same object
 that call ``func(w (q,)) -> float`` (or ``func_batch(X (k, q)) -> k values``
@@ -19,8 +22,8 @@ returns and ``tell`` takes points of the parameter box ``bounds (q, 2)``
 The pieces: :class:`suspid.optimize.loop.LoopState` (points, values,
 records), :class:`suspid.optimize.loop.EIProposer` (fit J~, maximise EI;
 batches by kriging believer), the stopping rules
-:class:`~suspid.optimize.loop.MaxIterations` and
-:class:`~suspid.optimize.loop.EIBelowTolerance`, and the optional local
+:class:`~suspid.optimize.trials.MaxIterations` | :class:`~suspid.optimize.trials.EIBelowTolerance`
+(and :class:`~suspid.optimize.trials.Budget` with a ``budget``), and the optional local
 refinement :class:`suspid.optimize.refine.TrustRegionRefiner` with its
 radius rule. EI and its search: :mod:`suspid.optimize.acquisition`.
 
