@@ -43,7 +43,7 @@ from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Executor, OptimizerResult
 from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.analysis import analyse, cached_y_sim
-from suspid.workflows.driver import drive, failure  # noqa: F401  (failure: re-exported)
+from suspid.workflows.driver import drive
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem, moved_kinds
 from suspid.workflows.phases import ProgressPhases
