@@ -164,8 +164,8 @@ def whole_run(segments: int, length_m: float, m0: int, m1: int) -> None:
             design = finished[m0 - 1] - t0  # start-up, the reference and measurement dates, the m0 design points
             ego = finished[-1] - finished[m0 - 1]  # the m1 EGO points
             sim = float(np.median([e.wall_time_s for e in evaluations[m0:]]))  # EGO points: one simulation each
-            steps = ledger.iterations("ego")
-            fit = float(np.mean([row["fit_s"] + row["search_s"] for row in steps])) if steps else float("nan")
+            steps = [t for t in ledger.trials() if t["phase"] == "ego"]
+            fit = float(np.mean([row["fit_seconds"] + row["search_seconds"] for row in steps])) if steps else float("nan")
             times = (design, ego, wall)
             if first is None:
                 first = (times, r.w_opt)

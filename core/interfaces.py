@@ -25,6 +25,8 @@ from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from suspid.optimize.trials import Trial, TrialBook, TrialLoop
+
 IRREGULARITY_CHANNELS = ("vertical", "lateral", "cross_level", "gauge")
 """Rows of :attr:`TrackSegment.irregularities`, all in metres (EN 13848 quantities).
 
@@ -482,14 +484,20 @@ class SpectraModel(ABC):
         """J (eq. 5) of spectra ``(v, n_channels, n_freqs)`` dB with the run's data: no simulation."""
 
 
-class Optimizer(ABC):
-    """A maximiser of J over the parameter box, driven by **ask/tell** (the model is :class:`suspid.optimize.ego.EGO`)::
+class Optimizer(TrialLoop, ABC):
+    """A maximiser of J over the parameter box, driven by **ask/tell** on trials (the model is
+    :class:`suspid.optimize.ego.EGO`)::
 
         opt = cls(bounds, budget=300, seed=7, **options)
         while not opt.done:
-            X = opt.ask(n=n_workers)      # (k, q) SI points, k >= 1
-            opt.tell(X, values)           # (k,) J there; None or NaN where the evaluation failed
-        res = opt.result()                # an OptimizerResult
+            trials = opt.ask_trials(n=n_workers)               # Trial objects: id, u, x (SI), phase, details
+            opt.tell_trials([t.id for t in trials], values)    # J by trial id; None or NaN where it failed
+        res = opt.result()                                     # an OptimizerResult
+
+    The driver (:func:`suspid.workflows.driver.drive`) speaks only the trial interface. A plugin
+    may implement just the array interface (``ask(n) -> X (k, q)``, ``tell(X, values)``): the base
+    class hands its points out as trials and tells it, once every trial of an ask has a value, the
+    points in the order it asked them. The built-in optimisers implement the trials natively.
 
     Contract: every point :meth:`ask` returns lies in the box; the points of one
     :meth:`ask` are told together, in that order, before the next :meth:`ask`
@@ -516,9 +524,6 @@ class Optimizer(ABC):
     #: A top-level config section holding this optimiser's options when ``optimizer.options`` is
     #: empty (the ``ego`` plugin: the ``ego:`` section, which configs had before optimisers were plugins).
     options_section: ClassVar[str | None] = None
-    #: Optional sink the driver sets: ``on_record(run, index, record)`` stores one JSON-able row
-    #: of the optimiser's own log (e.g. EI and hyperparameters per EGO iteration) in the run ledger.
-    on_record: Callable[[str, int, dict], None] | None = None
     #: Optional capability: an optimiser that sets it True is given :attr:`spectra_model` (a
     #: :class:`SpectraModel` of the run) by the driver before its first :meth:`ask`, to linearise
     #: the model (a gradient-based search). Its Jacobians are not told evaluations: the driver counts
@@ -549,14 +554,43 @@ class Optimizer(ABC):
         """True when the optimiser asks nothing more (budget spent or its own stopping rule)."""
 
     def asynchronous(self, n_workers: int) -> bool:
-        """Whether the driver should keep ``n_workers`` points in flight, one :meth:`ask` at a time.
+        """Whether the driver should keep ``n_workers`` trials in flight, one :meth:`ask_trials` at a time.
 
-        An optimiser that answers True takes ``ask(1, pending=X_p)``: one more point beside the
-        points ``X_p (p, q)`` SI being evaluated, or ``(0, q)`` when it has none to add before one
-        of them is told; and it takes points told one at a time, oldest first
-        (:func:`suspid.workflows.asynchronous.drive_async`). Default False: ask, evaluate together, tell.
+        An optimiser that answers True takes ``ask_trials(1, beside=True)``: one more trial beside
+        the trials being evaluated, or none when it has none to add before one of them is told; and
+        it takes trials told one at a time, oldest first (:func:`suspid.workflows.driver.drive`).
+        Default False: ask, evaluate together, tell.
         """
         return False
+
+    # -- the trial loop's hooks over the array interface (suspid.optimize.trials.TrialLoop) --------
+    # An optimiser that speaks only ask/tell of arrays runs on the loop through these defaults:
+    # its points are handed out as trials and told back, in the order asked, once they have values.
+    def _loop_start(self) -> None:
+        if "book_" not in self.__dict__:
+            from suspid.optimize.design import check_bounds
+            self.book_ = TrialBook(check_bounds(self.bounds))
+
+    def _finished(self) -> bool:
+        return bool(self.__dict__.get("_asked_nothing")) or self.done
+
+    def _propose_trials(self, n: int) -> None:
+        self._new_trials(np.atleast_2d(self.ask(n=n)))
+
+    def _beside(self) -> list["Trial"]:
+        pending = np.array([t.x for t in self.book_.waiting])
+        return self._new_trials(np.atleast_2d(self.ask(1, pending=pending)), beside=True)  # type: ignore[call-arg]
+
+    def _new_trials(self, X: np.ndarray, beside: bool = False) -> list["Trial"]:
+        from suspid.optimize.design import to_unit
+        if X.size == 0:
+            if not beside:   # the optimiser has nothing to ask: the loop stops
+                self.__dict__["_asked_nothing"] = True
+            return []
+        return [self.book_.new(u, self.name, x=x.copy()) for u, x in zip(to_unit(X, self.book_.bounds), X)]
+
+    def _commit_trials(self, trials: list["Trial"]) -> None:
+        self.tell(np.array([t.x for t in trials]), [t.J for t in trials])
 
     @abstractmethod
     def result(self) -> OptimizerResult:

@@ -287,49 +287,48 @@ OPTIMIZER_BOX = np.array([[-2.0, 3.0], [10.0, 20.0]])
 
 def _run_optimizer(cls: type, options: dict[str, Any], budget: int, seed: int,
                    fail_every: int, asynchronous: bool = False) -> tuple[list[np.ndarray], Any]:
-    """Drive one optimiser on a concave quadratic (maximiser (1, 16)) whose every ``fail_every``-th
-    evaluation fails; returns the points in the order told and the result. ``asynchronous``: with
-    two points in flight, on the schedule of :func:`suspid.workflows.asynchronous.drive_async`."""
+    """Drive one optimiser through its trials (as :func:`suspid.workflows.driver.drive` does) on a concave
+    quadratic (maximiser (1, 16)) whose every ``fail_every``-th evaluation fails; returns the points in the
+    order told and the result. ``asynchronous``: with two trials in flight, on the driver's schedule."""
     from suspid.optimize.design import DesignOptions  # the conformance kit only
 
     opt = cls(OPTIMIZER_BOX, budget=budget, seed=seed, design=DesignOptions(n_initial=6, seed=seed), **options)
     told: list[np.ndarray] = []
-    flights: list[np.ndarray] = []  # asynchronous: asked, not told, oldest first
+    flights: list[Any] = []  # asynchronous: trials asked, not told, oldest first
 
-    def asked(X: np.ndarray, least: int) -> np.ndarray:
-        X = np.asarray(X, dtype=float)
-        X = X.reshape(-1, 2) if X.size == 0 else X
-        assert X.ndim == 2 and X.shape[1] == 2 and X.shape[0] >= least, \
-            f"ask() must return (k >= {least}, q) points here, got shape {X.shape}"
+    def asked(trials: list[Any], least: int) -> list[Any]:
+        X = np.array([t.x for t in trials], dtype=float).reshape(-1, 2)
+        assert len(trials) >= least, f"ask_trials() must hand out at least {least} trials here, got {len(trials)}"
+        assert len({t.id for t in trials}) == len(trials), "ask_trials() handed out two trials with one id"
         assert np.all(X >= OPTIMIZER_BOX[:, 0] - 1e-9) and np.all(X <= OPTIMIZER_BOX[:, 1] + 1e-9), \
-            f"ask() returned points outside the bounds: {X.tolist()}"
+            f"ask_trials() handed out points outside the bounds: {X.tolist()}"
         assert len(told) + len(flights) + len(X) <= budget, \
             f"asked {len(told) + len(flights) + len(X)} points for a budget of {budget}"
-        return X
+        return trials
 
-    def tell(X: np.ndarray) -> None:
-        opt.tell(X, [None if (len(told) + i + 1) % fail_every == 0 else
-                     float(-((x[0] - 1.0) / 5.0) ** 2 - ((x[1] - 16.0) / 10.0) ** 2) for i, x in enumerate(X)])
-        told.extend(X)
+    def tell(trials: list[Any]) -> None:
+        opt.tell_trials([t.id for t in trials], [
+            None if (len(told) + i + 1) % fail_every == 0 else
+            float(-((t.x[0] - 1.0) / 5.0) ** 2 - ((t.x[1] - 16.0) / 10.0) ** 2) for i, t in enumerate(trials)])
+        told.extend(np.array(t.x, dtype=float) for t in trials)
 
     for _ in range(10 * budget):
         if not flights:
             if opt.done:
                 break
-            X = asked(opt.ask(n=2), 1)
-            if not asynchronous or len(X) > 1:
-                tell(X)
+            trials = asked(opt.ask_trials(n=2), 1)
+            if not asynchronous or len(trials) > 1:
+                tell(trials)
                 continue
-            flights.append(X[0])
+            flights.append(trials[0])
         while len(flights) < 2:
-            X = asked(opt.ask(n=1, pending=np.array(flights)), 0)
-            assert len(X) <= 1, f"ask(1, pending=...) must return at most one point, got {len(X)}"
-            if not len(X):
+            trials = asked(opt.ask_trials(n=1, beside=True), 0)
+            assert len(trials) <= 1, f"ask_trials(1, beside=True) must hand out at most one trial, got {len(trials)}"
+            if not trials:
                 break
-            assert not any(np.allclose(X[0], x, rtol=1e-12, atol=0) for x in flights), \
-                "ask(1, pending=...) returned a point that is in flight"
-            flights.append(X[0])
-        tell(flights.pop(0)[None, :])
+            assert trials[0].id not in {f.id for f in flights}, "ask_trials(1, beside=True) handed out a trial in flight"
+            flights.append(trials[0])
+        tell([flights.pop(0)])
     else:
         raise AssertionError(f"not done after {10 * budget} ask/tell rounds")
     return told, opt.result()
@@ -339,14 +338,15 @@ def check_optimizer(cls: type, options: Mapping[str, Any] | None = None, budget:
     """Check an optimiser class against :class:`suspid.interfaces.Optimizer`.
 
     Checks, on a 2-d concave quadratic over a box that is not the unit square,
-    with every 5th evaluation failing (told as None): ``ask`` returns ``(k >= 1, q)``
-    points inside the bounds while not ``done``; no more than ``budget`` points
-    in all; a point not asked is refused by ``tell``; ``result()`` holds every
-    point told, in order, with NaN where it failed, and its best point; it
-    improves on the first point told; the same seed gives the same points.
-    An optimiser whose ``asynchronous(2)`` is True is also driven with two points
-    in flight (``ask(1, pending=...)``, oldest told first): at most one new point
-    per ask, never one in flight, the budget kept, the same points for the same seed.
+    with every 5th evaluation failing (told as None), through the trial interface the
+    driver uses: ``ask_trials`` hands out at least one trial, with distinct ids and points
+    inside the bounds, while not ``done``; no more than ``budget`` points in all; a point
+    not asked is refused by the array ``tell``; ``result()`` holds every point told, in
+    order, with NaN where it failed, and its best point; it improves on the first point
+    told; the same seed gives the same points. An optimiser whose ``asynchronous(2)`` is
+    True is also driven with two trials in flight (``ask_trials(1, beside=True)``, oldest
+    told first): at most one new trial per ask, never one in flight, the budget kept, the
+    same points for the same seed.
     """
     from suspid.interfaces import Optimizer  # the conformance kit only
 

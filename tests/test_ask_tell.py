@@ -122,3 +122,39 @@ def test_known_values_partial_tells_and_wrong_points():
     opt.stop()
     res = opt.result()
     assert res.stop_reason == "stopped" and res.n_function_calls == 3 and res.n_evaluations == 5
+
+
+# -- trials: points with an identity --------------------------------------------------------------
+def test_trials_are_told_by_id_in_any_order_and_give_the_run_told_by_points():
+    """A batch told by trial id, last trial first, gives the run of the points told in order; an id that
+    does not wait for a value is refused; every trial keeps its id, phase, status and value."""
+    kwargs = CASES["batch 3"]
+    reference = drive(kwargs)[0]
+    ego, design, surrogate = options_for(**kwargs)
+    opt = EGO(BRANIN.bounds, ego=ego, design=design, surrogate=surrogate)
+    while not opt.done:
+        trials = opt.ask_trials()
+        assert [t.id for t in trials] == list(range(trials[0].id, trials[0].id + len(trials)))
+        np.testing.assert_array_equal(np.array([t.x for t in trials]), opt.ask())
+        for t in reversed(trials):
+            opt.tell_trials([t.id], [neg_branin(t.x)])
+        with pytest.raises(SuspidError, match=f"trial {trials[0].id} is not one"):
+            opt.tell_trials([trials[0].id], [0.0])
+    res = opt.result()
+    np.testing.assert_array_equal(res.X, reference.X)
+    assert res.y_opt == reference.y_opt
+    told = [t for t in res.trials if t.told]
+    assert [t.status for t in told] == ["ok"] * len(told) and len(told) == res.n_evaluations
+    assert [t.J for t in told] == list(res.y) and {t.phase for t in told} == {"initial", "ego"}
+
+
+def test_stopping_conditions_have_one_signature_and_combine():
+    from suspid.optimize.trials import Budget, EIBelowTolerance, MaxIterations, StopState
+
+    stop = EIBelowTolerance(1e-3) | MaxIterations(5) | Budget(20)
+    assert not stop(StopState(n_told=10, n_new=2, log_ei=math.log(1e-2), epsilon=1e-3))
+    assert stop.reason_for(StopState(n_told=10, n_new=2, log_ei=math.log(1e-4), epsilon=1e-3)) == "ei_below_tol"
+    assert stop.reason_for(StopState(n_told=10, n_new=5)) == "max_iter"
+    assert stop.reason_for(StopState(n_told=20, n_new=0)) == "budget"
+    assert stop.reason_for(StopState(n_told=20, n_new=5)) == "max_iter"   # the first that fires names it
+    assert not EIBelowTolerance(0.0)(StopState(log_ei=-1e9, epsilon=0.0))   # tol 0: the rule never fires

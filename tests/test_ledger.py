@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import numpy as np
 
@@ -99,3 +100,40 @@ def test_concurrent_writers(tmp_path):
     led = Ledger(path)
     assert led.count() == 160 and len(led.iterations("design")) == 160
     assert len({e.worker for e in led.evaluations()}) == len(set(pids))
+
+
+def test_a_ledger_written_by_the_previous_suspid_is_migrated_and_its_run_resumes_without_simulating(tmp_path):
+    """tests/data/ledger_v1: a tiny run's ledger written by suspid before trials had ids (schema version 1,
+    each (w, J) three times). Opening it migrates it to one trials row per trial; running the same config
+    again simulates nothing and gives the result the old code wrote."""
+    import json
+    import shutil
+
+    import yaml
+
+    import suspid
+    from suspid.infra.ledger import SCHEMA_VERSION, check_ledger_file, count_finished
+
+    data = Path(__file__).parent / "data" / "ledger_v1"
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    shutil.copy(data / "ledger.sqlite", run_dir / "ledger.sqlite")
+    config = yaml.safe_load((data / "config.yaml").read_text())
+    config["output"] = {"dir": str(run_dir)}
+    expected = json.loads((data / "expected.json").read_text())
+    check_ledger_file(run_dir / "ledger.sqlite")   # validate's check accepts it and changes nothing
+    assert count_finished(run_dir / "ledger.sqlite") == 8
+    led = Ledger(run_dir / "ledger.sqlite")
+    assert led.get_meta("schema_version") == str(SCHEMA_VERSION) == "2"
+    runs = {run for run, _, _ in led.all_iterations()}
+    assert "evaluations" not in runs and "design" not in runs and "trials" in runs
+    trials = led.trials()
+    assert [t["J"] for t in trials] == expected["anytime"]["J"] and all(t["key"] for t in trials)
+    led.close()
+    result = suspid.identify(config).to_dict()
+    assert result["n_simulator_calls_this_session"] == 0
+    for key in ("w_opt", "J_max", "n_simulator_calls", "anytime", "stop_reason"):
+        assert result[key] == expected[key], key
+    led = Ledger(run_dir / "ledger.sqlite")
+    assert [t["J"] for t in led.trials()] == expected["anytime"]["J"]
+    assert [t["phase"] for t in led.trials()][:5] == ["initial"] * 5

@@ -25,10 +25,10 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 def _loop_rows(ledger: Path, run: str) -> list[float | None]:
-    """J of the ``evaluations`` records of one run in the ledger (``evaluations`` or ``history/<id>/evaluations``)."""
+    """J of the trials of one run in the ledger (``trials`` or ``history/<id>/trials``)."""
     led = Ledger(ledger)
     try:
-        return [r["J"] for r in led.iterations(run)]
+        return [r["J"] for r in led.trials(run)]
     finally:
         led.close()
 
@@ -55,14 +55,14 @@ def test_two_seeds_into_one_folder_both_keep_their_results_and_each_resumes(tmp_
     assert json.loads(b_files["result.json"])["w_opt"] == b.w_opt != a.w_opt
     # the ledger: the latest run's records under their usual names, the other's apart, none mixed
     ledger = run_dir / "ledger.sqlite"
-    assert _loop_rows(ledger, "evaluations") == b.result["anytime"]["J"]
-    assert _loop_rows(ledger, f"history/{a_id}/evaluations") == a.result["anytime"]["J"]
+    assert _loop_rows(ledger, "trials") == b.result["anytime"]["J"]
+    assert _loop_rows(ledger, f"history/{a_id}/trials") == a.result["anytime"]["J"]
     again = suspid.identify(a_cfg)
     assert again.result["n_simulator_calls_this_session"] == 0 and again.w_opt == a.w_opt
     assert again.result["run_id"] == a_id and json.loads((run_dir / "result.json").read_text())["w_opt"] == a.w_opt
     assert _files(run_dir / "history" / b_id) == b_files
-    assert _loop_rows(ledger, "evaluations") == a.result["anytime"]["J"]
-    assert _loop_rows(ledger, f"history/{b_id}/evaluations") == b.result["anytime"]["J"]
+    assert _loop_rows(ledger, "trials") == a.result["anytime"]["J"]
+    assert _loop_rows(ledger, f"history/{b_id}/trials") == b.result["anytime"]["J"]
     # a run directory written before the history (its outputs at the top, no latest.json): kept on the next run
     legacy, a_files = tmp_path / "legacy", _files(run_dir / "history" / a_id)   # as the resume wrote them again
     legacy.mkdir()

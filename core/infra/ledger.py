@@ -46,8 +46,10 @@ import numpy as np
 from suspid.errors import LedgerError, LedgerWarning
 from suspid.infra.files import canonical
 
-SCHEMA_VERSION = 1
-"""Version of the tables below; a ledger of another version is refused (no migration exists yet)."""
+SCHEMA_VERSION = 2
+"""Version of the records below. 2: the loop's record is one ``trials`` row per trial (its evaluation's
+key, phase, status and the proposal's figures; w and J only in ``evaluations``). A version-1 ledger is
+migrated when it is opened (:func:`migrate_v1`); another version is refused with the remedy."""
 
 SQLITE_HEADER = b"SQLite format 3\x00"
 _REMEDY = "move it away or run with --fresh (which sets it aside)"
@@ -66,9 +68,9 @@ CREATE TABLE IF NOT EXISTS evaluations (
     worker TEXT
 );
 CREATE TABLE IF NOT EXISTS iterations (
-    run TEXT NOT NULL,          -- which loop: 'design', 'ego', or a study variant
-    iteration INTEGER NOT NULL,
-    record TEXT NOT NULL,       -- JSON: w, J, EI, J_max, hyperparameters, times
+    run TEXT NOT NULL,          -- 'trials', or 'history/<run id>/trials' for another run of the folder
+    iteration INTEGER NOT NULL, -- the trial id
+    record TEXT NOT NULL,       -- JSON: key (of evaluations), phase, status, EI, J_max, hyperparameters, times
     PRIMARY KEY (run, iteration)
 );
 CREATE TABLE IF NOT EXISTS artifacts (key TEXT PRIMARY KEY, value BLOB NOT NULL, created_at REAL NOT NULL);
@@ -160,8 +162,8 @@ def check_ledger_file(path: str | Path) -> None:
     """Check, without changing anything, that ``path`` is absent, empty or a sound suspid ledger.
 
     :raises LedgerError: not an SQLite database, damaged (``PRAGMA quick_check``),
-        other tables (not a suspid ledger), or another ``schema_version``; one line
-        naming the file and the remedy.
+        other tables (not a suspid ledger), or a ``schema_version`` other than this one's
+        and 1 (which the run migrates); one line naming the file and the remedy.
     """
     path = Path(path)
     if not _check_header(path):
@@ -171,7 +173,7 @@ def check_ledger_file(path: str | Path) -> None:
     except sqlite3.Error as exc:
         raise LedgerError(f"{path}: cannot open the run ledger ({_reason(exc)}); {_REMEDY}") from None
     try:
-        _check_connection(conn, path)
+        _check_connection(conn, path, migrate=False)   # a version-1 ledger is migrated when the run opens it
     finally:
         conn.close()
 
@@ -190,8 +192,9 @@ def _check_header(path: Path) -> bool:
     return True
 
 
-def _check_connection(conn: sqlite3.Connection, path: Path) -> bool:
-    """Integrity, tables and schema version of an open ledger (see :func:`check_ledger_file`).
+def _check_connection(conn: sqlite3.Connection, path: Path, migrate: bool = True) -> bool:
+    """Integrity, tables and schema version of an open ledger (see :func:`check_ledger_file`); a
+    version-1 ledger is migrated (:func:`migrate_v1`) when ``migrate``, else accepted as it is.
 
     :returns: True when the ledger is complete (every table and its schema version), False when it
         still has to be created.
@@ -220,12 +223,67 @@ def _check_connection(conn: sqlite3.Connection, path: Path) -> bool:
         raise LedgerError(f"{path}: the run ledger is damaged ({_reason(exc)}); {_REMEDY}") from None
     if row is None:
         return False   # created, schema version not yet written
+    if row[0] == "1":
+        if migrate:
+            migrate_v1(conn, path)
+        return True
     if row[0] != str(SCHEMA_VERSION):
         newer = row[0].isdigit() and int(row[0]) > SCHEMA_VERSION
         raise LedgerError(f"{path}: the run ledger has schema version {row[0]}, this suspid reads version "
                           f"{SCHEMA_VERSION}" + (" (written by a newer suspid: upgrade suspid, or " if newer
                                                  else " (") + f"{_REMEDY})")
     return True
+
+
+V1_LOOP_RUNS = ("evaluations", "design")
+"""Version-1 loop rows that repeated (w, J) of the evaluations: replaced by ``trials`` rows on migration."""
+
+
+def migrate_v1(conn: sqlite3.Connection, path: Path) -> None:
+    """Migrate a version-1 ledger to version 2 in one transaction.
+
+    Version 1 wrote each evaluation's (w, J) three times: the ``evaluations`` table, an
+    ``evaluations`` loop row (by its index in the run) and the optimiser's own row
+    (``design``, ``ego``, ...). Each ``evaluations`` loop row (of every run kept in the
+    folder, ``history/<id>/`` included) becomes a ``trials`` row with the same index, holding
+    the key of its evaluation (found by its w) and its status; the ``evaluations`` and
+    ``design`` loop rows are removed. The optimisers' logs (``ego``, ``refine``, ...) stay as
+    they were written. Evaluations, artifacts and meta are not touched, so a run resumes and
+    reads every finished evaluation.
+
+    :raises LedgerError: the migration could not be written (the ledger is left as it was).
+    """
+    try:
+        conn.execute("BEGIN IMMEDIATE")
+        if conn.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()[0] != "1":
+            conn.execute("ROLLBACK")   # another process migrated it meanwhile
+            return
+        by_w = {canonical_w(w): key for key, w in conn.execute("SELECT key, w FROM evaluations")}
+        rows = conn.execute("SELECT run, iteration, record FROM iterations").fetchall()
+        for run, i, record in rows:
+            prefix, _, loop = run.rpartition("/")
+            if loop != "evaluations":
+                continue
+            r = json.loads(record)
+            key = by_w.get(canonical_w(json.dumps(r.get("w")))) if r.get("w") is not None else None
+            trial = {"key": key, "id": int(i), "phase": "v1", "status": "ok" if r.get("J") is not None else "failed"}
+            conn.execute("INSERT OR REPLACE INTO iterations VALUES (?, ?, ?)",
+                         (f"{prefix}/trials" if prefix else "trials", int(i), json.dumps(canonical(trial))))
+        for run, _, _ in rows:
+            if run.rpartition("/")[2] in V1_LOOP_RUNS:
+                conn.execute("DELETE FROM iterations WHERE run = ?", (run,))
+        conn.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+        conn.execute("COMMIT")
+    except (sqlite3.Error, ValueError, TypeError) as exc:
+        if conn.in_transaction:
+            conn.execute("ROLLBACK")
+        raise LedgerError(f"{path}: the run ledger of schema version 1 could not be migrated to version "
+                          f"{SCHEMA_VERSION} ({_reason(exc)}); {_REMEDY}") from None
+
+
+def canonical_w(text: str) -> str:
+    """A parameter mapping's JSON text in one spelling (sorted keys), to find an evaluation by its w."""
+    return json.dumps(json.loads(text), sort_keys=True)
 
 
 def move_aside(path: str | Path) -> Path | None:
@@ -405,6 +463,20 @@ class Ledger:
         """Record one design point or EGO iteration (w, J, EI, hyperparameters, times)."""
         self._write("INSERT OR REPLACE INTO iterations VALUES (?, ?, ?)",
                     (run, int(iteration), json.dumps(canonical(record))))
+
+    def put_trial(self, trial_id: int, record: Mapping[str, Any]) -> None:
+        """Record one trial of the run's loop: its evaluation's ``key``, phase, status and the proposal's
+        figures (EI, J_max, hyperparameters, times). w and J stay in the evaluation (:meth:`trials`)."""
+        self.put_iteration("trials", trial_id, record)
+
+    def trials(self, run: str = "trials") -> list[dict[str, Any]]:
+        """The trials of the run's loop in id order, each with ``w`` and ``J`` of its evaluation
+        (``J`` None for a failed one); ``run``: ``history/<run id>/trials`` for another run of the folder."""
+        out = []
+        for row in self.iterations(run):
+            ev = self.get(row["key"]) if row.get("key") else None
+            out.append({**row, "w": ev.w if ev is not None else None, "J": ev.J if ev is not None and ev.ok else None})
+        return out
 
     def iterations(self, run: str) -> list[dict[str, Any]]:
         rows = self._read("SELECT iteration, record FROM iterations WHERE run = ? ORDER BY iteration", (run,))

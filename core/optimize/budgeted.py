@@ -1,14 +1,17 @@
 """A base for ask/tell optimisers with a budget: the bookkeeping every one of them needs.
 
-:class:`BudgetedOptimizer` implements :class:`suspid.interfaces.Optimizer` once:
-it checks the box, hands out the points a subclass proposes (never more than the
-budget left), checks that ``tell`` gives exactly the points asked, keeps every
-point and value in evaluation order, and builds the
-:class:`~suspid.interfaces.OptimizerResult`. A subclass works in the unit cube
-``[0, 1]^q`` and writes two methods::
+:class:`BudgetedOptimizer` implements :class:`suspid.interfaces.Optimizer` once, on
+trials (:class:`suspid.optimize.trials.Trial`): it checks the box, hands out the points
+a subclass proposes as trials (never more than the budget left), takes their values by
+trial id (all the trials of one ask, told together), keeps every point and value in
+evaluation order, and builds the :class:`~suspid.interfaces.OptimizerResult`. A subclass
+works in the unit cube ``[0, 1]^q`` and writes two methods::
 
     def _propose(self, n: int) -> np.ndarray     # (k, q) points in [0, 1]^q, k >= 1; empty: stop
     def _learn(self, U: np.ndarray, J: np.ndarray) -> None   # their J, failed ones as the worst J so far
+
+The stopping conditions are :class:`~suspid.optimize.trials.Budget` and the subclass's
+own (``stop_reason_``, e.g. ``"converged"``).
 
 Public API: :class:`BudgetedOptimizer`.
 """
@@ -16,13 +19,14 @@ Public API: :class:`BudgetedOptimizer`.
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from suspid.errors import SuspidError
 from suspid.interfaces import Optimizer, OptimizerResult
 from suspid.optimize.design import DesignOptions, check_bounds, from_unit, make_design, to_unit
+from suspid.optimize.trials import Budget, StopState, Trial, TrialBook
 
 __all__ = ["BudgetedOptimizer"]
 
@@ -31,7 +35,9 @@ class BudgetedOptimizer(Optimizer):
     """The bookkeeping of an ask/tell optimiser in ``[0, 1]^q`` (see the module docstring).
 
     State, set at the first call: ``bounds_ (q, 2)``, ``q_``, ``U_`` (list of ``(q,)`` unit points
-    told), ``y_`` (their J, NaN where failed), ``stop_reason_`` (None while running).
+    told), ``y_`` (their J, NaN where failed), ``stop_reason_`` (None while running), ``book_``
+    (the :class:`~suspid.optimize.trials.TrialBook` of the trials handed out), ``last_told_`` (the
+    trials of the last tell, whose ``details`` a subclass may add its own figures to in ``_learn``).
     """
 
     def _start(self) -> None:
@@ -42,53 +48,66 @@ class BudgetedOptimizer(Optimizer):
         self.U_: list[np.ndarray] = []
         self.y_: list[float] = []
         self.stop_reason_: str | None = None
-        self._asked = np.empty((0, self.q_))
+        self.book_ = TrialBook(self.bounds_, self.budget)
+        self.stopping_ = Budget(self.budget)
         self._started = True
         self._setup()
 
     def _setup(self) -> None:
         """Build the optimiser's own state (called once, at the first call)."""
 
-    # -- the contract ------------------------------------------------------------
+    # -- the loop's hooks (suspid.optimize.trials.TrialLoop) ---------------------------
+    whole_batches = True
+
+    def _loop_start(self) -> None:
+        self._start()
+
     @property
     def remaining(self) -> int:
         """Evaluations left in the budget."""
         self._start()
         return self.budget - len(self.y_)
 
+    def _finished(self) -> bool:
+        if self.stop_reason_ is None:
+            self.stop_reason_ = self.stopping_.reason_for(StopState(n_told=len(self.y_)))
+        return self.stop_reason_ is not None
+
     @property
     def done(self) -> bool:
         self._start()
-        if self.stop_reason_ is None and self.remaining <= 0:
-            self.stop_reason_ = "budget"
-        return self.stop_reason_ is not None
+        return self._finished()
 
-    def ask(self, n: int = 1) -> np.ndarray:
-        self._start()
-        if len(self._asked):
-            return from_unit(self._asked, self.bounds_)
-        if self.done:
-            return np.empty((0, self.q_))
+    def _propose_trials(self, n: int) -> None:
         U = np.atleast_2d(np.asarray(self._propose(max(int(n), 1)), dtype=float))
         if U.size == 0:
             self.stop_reason_ = self.stop_reason_ or "converged"
-            return np.empty((0, self.q_))
-        self._asked = np.clip(U[: self.remaining], 0.0, 1.0)
-        return from_unit(self._asked, self.bounds_)
+            return
+        for u in np.clip(U[: self.remaining], 0.0, 1.0):
+            self.book_.new(u, self.name)
+
+    def _commit_trials(self, trials: list[Trial]) -> None:
+        U = to_unit(np.array([t.x for t in trials]), self.bounds_)   # the points as the driver evaluated them
+        values = [math.nan if t.J is None else t.J for t in trials]
+        self.U_.extend(u.copy() for u in U)
+        self.y_.extend(values)
+        self.last_told_ = trials
+        self._learn(U, self.filled(values))
+
+    # -- the array contract ----------------------------------------------------------
+    def ask(self, n: int = 1) -> np.ndarray:
+        self._start()
+        return np.array([t.x for t in self.ask_trials(n)]).reshape(-1, self.q_)
 
     def tell(self, X: np.ndarray, values: Sequence[float | None]) -> None:
         self._start()
         X = np.atleast_2d(np.asarray(X, dtype=float))
-        values = [_as_float(v) for v in values]
-        U = to_unit(X, self.bounds_)
-        if U.shape != self._asked.shape or len(values) != len(U) or \
-                not np.allclose(U, self._asked, rtol=0.0, atol=1e-9):
-            raise SuspidError(f"{self.name}: tell expects the {len(self._asked)} points ask returned, "
+        waiting = self.book_.waiting
+        if X.shape != (len(waiting), self.q_) or len(values) != len(X) or not np.allclose(
+                to_unit(X, self.bounds_), np.array([t.u for t in waiting]).reshape(-1, self.q_), rtol=0.0, atol=1e-9):
+            raise SuspidError(f"{self.name}: tell expects the {len(waiting)} points ask returned, "
                               f"in the same order, and one value each; got {X.shape[0]} points, {len(values)} values")
-        self._asked = np.empty((0, self.q_))
-        self.U_.extend(u.copy() for u in U)
-        self.y_.extend(values)
-        self._learn(U, self.filled(values))
+        self.tell_trials([t.id for t in waiting], list(values))
 
     def result(self) -> OptimizerResult:
         self._start()
@@ -130,11 +149,3 @@ class BudgetedOptimizer(Optimizer):
 
     def _learn(self, U: np.ndarray, J: np.ndarray) -> None:
         """Take the values of the points just told (default: nothing to learn)."""
-
-
-def _as_float(v: Any) -> float:
-    """J as a float, NaN for a failed evaluation (None, NaN, ±inf)."""
-    if v is None:
-        return math.nan
-    J = float(v)
-    return J if math.isfinite(J) else math.nan

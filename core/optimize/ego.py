@@ -1,14 +1,17 @@
 """Efficient Global Optimization (EGO) of an expensive objective J (paper §3.2, eq. 9).
 
-The paper's loop (see :mod:`suspid.optimize.loop`) behind an **ask/tell**
-interface, so that an outside process (a batch of simulations on another
-machine, a queue) can drive it::
+The paper's loop (see :mod:`suspid.optimize.loop`) on the one ask/tell state
+machine (:class:`suspid.optimize.trials.TrialLoop`), so that an outside process
+(a batch of simulations on another machine, a queue) can drive it::
 
     opt = EGO(bounds, ego=EGOOptions(max_iter=40), design=DesignOptions(n_initial=10))
     while not opt.done:
-        X = opt.ask()             # (n_points, q) SI points to evaluate next, the initial design first
-        opt.tell(X, values)       # (n_points,) their J; None or NaN where the evaluation failed
-    result = opt.result()         # an EGOResult
+        trials = opt.ask_trials()                          # the initial design first; t.x SI, t.u in [0, 1]^q
+        opt.tell_trials([t.id for t in trials], values)    # their J by trial id; None or NaN where it failed
+    result = opt.result()                                  # an EGOResult
+
+``ask()`` and ``tell(X, values)`` are the same with arrays of SI points, for a caller
+that holds points rather than trials.
 
 :func:`run_ego` and :func:`maximize` are thin loops over the same object
 that call ``func(w (q,)) -> float`` (or ``func_batch(X (k, q)) -> k values``
@@ -19,8 +22,8 @@ returns and ``tell`` takes points of the parameter box ``bounds (q, 2)``
 The pieces: :class:`suspid.optimize.loop.LoopState` (points, values,
 records), :class:`suspid.optimize.loop.EIProposer` (fit J~, maximise EI;
 batches by kriging believer), the stopping rules
-:class:`~suspid.optimize.loop.MaxIterations` and
-:class:`~suspid.optimize.loop.EIBelowTolerance`, and the optional local
+:class:`~suspid.optimize.trials.MaxIterations` | :class:`~suspid.optimize.trials.EIBelowTolerance`
+(and :class:`~suspid.optimize.trials.Budget` with a ``budget``), and the optional local
 refinement :class:`suspid.optimize.refine.TrustRegionRefiner` with its
 radius rule. EI and its search: :mod:`suspid.optimize.acquisition`.
 
@@ -64,22 +67,21 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from suspid.errors import ConfigError, SuspidError
+from suspid.errors import ConfigError, SimulatorError, SuspidError
 from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Surrogate
 from suspid.optimize.acquisition import (ei_from_log, expected_improvement, log_ei_and_grad,
                                          log_expected_improvement)
 from suspid.optimize.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
-from suspid.optimize.loop import (EGOResult, EIBelowTolerance, EIProposer, IterationRecord, LoopState,
-                                  MaxIterations)
+from suspid.optimize.loop import EGOResult, EIProposer, IterationRecord, LoopState
+from suspid.optimize.trials import Budget, EIBelowTolerance, MaxIterations, StopState, Trial, TrialBook, TrialLoop
 from suspid.optimize.options import EGOOptions, RefineOptions, make_surrogate
 from suspid.options import parse_options
-from suspid.optimize.refine import RefineStep, TrustRegionRefiner
+from suspid.optimize.refine import TrustRegionRefiner
 
 __all__ = ["EGO", "EGOOptions", "RefineOptions", "IterationRecord", "EGOResult", "run_ego", "maximize",
            "make_surrogate", "expected_improvement", "log_expected_improvement", "log_ei_and_grad"]
@@ -90,27 +92,7 @@ BELIEVED = -1
 """``EIProposer.fitted_on`` after :meth:`EGO.ask_beside`: the surrogate's last fit saw believed values."""
 
 
-@dataclass
-class _Slot:
-    """A point handed out by ``ask`` and waiting for its value."""
-
-    u: np.ndarray
-    phase: str
-    iteration: int = 0
-    log_ei: float | None = None
-    j_max: float | None = None
-    epsilon: float | None = None
-    hyperparameters: dict | None = None
-    fit_seconds: float = 0.0
-    search_seconds: float = 0.0
-    step: RefineStep | None = None
-    told: bool = False
-    J: float | None = None
-    eval_seconds: float | None = None
-    counted: bool = True  # a function call (False for values from y_init)
-
-
-class EGO:
+class EGO(TrialLoop):
     """The EGO loop as an ask/tell object (see the module docstring).
 
     The constructor only stores its arguments; the bounds, the initial points
@@ -124,11 +106,18 @@ class EGO:
     :param X_init: ``(n0, q)`` initial points in SI units, instead of the design.
     :param y_init: ``(n0,)`` their J where known, NaN where still to be evaluated.
     :param callback: called with each :class:`IterationRecord`; returning True stops.
+    :param budget: the largest number of evaluations of J (initial points included, values of
+        ``y_init`` not), None: m0 + m1 and the refinement's. Reaching it stops the run
+        (``stop_reason == "budget"``) unless the loop's own rule stops it at the same point.
+    :param drop_failed_initial: initial points whose evaluation failed are left out of the loop
+        (not seen by the fits), as the pipeline's ``ego`` optimiser has always done; the loop then
+        needs 2 initial points with a value (:class:`~suspid.errors.SimulatorError` otherwise).
     """
 
     def __init__(self, bounds, *, ego: EGOOptions | None = None, design: DesignOptions | None = None,
                  surrogate: Surrogate | None = None, X_init: np.ndarray | None = None,
-                 y_init: np.ndarray | None = None, callback: Callback | None = None) -> None:
+                 y_init: np.ndarray | None = None, callback: Callback | None = None, budget: int | None = None,
+                 drop_failed_initial: bool = False) -> None:
         self.bounds = bounds
         self.ego = ego
         self.design = design
@@ -136,6 +125,8 @@ class EGO:
         self.X_init = X_init
         self.y_init = y_init
         self.callback = callback
+        self.budget = budget
+        self.drop_failed_initial = drop_failed_initial
         self._started = False
 
     # -- setup -------------------------------------------------------------------
@@ -157,6 +148,8 @@ class EGO:
             if np.any(U < -1e-9) or np.any(U > 1 + 1e-9) or not np.all(np.isfinite(U)):
                 raise ConfigError("X_init has points outside the bounds")
             U = np.clip(U, 0.0, 1.0)
+        if self.budget is not None:
+            U = U[: self.budget]
         if U.shape[0] < 2:
             raise ConfigError(f"EGO needs at least 2 initial points, got {U.shape[0]}")
         y0 = np.full(U.shape[0], np.nan)
@@ -167,11 +160,13 @@ class EGO:
         self.options_ = opts
         self.bounds_ = b
         self.state_ = LoopState(q=q)
+        self.book_ = TrialBook(b, self.budget)
         self.surrogate_ = self.surrogate if self.surrogate is not None else make_surrogate(
             "gpy-kriging", seed=opts.seed)
         self.proposer_ = EIProposer(self.surrogate_, opts)
         self.max_iterations_ = MaxIterations(opts.max_iter)
         self.ei_rule_ = EIBelowTolerance(opts.tol)
+        self.paper_stop_ = self.max_iterations_ | self.ei_rule_
         self.refiner_: TrustRegionRefiner | None = None
         self.phase_ = "initial"
         self.stop_reason_: str | None = None
@@ -180,12 +175,15 @@ class EGO:
         self._iteration = 0  # EGO iterations begun
         self._n_new = 0  # points told after the design (failed ones included)
         self._result: EGOResult | None = None
-        self._pending = [_Slot(u=u.copy(), phase="initial") for u in U]
         self._started = True
-        for slot, v in zip(self._pending, y0):
+        X0 = self.X_init if self.X_init is None else np.asarray(self.X_init, dtype=float)[: len(U)]
+        trials = [self.book_.new(u.copy(), "initial", x=None if X0 is None else X0[i].copy())
+                  for i, u in enumerate(U)]
+        for t, v in zip(trials, y0):
             if np.isfinite(v):
-                slot.told, slot.J, slot.counted = True, float(v), False
-        self._flush()
+                t.counted = False
+                self.book_.record([t.id], [float(v)])
+        self._commit_told()
 
     # -- public interface --------------------------------------------------------
     @property
@@ -206,27 +204,41 @@ class EGO:
         self._start()
         return self.state_
 
-    def ask(self) -> np.ndarray:
-        """The points to evaluate next: ``(n_points, q)`` in SI units (empty when done).
+    @property
+    def trials(self) -> list[Trial]:
+        """Every :class:`~suspid.optimize.trials.Trial` handed out so far, by id."""
+        self._start()
+        return list(self.book_.trials)
 
-        The initial design first (without the points whose value ``y_init``
-        gave), then one EGO point per call (``batch`` with ``ego.batch`` > 1),
-        then the refinement's points. Calling again before :meth:`tell`
-        returns the points still waiting for a value.
+    def tell_trials(self, ids: Sequence[int], values: Sequence[float | None],
+                    eval_seconds: Sequence[float | None] | None = None) -> list[IterationRecord]:
+        """Give J of trials :meth:`ask_trials` handed out (all of them or some, in any order).
+
+        :param ids: the trials' ids.
+        :param values: ``(k,)`` J there; None, NaN or ±inf for a failed evaluation.
+        :param eval_seconds: ``(k,)`` evaluation wall times for the records (optional).
+        :returns: the records made (in index order; a trial waits for those asked before it).
+        :raises SuspidError: an id that is not waiting for a value, or a value that is not a number.
         """
         self._start()
-        self._advance()
-        U = [s.u for s in self._pending if not s.told]
-        return from_unit(np.array(U).reshape(-1, self.state_.q), self.bounds_)
+        n_before = len(self.state_.records)
+        super().tell_trials(ids, values, eval_seconds)
+        spent = Budget(self.budget) if self.budget is not None else None
+        if spent is not None and self.phase_ != "done" and spent(StopState(n_told=self._told_count())) \
+                and not self.done:   # the loop's own stop (its next proposal) first
+            self.stop(spent.reason)
+        return self.state_.records[n_before:]
+
+    def ask(self) -> np.ndarray:
+        """The SI points of :meth:`ask_trials`, ``(n_points, q)`` (empty when done)."""
+        return np.array([t.x for t in self.ask_trials()]).reshape(-1, self.state_.q)
 
     def tell(self, X: np.ndarray, values: Sequence[float | None], eval_seconds: Sequence[float | None] | None = None
              ) -> list[IterationRecord]:
-        """Give J at points returned by :meth:`ask` (all of them or some, in any order).
+        """:meth:`tell_trials` for callers that hold the points :meth:`ask` returned, not the trials.
 
         :param X: ``(n_points, q)`` SI points, each one of those :meth:`ask` returned.
         :param values: ``(n_points,)`` J there; None, NaN or ±inf for a failed evaluation.
-        :param eval_seconds: ``(n_points,)`` evaluation wall times for the records (optional).
-        :returns: the records made (in index order; a point waits for those asked before it).
         :raises SuspidError: a point that is not waiting for a value, or a value that is not a number.
         """
         self._start()
@@ -235,36 +247,32 @@ class EGO:
         if X.shape[0] != len(values) or (X.size and X.shape[1] != self.state_.q):
             raise SuspidError(f"tell: {X.shape[0]} points of shape {X.shape} for {len(values)} values; "
                               f"expected (n_points, {self.state_.q}) and n_points values")
-        times = list(eval_seconds) if eval_seconds is not None else [None] * len(values)
-        U = to_unit(X, self.bounds_) if X.size else X
-        for u, v, dt in zip(U, values, times):
-            slot = self._match(u)
-            slot.told, slot.J, slot.eval_seconds = True, _as_value(v, from_unit(u, self.bounds_)), dt
-        n_before = len(self.state_.records)
-        self._flush()
-        return self.state_.records[n_before:]
+        ids = self.book_.match(X) if X.size else []
+        return self.tell_trials(ids, values, eval_seconds)
 
-    def ask_beside(self, pending: np.ndarray) -> np.ndarray:
-        """One more EGO point while the points ``pending (p, q)`` SI are being evaluated (asynchronous drivers).
+    def ask_beside(self, pending: np.ndarray | None = None) -> list[Trial]:
+        """One more EGO trial while the trials waiting for a value are being evaluated (asynchronous drivers).
 
-        The kriging believer (:class:`suspid.optimize.loop.EIProposer`): the pending
-        points enter the fit with the surrogate's mean as their J, so EI looks
-        elsewhere. The point joins the points waiting for a value (tell it like
-        any other) and counts as one EGO iteration. No point is added outside
-        the ``"ego"`` phase, once m1 points are asked, or when the point's EI
-        is below the paper's eps (as a later point of a batch): the caller then
-        waits for a pending point, tells it and asks again; with nothing
-        pending, :meth:`ask` takes the paper's step, and its stop. EI
-        candidates of the p-th pending point after n evaluations come from
-        ``default_rng([seed, 3, n, p])``.
+        The kriging believer (:class:`suspid.optimize.loop.EIProposer`): the waiting
+        points (``pending (p, q)`` SI when given, else those of the waiting trials) enter the
+        fit with the surrogate's mean as their J, so EI looks elsewhere. The trial joins the
+        waiting ones (tell it like any other) and counts as one EGO iteration. No trial is added
+        outside the ``"ego"`` phase, once m1 points are asked, beyond the budget, or when the
+        point's EI is below the paper's eps (as a later point of a batch): the caller then waits
+        for a waiting trial, tells it and asks again; with nothing waiting, :meth:`ask_trials`
+        takes the paper's step, and its stop. EI candidates of the p-th waiting point after n
+        evaluations come from ``default_rng([seed, 3, n, p])``.
 
-        :returns: ``(1, q)`` SI, or ``(0, q)`` when no point can be added now.
+        :returns: one trial, or none when no trial can be added now.
         """
         self._start()
-        q = self.state_.q
         if self.phase != "ego" or self._iteration >= self.options_.max_iter:
-            return np.empty((0, q))
+            return []
+        if self.budget is not None and len([t for t in self.book_.trials if t.counted]) >= self.budget:
+            return []
         st, model, opts = self.state_, self.surrogate_, self.options_
+        if pending is None:
+            pending = np.array([t.x for t in self.book_.waiting]).reshape(-1, st.q)
         U_p = to_unit(np.atleast_2d(np.asarray(pending, dtype=float)), self.bounds_)
         U, y = self.proposer_._data(st)
         t0 = time.perf_counter()
@@ -278,17 +286,15 @@ class EGO:
         t0 = time.perf_counter()
         u, log_ei = self.proposer_._search(model, U_b, y_b, st.y_array, j_max, rng)
         epsilon = self.ei_rule_.epsilon(st.y_array)
-        if self.ei_rule_.should_stop(log_ei, epsilon):
-            return np.empty((0, q))
+        if self.ei_rule_.below(log_ei, epsilon):
+            return []
         self._iteration += 1
-        self._pending.append(_Slot(u=u, phase="ego", iteration=self._iteration, log_ei=log_ei, j_max=j_max,
-                                   epsilon=epsilon,
-                                   hyperparameters=dict(model.hyperparameters_ or {}), fit_seconds=t_fit,
-                                   search_seconds=time.perf_counter() - t0))
-        return from_unit(u[None, :], self.bounds_)
+        return [self.book_.new(u, "ego", iteration=self._iteration, log_ei=log_ei, j_max=j_max, epsilon=epsilon,
+                               hyperparameters=dict(model.hyperparameters_ or {}), fit_seconds=t_fit,
+                               search_seconds=time.perf_counter() - t0)]
 
     def stop(self, reason: str = "stopped") -> None:
-        """End the run now (points still waiting for a value are dropped)."""
+        """End the run now (trials still waiting for a value are dropped)."""
         self._start()
         if self.phase_ == "initial":
             self.state_.n_initial = self.state_.n_points
@@ -296,7 +302,7 @@ class EGO:
             self.refine_stop_reason_ = reason
         elif self.phase_ != "done":
             self.stop_reason_ = reason
-        self._pending = []
+        self.book_.drop_waiting()
         self.phase_ = "done"
 
     def result(self) -> EGOResult:
@@ -326,80 +332,91 @@ class EGO:
                         surrogate=self.surrogate_ if model.fitted_on else None, bounds=b,
                         design_min_distance=min_distance(Ua[:st.n_initial or st.n_points]),
                         n_function_calls=self.n_function_calls_, refine_stop_reason=self.refine_stop_reason_,
-                        n_refine=self.refiner_.n if self.refiner_ is not None else 0, X_failed=failed)
+                        n_refine=self.refiner_.n if self.refiner_ is not None else 0, X_failed=failed,
+                        trials=list(self.book_.trials))
         if finished:
             self._result = res
         return res
 
     # -- internals ---------------------------------------------------------------
-    def _match(self, u: np.ndarray) -> _Slot:
-        for slot in self._pending:
-            if not slot.told and np.max(np.abs(slot.u - u)) <= 1e-9:
-                return slot
-        raise SuspidError(f"tell: the point {from_unit(u, self.bounds_).tolist()} is not one that ask() "
-                          f"returned and that still waits for a value")
-
     def _report(self, record: IterationRecord) -> bool:
         self.state_.records.append(record)
         return bool(self.callback(record)) if self.callback is not None else False
 
-    def _flush(self) -> None:
-        """Commit the told points at the head of the queue, in order, with their records."""
+    # -- the loop's hooks (suspid.optimize.trials.TrialLoop) ----------------------------
+    def _loop_start(self) -> None:
+        self._start()
+
+    def _finished(self) -> bool:
+        return self.phase_ == "done"
+
+    def _beside(self) -> list[Trial]:
+        return self.ask_beside()
+
+    def _commit_trials(self, trials: list[Trial]) -> None:
+        """Commit told trials, in id order, with their records."""
         st, b = self.state_, self.bounds_
-        while self._pending and self._pending[0].told:
-            s = self._pending.pop(0)
+        for s in trials:
+            d = s.details
             if s.counted:
                 self.n_function_calls_ += 1
             if s.phase != "initial":
                 self._n_new += 1
             if s.J is None:
+                if s.phase == "initial" and self.drop_failed_initial:
+                    continue
                 st.U_failed.append(s.u)
                 if s.phase == "refine":
-                    self.refiner_.update(s.step, None)
+                    self.refiner_.update(d["step"], None)
                 continue
             j_before = st.j_max()
             index = st.add(s.u, s.J)
+            s.details["index"] = index
             if s.phase == "initial":
                 record = IterationRecord(iteration=0, index=index, phase="initial", x=from_unit(s.u, b),
-                                         x_unit=s.u.copy(), J=s.J, J_max=j_before, eval_seconds=s.eval_seconds)
+                                         x_unit=s.u.copy(), J=s.J, J_max=j_before,
+                                         eval_seconds=s.eval_seconds if s.counted else None)
             else:
-                record = IterationRecord(iteration=s.iteration, index=index, phase=s.phase, x=from_unit(s.u, b),
-                                         x_unit=s.u, J=s.J, EI=ei_from_log(s.log_ei), log_EI=s.log_ei,
-                                         J_max=s.j_max, epsilon=s.epsilon, hyperparameters=dict(s.hyperparameters),
-                                         fit_seconds=s.fit_seconds, search_seconds=s.search_seconds,
-                                         eval_seconds=s.eval_seconds)
+                record = IterationRecord(iteration=d["iteration"], index=index, phase=s.phase, x=from_unit(s.u, b),
+                                         x_unit=s.u, J=s.J, EI=ei_from_log(d["log_ei"]), log_EI=d["log_ei"],
+                                         J_max=d["j_max"], epsilon=d["epsilon"],
+                                         hyperparameters=dict(d["hyperparameters"]), fit_seconds=d["fit_seconds"],
+                                         search_seconds=d["search_seconds"], eval_seconds=s.eval_seconds)
             stop = self._report(record)
             if s.phase == "refine":
                 if stop:
                     self.refiner_.n += 1
                     self.stop("callback")
                     return
-                self.refiner_.update(s.step, s.J)
+                self.refiner_.update(d["step"], s.J)
             elif stop:
                 if s.phase == "initial":  # the rest of the design is not evaluated
                     self.stop("callback")
                     return
                 self.stop_reason_ = "callback"  # the rest of the batch is already evaluated
-        if self.stop_reason_ == "callback" and not self._pending and self.phase_ != "done":
+        if self.stop_reason_ == "callback" and not self.book_.queue and self.phase_ != "done":
             self.phase_ = "done"
 
-    def _advance(self) -> None:
-        """With nothing pending, move on: propose the next points or stop."""
-        while not self._pending and self.phase_ != "done":
-            if self.phase_ == "initial":
-                self.state_.n_initial = self.state_.n_points
-                if self.state_.n_points < 2:
-                    raise SuspidError(f"EGO needs at least 2 initial points with a value, got "
-                                      f"{self.state_.n_points}")
-                self.phase_ = "ego"
-            elif self.phase_ == "ego":
-                self._propose_ego()
-            elif self.phase_ == "refine":
-                self._propose_refine()
+    def _propose_trials(self, n: int = 1) -> None:
+        """With nothing waiting, move on: the next phase, the next trials, or the stop."""
+        if self.phase_ == "initial":
+            self.state_.n_initial = self.state_.n_points
+            if self.state_.n_points < 2:
+                n_design = len([t for t in self.book_.trials if t.phase == "initial"])
+                if self.drop_failed_initial:
+                    raise SimulatorError(f"only {self.state_.n_points} of {n_design} design points could be "
+                                         f"simulated; see the failures in the run's ledger")
+                raise SuspidError(f"EGO needs at least 2 initial points with a value, got "
+                                  f"{self.state_.n_points}")
+            self.phase_ = "ego"
+        elif self.phase_ == "ego":
+            self._propose_ego()
+        elif self.phase_ == "refine":
+            self._propose_refine()
 
     def _propose_ego(self) -> None:
         opts = self.options_
-        if self.max_iterations_.should_stop(self._n_new) or self._iteration >= opts.max_iter:
+        if self.paper_stop_(StopState(n_new=self._n_new)) or self._iteration >= opts.max_iter:
             self.stop_reason_ = self.max_iterations_.reason
             self._begin_refine()
             return
@@ -409,7 +426,8 @@ class EGO:
                       fit_seconds=p.fit_seconds, search_seconds=p.search_seconds)
         if not p.points:  # the paper's stop: EI(w_l) < eps
             u, log_ei = p.rejected
-            self.stop_reason_ = self.ei_rule_.reason
+            self.stop_reason_ = self.paper_stop_.reason_for(StopState(n_new=self._n_new, log_ei=log_ei,
+                                                                      epsilon=p.epsilon))
             self._report(IterationRecord(iteration=self._iteration, index=self.state_.n_points, phase="stop",
                                          x=from_unit(u, self.bounds_), x_unit=u, J=None, EI=ei_from_log(log_ei),
                                          log_EI=log_ei, J_max=p.j_max, epsilon=p.epsilon,
@@ -417,7 +435,8 @@ class EGO:
                                          search_seconds=p.search_seconds))
             self._begin_refine()
             return
-        self._pending = [_Slot(u=u, phase="ego", log_ei=log_ei, **common) for u, log_ei in p.points]
+        for u, log_ei in p.points:
+            self.book_.new(u, "ego", log_ei=log_ei, **common)
 
     def _begin_refine(self) -> None:
         ro = self.options_.refine
@@ -434,20 +453,10 @@ class EGO:
             self.refine_stop_reason_ = self.refiner_.reason
             self.phase_ = "done"
             return
-        self._pending = [_Slot(u=step.u, phase="refine", iteration=step.iteration, log_ei=step.log_ei,
-                               j_max=step.j_max, epsilon=step.epsilon, hyperparameters=step.hyperparameters,
-                               fit_seconds=step.fit_seconds, search_seconds=step.search_seconds, step=step)]
+        self.book_.new(step.u, "refine", iteration=step.iteration, log_ei=step.log_ei, j_max=step.j_max,
+                       epsilon=step.epsilon, hyperparameters=step.hyperparameters, fit_seconds=step.fit_seconds,
+                       search_seconds=step.search_seconds, step=step)
 
-
-def _as_value(v: Any, x: np.ndarray) -> float | None:
-    """J as a float, None for a failed evaluation (None, NaN, ±inf)."""
-    if v is None:
-        return None
-    try:
-        J = float(v)
-    except (TypeError, ValueError):
-        raise SuspidError(f"the objective returned {v!r} at w={x.tolist()}; expected a number") from None
-    return J if math.isfinite(J) else None
 
 
 # -- the loops of the pipeline and of the notebook ---------------------------------------
@@ -497,14 +506,15 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
                   callback=callback)
         while not opt.done:
             batched = opt.phase == "ego" and opt.options_.batch > 1
-            X = opt.ask()
+            trials = opt.ask_trials()
             if not batched:  # one point at a time: a callback can stop after any of them
-                for x in X:
-                    J, dt = _evaluate(func, x)
-                    opt.tell(x[None, :], [J], [dt])
+                for t in trials:
+                    J, dt = _evaluate(func, t.x)
+                    opt.tell_trials([t.id], [J], [dt])
                     if opt.done:
                         break
                 continue
+            X = np.array([t.x for t in trials])
             t0 = time.perf_counter()
             if func_batch is not None:
                 values = [float(v) for v in func_batch(X)]
@@ -513,7 +523,7 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
             else:
                 values = [_evaluate(func, x)[0] for x in X]
             dt = (time.perf_counter() - t0) / len(X)
-            opt.tell(X, values, [dt] * len(X))
+            opt.tell_trials([t.id for t in trials], values, [dt] * len(X))
         return opt.result()
 
 

@@ -22,11 +22,12 @@ As in emukit's outer loop it is cut into small pieces that
   budget mode (``tol`` < ``explore_tol``) it also warps J (:func:`warp_values`),
   exploits every :data:`EXPLOIT_PERIOD`-th step (and again after a near miss)
   and sets stalled basins aside;
-- :class:`MaxIterations` (m1) and :class:`EIBelowTolerance` (EI < eps): the
-  paper's stopping rules. The refinement's proposer and radius rule are in
+- :class:`~suspid.optimize.trials.MaxIterations` (m1) and
+  :class:`~suspid.optimize.trials.EIBelowTolerance` (EI < eps): the paper's stopping
+  rules (:mod:`suspid.optimize.trials`, where they combine with ``|``). The refinement's proposer and radius rule are in
   :mod:`suspid.optimize.refine`.
 
-Public API: :class:`IterationRecord`, :class:`EGOResult`, :class:`LoopState`,
+Public API: :class:`IterationRecord`, :class:`LoopOutcome`, :class:`EGOResult`, :class:`LoopState`,
 :class:`Proposal`, :class:`EIProposer`, :class:`MaxIterations`,
 :class:`EIBelowTolerance`, :func:`warp_values`, :data:`EXPLOIT_PERIOD`.
 """
@@ -45,8 +46,9 @@ from scipy.stats import yeojohnson
 from suspid.interfaces import Surrogate
 from suspid.optimize.acquisition import ei_from_log, log_expected_improvement, maximize_ei, maximize_mean
 from suspid.optimize.options import EGOOptions
+from suspid.optimize.trials import EIBelowTolerance, MaxIterations, Trial
 
-__all__ = ["IterationRecord", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
+__all__ = ["IterationRecord", "LoopOutcome", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
            "EIBelowTolerance", "warp_values"]
 
 EXPLOIT_PERIOD = 3
@@ -113,8 +115,12 @@ class IterationRecord:
 
 
 @dataclass
-class EGOResult:
-    """Outcome of an EGO run.
+class LoopOutcome:
+    """What a finished optimisation loop leaves for the analysis, whatever the optimiser: the points
+    with a value, the best one, the surrogate fitted on them and the trials.
+
+    The EGO loop returns it as :class:`EGOResult` (its surrogate is the loop's own); for another
+    optimiser :meth:`of_points` fits the configured surrogate on its points.
 
     :ivar x_opt: ``(q,)`` w_opt, the best evaluated point, SI units.
     :ivar y_opt: J(w_opt).
@@ -139,6 +145,7 @@ class EGOResult:
     :ivar n_function_calls: evaluations of J made by this run, failed ones
         included (values from ``y_init`` are not counted).
     :ivar X_failed: ``(n_failed, q)`` SI points whose evaluation failed (not in ``X``).
+    :ivar trials: every :class:`~suspid.optimize.trials.Trial` the run handed out, by id.
     """
 
     x_opt: np.ndarray
@@ -156,6 +163,7 @@ class EGOResult:
     refine_stop_reason: str | None = None
     n_refine: int = 0
     X_failed: np.ndarray | None = None
+    trials: list[Trial] = field(default_factory=list)
 
     @property
     def n_evaluations(self) -> int:
@@ -166,6 +174,34 @@ class EGOResult:
     def n_iterations(self) -> int:
         """Number of points evaluated after the initial design (EGO and refinement)."""
         return self.n_evaluations - self.n_initial
+
+    @classmethod
+    def of_points(cls, x_opt: np.ndarray, y_opt: float, X: np.ndarray, y: np.ndarray, U: np.ndarray,
+                  n_initial: int, stop_reason: str, surrogate: Surrogate | None, bounds: np.ndarray,
+                  trials: list[Trial] | None = None) -> "LoopOutcome":
+        """The outcome of an optimiser without a model of its own, from every point it was told.
+
+        :param X: ``(n, q)`` SI points told, in order; :param y: ``(n,)`` their J, NaN where failed;
+            :param U: ``(n, q)`` the same points in ``[0, 1]^q``.
+        :param surrogate: a surrogate instance, fitted here on the points with a value (at least 2;
+            otherwise the outcome has none).
+        """
+        from suspid.infra.threads import single_blas_thread
+        from suspid.optimize.design import min_distance
+        ok = np.isfinite(y)
+        fitted = None
+        if ok.sum() >= 2 and surrogate is not None:
+            with single_blas_thread():
+                fitted = surrogate.fit(U[ok], y[ok])
+        return cls(x_opt=np.asarray(x_opt, float), y_opt=float(y_opt), X=X[ok], y=y[ok], X_unit=U[ok],
+                   n_initial=int(min(n_initial, ok.sum())), stop_reason=stop_reason, history=[], surrogate=fitted,
+                   bounds=bounds, design_min_distance=min_distance(U[ok][:n_initial]),
+                   n_function_calls=int(len(y)), X_failed=X[~ok], trials=list(trials or []))
+
+
+@dataclass
+class EGOResult(LoopOutcome):
+    """Outcome of an EGO run (:class:`LoopOutcome`, with the EGO loop's own surrogate and records)."""
 
 
 @dataclass
@@ -211,39 +247,6 @@ class LoopState:
         self.U.append(u)
         self.y.append(J)
         return len(self.y) - 1
-
-
-class MaxIterations:
-    """Stopping rule: at most m1 = ``max_iter`` points after the initial design."""
-
-    reason = "max_iter"
-
-    def __init__(self, max_iter: int) -> None:
-        self.max_iter = max_iter
-
-    def should_stop(self, n_new_points: int) -> bool:
-        """True once ``n_new_points`` (points told after the design, failed ones included) reach m1."""
-        return n_new_points >= self.max_iter
-
-
-class EIBelowTolerance:
-    """The paper's stopping rule: EI(w_l) < eps, eps = tol * (max J - min J) over the current data.
-
-    With tol = 0, or all J equal, eps = 0 and the rule never fires.
-    """
-
-    reason = "ei_below_tol"
-
-    def __init__(self, tol: float) -> None:
-        self.tol = tol
-
-    def epsilon(self, y: np.ndarray) -> float:
-        """eps for the values ``y (n_points,)``, in units of J."""
-        return self.tol * float(y.max() - y.min())
-
-    def should_stop(self, log_ei: float, epsilon: float) -> bool:
-        """True when EI < eps (compared in log space, so an EI that underflows still counts)."""
-        return epsilon > 0 and log_ei < math.log(epsilon)
 
 
 @dataclass

@@ -23,7 +23,7 @@ from suspid.method.adequacy import band_residuals, frequency_bands, information_
 from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bias_aware_half_width
 from suspid.method.jacobian import fisher_identifiability, fisher_information
 from suspid.method.noise import refit_gaussian, reference_paths
-from suspid.optimize.ego import EGOResult
+from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -172,13 +172,15 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     return np.atleast_2d(np.cov(grads, rowvar=False)), curvature, float(np.std(j_opt, ddof=1))
 
 
-def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
+def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, config: Config,
             failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
             executor: Executor | None = None, phases: Phases | None = None,
             spectra_model: SpectraModel | None = None) -> Analysis:
     """w_opt, errors against w_ref, identifiability, intervals, trust and sensitivity (the first keys of
     ``result.json``: :meth:`Analysis.to_json`).
 
+    :param loop: the finished loop (:class:`~suspid.optimize.loop.LoopOutcome`, any optimiser): its best
+        point and the surrogate fitted on its points.
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
     :param phases: shows each phase while it runs (:mod:`suspid.workflows.phases`; default: nowhere).
@@ -190,7 +192,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
     failed = list(failed or [])
     opts = config.identifiability
     names, lo, hi = problem.names, problem.bounds[:, 0], problem.bounds[:, 1]
-    x_opt = np.asarray(ego.x_opt, float)
+    x_opt = np.asarray(loop.x_opt, float)
     u_opt = problem.to_unit(x_opt)
     phases.start(f"intervals ({2 * problem.q} simulations)")
     sigma_g, curvature, sigma_J = gradient_noise(problem, ledger, u_opt, opts.step, opts.n_redraws,
@@ -199,7 +201,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
                                                  reference=opts.bootstrap_reference)
     rng = named_rng(config.seed, "identifiability")
     phases.start("identifiability")
-    verdict = assess(names, u_opt, sigma_g, ego.surrogate, opts, rng, curvature)
+    verdict = assess(names, u_opt, sigma_g, loop.surrogate, opts, rng, curvature)
     fisher = None
     if spectra_model is not None:
         try:
@@ -250,7 +252,7 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
             first_sobol={n: float(v) for n, v in zip(names, verdict.first_index)},
             lengthscales=None if verdict.lengthscales is None
             else {n: float(v) for n, v in zip(names, np.ravel(verdict.lengthscales))}),
-        J_max=float(ego.y_opt),
+        J_max=float(loop.y_opt),
         objective=config.objective.plugin,
         surrogate=config.surrogate.plugin,
         simulator=config.simulator.plugin,
@@ -269,8 +271,8 @@ def analyse(problem: Problem, ledger: Ledger, ego: EGOResult, config: Config,
         result.w_corrected_normalized = {n: float(v) for n, v in zip(names, u_est)}
         if problem.w_ref is not None:
             result.errors_percent_corrected = errors_percent(problem, x_est)
-    if ego.n_refine:
-        result.paper_loop = paper_loop(problem, ego)
+    if loop.n_refine:
+        result.paper_loop = paper_loop(problem, loop)
     return result
 
 
@@ -314,13 +316,13 @@ def fisher_verdict(problem: Problem, spectra_model: SpectraModel, x_opt: np.ndar
     return replace(verdict, identifiable=identifiable, reasons=reasons), figures
 
 
-def paper_loop(problem: Problem, ego: EGOResult) -> PaperLoop:
-    """Where the paper's loop stood when it stopped, before the local refinement (``ego.refine``)."""
+def paper_loop(problem: Problem, loop: LoopOutcome) -> PaperLoop:
+    """Where the paper's loop stood when it stopped, before the local refinement (``loop.refine``)."""
     names = problem.names
-    n_loop = ego.n_evaluations - ego.n_refine
-    best = int(np.argmax(ego.y[:n_loop]))
-    x = np.asarray(ego.X[best], float)
-    return PaperLoop(n_iterations=n_loop - ego.n_initial, n_simulator_calls=n_loop, J_max=float(ego.y[best]),
+    n_loop = loop.n_evaluations - loop.n_refine
+    best = int(np.argmax(loop.y[:n_loop]))
+    x = np.asarray(loop.X[best], float)
+    return PaperLoop(n_iterations=n_loop - loop.n_initial, n_simulator_calls=n_loop, J_max=float(loop.y[best]),
                      w_opt={n: float(v) for n, v in zip(names, x)},
                      w_opt_normalized={n: float(v) for n, v in zip(names, problem.to_unit(x))},
                      errors_percent=None if problem.w_ref is None else errors_percent(problem, x))

@@ -4,7 +4,7 @@
    (:func:`suspid.workflows.problem.build_problem`);
 2. the optimiser the config names (``optimizer:``, default ``ego``: the paper's
    maximin design of m0 points, then EGO on the Kriging metamodel, eq. 9) driven
-   through ask/tell by :func:`drive`, every J through the run's executor;
+   through its trials by :func:`suspid.workflows.driver.drive`, every J through the run's executor;
 3. for optimisers without a metamodel of their own, the configured surrogate
    fitted on every evaluated point (the analysis reads it);
 4. identifiability, intervals (:mod:`suspid.workflows.analysis`),
@@ -14,8 +14,8 @@ Every evaluation of J is committed to the run ledger the moment it finishes.
 The chain is deterministic for a given config, so a run that was interrupted
 is resumed by running it again: the optimiser's steps are retraced and every
 finished evaluation is read from the ledger instead of being simulated again.
-The ledger's ``evaluations`` rows (and ``result.json``'s ``anytime``) keep J and
-w of every evaluation in order: the anytime history of the run.
+The ledger's ``trials`` rows (:meth:`suspid.infra.ledger.Ledger.trials`, and ``result.json``'s
+``anytime``) keep J and w of every trial in order: the anytime history of the run.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import yaml
 
 from suspid import registry
 from suspid.config import Config, optimizer_budget
-from suspid.errors import ConfigError, SimulatorError
+from suspid.errors import ConfigError
 from suspid.infra import history
 from suspid.infra.files import write_json, write_text
 from suspid.infra.ledger import Ledger
@@ -37,11 +37,9 @@ from suspid.infra.seeds import seed_for
 from suspid.infra.lock import open_run_dir
 from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Executor, OptimizerResult
-from suspid.optimize.design import min_distance
-from suspid.optimize.ego import EGOResult
+from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.analysis import analyse, cached_y_sim
-from suspid.workflows.asynchronous import drive_async
-from suspid.workflows.evaluation import evaluate_many, evaluation_key_of
+from suspid.workflows.driver import drive
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.elements import localisation_markdown, localisation_wanted, localise_problem, moved_kinds
 from suspid.workflows.phases import ProgressPhases
@@ -69,13 +67,6 @@ def resolved_config(config: Config) -> dict[str, Any]:
 def write_config(config: Config, run_dir: Path) -> None:
     """The resolved config, ``config.yaml`` in the run's folder (atomically)."""
     write_text(run_dir / "config.yaml", yaml.safe_dump(resolved_config(config), sort_keys=False))
-
-
-def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> dict[str, Any]:
-    """A failed point for ``result.json``: its phase, w and the simulator's message from the ledger."""
-    key, w = evaluation_key_of(problem, x_si)
-    found = ledger.get(key)
-    return {"phase": phase, "w": w, "error": found.error if found is not None else "unknown"}
 
 
 def surrogate_for(config: Config):
@@ -152,8 +143,7 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.infra.threads)
     with make_progress(progress) as bars, single_blas_thread():
         opt_result, failed = drive(optimizer, problem, ledger, executor, bars, retry_failed=retry_failed)
-    ego = opt_result.details if isinstance(opt_result.details, EGOResult) else \
-        as_ego_result(opt_result, surrogate_for(config), problem)
+    ego = loop_outcome(opt_result, optimizer, surrogate_for(config), problem)
     ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
     model = getattr(optimizer, "spectra_model", None)
@@ -198,6 +188,18 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     return out
 
 
+def loop_outcome(res: OptimizerResult, optimizer, surrogate, problem: Problem) -> LoopOutcome:
+    """What the analysis reads of the finished loop: the EGO loop's own outcome (its surrogate), or for
+    another optimiser its points with the configured ``surrogate`` fitted on them (identifiability,
+    Sobol indices and intervals read it), with the optimiser's trials."""
+    if isinstance(res.details, LoopOutcome):
+        return res.details
+    trials = getattr(getattr(optimizer, "book_", None), "trials", None) or \
+        getattr(getattr(optimizer, "_trial_book", None), "trials", None) or []
+    return LoopOutcome.of_points(res.x_opt, res.y_opt, res.X, res.y, problem.to_unit(res.X), res.n_initial,
+                                 res.stop_reason, surrogate, problem.bounds, trials)
+
+
 def _localise(config: Config, problem: Problem, result: dict[str, Any], executor, log) -> dict[str, Any] | None:
     """The localisation entry of ``result`` (:func:`suspid.workflows.elements.localise_problem`) when
     ``localisation.enabled`` asks for it (``auto``: an identified kind with elements moved out of its nominal
@@ -221,80 +223,3 @@ def add_verdict(result: IdentificationResult, problem: Problem, config: Config) 
     rows = verdict_rows(result.to_json(), parameters, config.limits)
     result.nominal = {r.name: r.nominal for r in rows if r.source == "identification"}
     result.verdict_block = verdict_block(rows, config.limits)
-
-
-def drive(optimizer, problem: Problem, ledger: Ledger, executor, bars, *, retry_failed: bool = False
-          ) -> tuple[OptimizerResult, list[dict[str, Any]]]:
-    """Run an optimiser through ask/tell, every J through the executor and the ledger (failures kept).
-
-    Each step asks as many points as the executor has workers and evaluates them
-    together (:func:`evaluate_many`); an optimiser that asks for it
-    (:meth:`suspid.interfaces.Optimizer.asynchronous`: ``ego.asynchronous`` with
-    ``ego.batch = 1`` and several workers) keeps one point in flight per worker
-    instead (:func:`suspid.workflows.asynchronous.drive_async`).
-
-    Every evaluation is recorded in the ledger's ``evaluations`` rows (index -> w and J, None for a
-    failed point) in the order the optimiser is told: the anytime history of the run. The optimiser's
-    own rows (:attr:`suspid.interfaces.Optimizer.on_record`) go to the ledger with ``x`` given as w.
-
-    :returns: the optimiser's result and the failed points (phase, w and the simulator's message).
-    """
-    def on_record(run: str, index: int, row: dict) -> None:
-        row = dict(row)
-        if "x" in row:
-            row = {"w": problem.w_of(np.asarray(row.pop("x"), float)), **row}
-        ledger.put_iteration(run, index, row)
-
-    optimizer.on_record = on_record
-    if getattr(optimizer, "uses_jacobian", False):
-        optimizer.spectra_model = ProblemSpectraModel(problem, ledger, executor)
-    label = optimizer.name  # the phase of a failed point after the design
-    task = bars.add_task(label, total=optimizer.budget, status="")
-    failed: list[dict[str, Any]] = []
-    n, j_max = 0, -np.inf
-
-    def tell(X: np.ndarray, evs: list) -> None:
-        nonlocal n, j_max
-        phase = "design" if n == 0 and len(X) > 1 else label
-        for x, ev in zip(X, evs):
-            if ev is None:
-                failed.append(failure(problem, ledger, phase, x))
-            else:
-                j_max = max(j_max, ev.J)
-            ledger.put_iteration("evaluations", n, {"w": problem.w_of(x), "J": ev.J if ev else None})
-            n += 1
-        optimizer.tell(X, [ev.J if ev is not None else None for ev in evs])
-        bars.update(task, completed=n, status=f"J_max {j_max:.4g}" if np.isfinite(j_max) else "failed points")
-
-    def together(X: np.ndarray) -> None:
-        tell(X, evaluate_many(problem, ledger, X, executor, lambda i, ev, reused: bars.update(task, advance=1),
-                              retry_failed=retry_failed))
-
-    n_workers = executor.n_workers
-    if optimizer.asynchronous(n_workers):
-        drive_async(optimizer, problem, ledger, executor, n_workers, tell, together, retry_failed=retry_failed)
-    else:
-        while not optimizer.done:
-            X = np.atleast_2d(optimizer.ask(n=n_workers))
-            if X.size == 0:
-                break
-            together(X)
-    bars.update(task, total=max(n, 1), completed=max(n, 1))
-    if not np.isfinite(j_max):
-        raise SimulatorError(f"none of the {n} points could be simulated; see the failures in {ledger.path}")
-    return optimizer.result(), failed
-
-
-def as_ego_result(res: OptimizerResult, surrogate, problem: Problem) -> EGOResult:
-    """An optimiser's result in the form the analysis takes: points with a value, and the configured
-    surrogate fitted on them (identifiability, Sobol indices and intervals read it)."""
-    ok = np.isfinite(res.y)
-    U = problem.to_unit(res.X[ok])
-    fitted = None
-    if ok.sum() >= 2:
-        with single_blas_thread():
-            fitted = surrogate.fit(U, res.y[ok])
-    return EGOResult(x_opt=np.asarray(res.x_opt, float), y_opt=float(res.y_opt), X=res.X[ok], y=res.y[ok], X_unit=U,
-                     n_initial=int(min(res.n_initial, ok.sum())), stop_reason=res.stop_reason, history=[],
-                     surrogate=fitted, bounds=problem.bounds, design_min_distance=min_distance(U[:res.n_initial]),
-                     n_function_calls=res.n_evaluations, X_failed=res.X[~ok])

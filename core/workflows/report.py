@@ -17,7 +17,7 @@ from suspid.infra.files import pyplot, save_figure, write_text
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
-from suspid.optimize.ego import EGOResult
+from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.trust import CHECK_LABELS, trust_word  # trust_word: importers take it from here too
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
@@ -371,7 +371,7 @@ def search_line(result: dict[str, Any]) -> str:
             f"(budget {result['budget']}, {result['n_initial']} of them a design), stop: `{result['stop_reason']}`")
 
 
-def write_report(run_dir: Path, problem: Problem, ego: EGOResult, result: dict[str, Any],
+def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict[str, Any],
                  ei_history: list[float], executor: Executor | None = None, y_opt: np.ndarray | None = None) -> Path:
     """``report.md``: the maintenance verdict first, then the parameter table, the model-error checks,
     Figures 1-2 and the convergence plot.

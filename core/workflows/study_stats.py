@@ -94,19 +94,19 @@ def run_metrics(result: Mapping[str, Any]) -> dict[str, float]:
 def evaluations_in_order(ledger_path: str | Path) -> list[dict[str, Any]]:
     """The run's evaluations ``{"w": {name: SI}, "J": float}`` in the order they were made.
 
-    The ledger's ``evaluations`` rows (every optimiser's points, by their index in
-    the run), or in a ledger written before optimisers recorded them: the design's
-    iterations first, then those of every other loop (``ego``, ``refine``, ...)
-    merged by their index, which counts the points of the run.
+    The ledger's trials (:meth:`~suspid.infra.ledger.Ledger.trials`, every optimiser's points
+    by id), or in a ledger written before optimisers recorded them: the design's iterations
+    first, then those of every other loop (``ego``, ``refine``, ...) merged by their index,
+    which counts the points of the run.
     """
     ledger = Ledger(ledger_path)
     try:
         rows = ledger.all_iterations()
+        trials = ledger.trials() if any(run == "trials" for run, _, _ in rows) else []
     finally:
         ledger.close()
-    recorded = sorted(((i, r) for run, i, r in rows if run == "evaluations"), key=lambda item: item[0])
-    if recorded:
-        return [r for _, r in recorded if r.get("J") is not None and r.get("w") is not None]
+    if trials:
+        return [r for r in trials if r.get("J") is not None and r.get("w") is not None]
     design = [r for run, _, r in rows if run == "design"]
     later = [r for _, _, r in sorted((row for row in rows if row[0] != "design"), key=lambda row: row[1])]
     ordered = design + later

@@ -124,8 +124,8 @@ class GaussNewton(BudgetedOptimizer):
         return best_u, best
 
     def _record(self, row: dict) -> None:
-        if self.on_record is not None:
-            self.on_record("gauss-newton", self.n_steps_, row)
+        """The step's own figures join its trial's details (the driver writes the trial once, after it is told)."""
+        self.last_told_[-1].details.update(row, step=self.n_steps_)
 
     def _propose(self, n: int) -> np.ndarray:
         if not self.U_:
@@ -159,8 +159,7 @@ class GaussNewton(BudgetedOptimizer):
         step = float(np.max(np.abs(u - self.centre_)))
         accepted = value > self.J_c
         self.n_steps_ += 1
-        self._record({"x": from_unit(u, self.bounds_).tolist(), "J": value, "J_predicted": predicted,
-                      "J_centre": self.J_c, "rho": rho if math.isfinite(rho) else None, "radius": self.radius_,
+        self._record({"J_predicted": predicted, "J_centre": self.J_c, "rho": rho if math.isfinite(rho) else None, "radius": self.radius_,
                       "accepted": accepted})
         if rho > 0.75 and step >= 0.99 * self.radius_:
             self.radius_ = min(2 * self.radius_, self.opts_.max_radius)
