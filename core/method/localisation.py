@@ -87,6 +87,9 @@ class LocalisationOptions(Section):
         "damper or a deflated air spring gives; 'any': a rise too")
     channel_gains: bool = Field(default=True, description="fit a flat gain per channel with every hypothesis (and "
                                 "the null): a calibration drift or segment gains are not taken for a change")
+    sensor_floor: bool = Field(default=True, description="when the noise model has no sensor floor (noise.floor: "
+                               "none), estimate one on the reference date as noise.floor: auto does: where sensor "
+                               "noise masks the response the measured spectra do not follow an element's change")
     calibrate: bool = Field(default=True, description="linearise the model at its model parameters estimated on "
                             "the reference date (identifiability.model_error.calibration's parameters and steps: by "
                             "default the simulator's calibratable ones), where its resonances match the vehicle's: "

@@ -33,6 +33,7 @@ from suspid.elements import declared_groups, finest_groups, kind_of, split_name
 from suspid.errors import ConfigError
 from suspid.infra.files import write_json
 from suspid.infra.lock import open_run_dir
+from suspid.method.floor import estimate_floor
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
                                         evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
@@ -85,8 +86,10 @@ class ElementAnalysis:
     """SI values the model is linearised at: the identified kinds' nominal values and, when
     ``localisation.calibrate`` is on, the model parameters calibrated on the reference date."""
     calibration: dict[str, Any] = field(default_factory=dict)
-    """``{"status": ..., "parameters": {name: {"nominal", "estimate"}}}``: the linearisation point's model
-    parameters (:func:`calibrated_point`)."""
+    """``{"status": ..., "parameters": {name: {"nominal", "estimate", "sd"}}, "sensor_floor": ...}``: the
+    linearisation point's model parameters (:func:`calibrated_point`) and the sensor floor's source."""
+    floor: Callable[[np.ndarray], np.ndarray] | None = None
+    """y_sim -> the spectra the sensors would give (:func:`_floor`); None: the identity."""
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """``x (n_channels, n_freqs)`` less its weighted least-squares fit by the nuisance columns."""
@@ -140,11 +143,23 @@ def _pair_means(a: np.ndarray) -> np.ndarray:
     return 0.5 * (a[0::2] + a[1::2])
 
 
-def _floor(problem: Problem) -> Callable[[np.ndarray], np.ndarray]:
-    """y_sim -> the spectra the sensors would give (the noise model's sensor floor added,
-    :meth:`suspid.method.floor.NoiseFloor.effective`; identity without a floor)."""
+def _floor(problem: Problem, y_sim0: np.ndarray | None = None, estimate: bool = False
+           ) -> tuple[Callable[[np.ndarray], np.ndarray], str]:
+    """y_sim -> the spectra the sensors would give, and where the floor comes from.
+
+    The noise model's sensor floor (:meth:`suspid.method.floor.NoiseFloor.effective`) when it has one; else,
+    with ``estimate``, one estimated on the reference date against ``y_sim0`` ``(v0, n_channels, n_freqs)`` dB
+    as ``noise.floor: auto`` does (:func:`suspid.method.floor.estimate_floor`); else the identity. Where sensor
+    noise masks the vehicle's response the measured spectra do not follow an element's change, and the model's
+    sensitivity there must not say they do."""
     f = getattr(problem.noise_model, "floor_", None)
-    return (lambda y: y) if f is None else f.effective
+    if f is not None:
+        return f.effective, "the noise model's (noise.floor)"
+    if estimate and y_sim0 is not None and problem.reference["y_mes0"].shape[0] >= 3:
+        octaves = problem.config.noise.floor_octaves
+        return (estimate_floor(problem.reference["y_mes0"], y_sim0, problem.freqs, octaves).effective,
+                "estimated on the reference date (localisation.sensor_floor)")
+    return (lambda y: y), "none"
 
 
 def _floor_gain(floor: Callable[[np.ndarray], np.ndarray], y: np.ndarray, h: float = 1e-3) -> np.ndarray:
@@ -261,11 +276,12 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, ledger=N
         if "parameters" in calibration:
             log("model at the calibrated point on the reference date's segments")
             y_sim0, _ = _task(simulator, problem.reference_segments, problem.config.spectra)(w0)
+    floor, floor_source = _floor(problem, y_sim0, options.sensor_floor)
+    calibration = {**calibration, "sensor_floor": floor_source}
     log(f"element Jacobian: {len(names)} elements of {', '.join(kinds)} on {len(segments)} segment(s)")
     jac = spectra_jacobian(simulator, w0, names, segments, problem.config.spectra, executor=executor)
     log("model at w0 on the measurement date's segments")
     y0, _ = _task(simulator, problem.segments, problem.config.spectra)(w0)
-    floor = _floor(problem)
     r_mes = problem.y_mes - floor(y0)
     r_ref = problem.reference["y_mes0"] - floor(y_sim0)
     delta, var = change_statistics(r_mes, r_ref, options.floor_db)
@@ -298,7 +314,7 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, ledger=N
         hyps.append(Hypothesis(g.name, g.kind, sorted(idx), float(nominal[min(idx)]),
                                f"together: {', '.join(parts)}" if len(parts) > 1 else ""))
     return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0,
-                           [r_mes, r_ref], len(found), w0=w0, calibration=calibration)
+                           [r_mes, r_ref], len(found), w0=w0, calibration=calibration, floor=floor)
 
 
 # -------------------------------------------------------------------------------------------- observability
@@ -446,7 +462,7 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
     h = fit.hypothesis
     members = [analysis.groups[i] for i in h.members]
     w0 = analysis.w0
-    floor = _floor(problem)
+    floor = analysis.floor or (lambda y: y)
     base = floor(analysis.y0).mean(axis=0)
     simulate = _task(problem.simulator, problem.segments, problem.config.spectra)
     theta = fit.theta
