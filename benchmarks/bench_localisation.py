@@ -184,6 +184,18 @@ def score(generator: str, case: str, out: dict, width: float | None, verdicts: l
             "verdict": mine, "expected_verdict": want, "verdict_ok": row["group"] == group and mine == want}
 
 
+SEVERITY = {"ok": 0, "warning": 1, "alarm": 2}
+
+
+def milder(row: dict) -> bool:
+    """A degraded case whose verdict is a milder state than its truth's (the unsafe error: no action, or an
+    inspection where a replacement is due); "not assessable" is not milder, it asks for no trust."""
+    want, got = row["expected_verdict"], row["verdict"]
+    if want not in SEVERITY:
+        return False
+    return got == "-" or (got in SEVERITY and SEVERITY[got] < SEVERITY[want])
+
+
 def kind_of(name: str) -> str:
     return name.split("[", 1)[0]
 
@@ -252,7 +264,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"nulls with nothing named: {100 * silent:.0f} % of {len(nulls)}")
     print(f"verdict right: {sum(r['verdict_ok'] for r in rows)} of {len(rows)} (degraded "
           f"{sum(r['verdict_ok'] for r in degraded_rows)} of {len(degraded_rows)}, nulls "
-          f"{sum(r['verdict_ok'] for r in nulls)} of {len(nulls)})")
+          f"{sum(r['verdict_ok'] for r in nulls)} of {len(nulls)}); milder than the truth's state (ok or "
+          f"warning for a worse one, nothing named for a degradation): "
+          f"{sum(milder(r) for r in degraded_rows)}; not assessable: "
+          f"{sum(r['verdict'] == 'not assessable' for r in degraded_rows)}")
     print(f"read as losses only (localisation.direction: decrease): right first "
           f"{100 * np.mean([r['right_decrease'] for r in degraded_rows]):.0f} %, nulls silent "
           f"{100 * np.mean([r['right_decrease'] for r in nulls]):.0f} %")
