@@ -159,6 +159,11 @@ def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
     assert vrow.name == "c_yaw[bogie1]" and vrow.label.endswith("(left/right not separable with these sensors)")
     assert out["linearised_at"]["status"] == "calibrated on the reference date"
     assert set(out["linearised_at"]["parameters"]) == set(problem.simulator.calibratable())
+    assert out["linearised_at"]["sensor_floor"].startswith("estimated on the reference date")
+    from suspid.workflows.elements import localisation_markdown
+
+    md = localisation_markdown(out)
+    assert "Model linearised at its model parameters calibrated on the reference date" in md and "conicity" in md
     # the value where the model is the vehicle: linearised at the model parameters' nominal values. Calibrated on
     # this experiment's reference date, whose fixed smooth gains (1.5 dB rms) the calibration partly takes for a
     # conicity and creep change, it reads 188 kN s/m (docs/elements.md)
