@@ -177,7 +177,7 @@ def score(generator: str, case: str, out: dict, width: float | None, verdicts: l
     mine = next((v.verdict for v in verdicts if v.name == row["group"]), "-")
     return {"right": row["group"] == group, "value_ok": bool(abs(error) <= 5.0), "error_percent": error,
             "covered": bool(lo <= truth <= hi), "named": row["group"], "value": row["value"],
-            "change_percent": 100.0 * (row["value"] / nominal - 1.0),
+            "change_percent": 100.0 * (row["value"] / row["nominal"] - 1.0),
             "right_decrease": right_decrease,
             "interval": (lo, hi), "evidence": row["evidence"], "alternatives": [a["group"] for a in row["alternatives"]],
             "together": row["separable"] or len(row["members"]) > 1,
