@@ -266,3 +266,23 @@ def test_identification_on_independent_data_recovers_w0(tmp_path):
     errs = protocol.errors(out.run_dir / "result.json", tmp_path / "measurement" / "truth.json")
     worst = max(abs(e["error_pct_interval"]) for e in errs.values())
     assert worst < 8.0, errs
+
+
+def test_element_values_override_their_kind_for_that_element_only():
+    """Per-element parameters (``c_yaw[bogie1,left]``): every element at its kind's value is the kind-level car;
+    one bogie's yaw dampers halved change the front bogie's lateral response more than the rear one's."""
+    v = 300 / 3.6
+    w = 2 * math.pi * np.array([2.0, 5.0, 8.0])
+    kind = TR.build_model({"c_yaw": 400e3}, v).sensor_response(w)
+    same = TR.build_model({f"c_yaw[bogie{b},{s}]": 400e3 for b in (1, 2) for s in ("left", "right")}, v)
+    assert np.array_equal(kind, same.sensor_response(w))
+    front = TR.build_model({"c_yaw[bogie1,left]": 400e3, "c_yaw[bogie1,right]": 400e3}, v)
+    assert [e.c for e in front.elements if e.name == "yaw_damper"] == [400e3, 400e3, 800e3, 800e3]
+    base = TR.build_model({}, v).sensor_response(w)
+    change = np.abs(front.sensor_response(w) - base).sum(axis=(0, 2, 3))          # per channel
+    i_front, i_rear = TR.CHANNELS.index("bogie_front_lateral"), TR.CHANNELS.index("bogie_rear_lateral")
+    assert change[i_front] > 2 * change[i_rear]
+    p = TR.parameters({"c_prim_z": 5e3, "c_prim_z[ws3,left]": 2e3})
+    assert TR.element(p, "c_prim_z", "ws3", "left") == 2e3 and TR.element(p, "c_prim_z", "ws4", "left") == 5e3
+    with pytest.raises(KeyError, match="c_yaw\\[bogie3"):
+        TR.parameters({"c_yaw[bogie3,left]": 1.0})

@@ -24,6 +24,14 @@ own gains) is fitted with every hypothesis and with the null when
 ``channel_gains`` is on (:func:`without_channel_gains`: Δ and J less their
 weighted mean over each channel's frequencies).
 
+The Jacobian is taken where the model reproduces the reference date: with
+its uncertain model parameters (creep scale, conicity, series stiffnesses)
+calibrated there (``calibrate``, by the caller). At their nominal values a
+model whose resonances sit elsewhere than the vehicle's gives a sensitivity
+of the wrong shape, and the least-squares change, a projection on it, comes
+out smaller than the true one (and another element's sensitivity may fit the
+change better).
+
 **Localisation.** Each cluster c is a hypothesis "the elements of c deviate
 together by θ": fitted by weighted least squares to the observed change Δ,
 θ_c = (u_cᵀ Jᵀ W Δ) / (u_cᵀ F u_c), χ²_c = Σ W (Δ - J u_c θ_c)², then refined by
@@ -79,6 +87,13 @@ class LocalisationOptions(Section):
         "damper or a deflated air spring gives; 'any': a rise too")
     channel_gains: bool = Field(default=True, description="fit a flat gain per channel with every hypothesis (and "
                                 "the null): a calibration drift or segment gains are not taken for a change")
+    sensor_floor: bool = Field(default=True, description="when the noise model has no sensor floor (noise.floor: "
+                               "none), estimate one on the reference date as noise.floor: auto does: where sensor "
+                               "noise masks the response the measured spectra do not follow an element's change")
+    calibrate: bool = Field(default=True, description="linearise the model at its model parameters estimated on "
+                            "the reference date (identifiability.model_error.calibration's parameters and steps: by "
+                            "default the simulator's calibratable ones), where its resonances match the vehicle's: "
+                            "false linearises at their nominal values")
 
 
 def change_statistics(residual_mes: np.ndarray, residual_ref: np.ndarray, floor_db: float = 0.05

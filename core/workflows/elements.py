@@ -33,11 +33,13 @@ from suspid.elements import declared_groups, finest_groups, kind_of, split_name
 from suspid.errors import ConfigError
 from suspid.infra.files import write_json
 from suspid.infra.lock import open_run_dir
+from suspid.method.floor import estimate_floor
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
                                         evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
                                         sandwich_sd, separability, without_channel_gains)
 from suspid.workflows.jacobian import spectra_jacobian
+from suspid.workflows.linearised import calibrate, date_jacobian, model_parameters
 from suspid.workflows.problem import Problem, _task, build_problem
 
 __all__ = ["ObservabilityResult", "ElementAnalysis", "observability", "element_analysis", "localise_problem",
@@ -80,6 +82,14 @@ class ElementAnalysis:
     nuisance: np.ndarray | None = None
     """``(n_channels, n_freqs, k)`` columns fitted with every hypothesis (kind-level changes of other kinds that
     moved), already removed from ``delta``, ``J`` and ``residuals`` (:func:`with_nuisance`)."""
+    w0: dict[str, float] = field(default_factory=dict)
+    """SI values the model is linearised at: the identified kinds' nominal values and, when
+    ``localisation.calibrate`` is on, the model parameters calibrated on the reference date."""
+    calibration: dict[str, Any] = field(default_factory=dict)
+    """``{"status": ..., "parameters": {name: {"nominal", "estimate", "sd"}}, "sensor_floor": ...}``: the
+    linearisation point's model parameters (:func:`calibrated_point`) and the sensor floor's source."""
+    floor: Callable[[np.ndarray], np.ndarray] | None = None
+    """y_sim -> the spectra the sensors would give (:func:`_floor`); None: the identity."""
 
     def project(self, x: np.ndarray) -> np.ndarray:
         """``x (n_channels, n_freqs)`` less its weighted least-squares fit by the nuisance columns."""
@@ -133,11 +143,23 @@ def _pair_means(a: np.ndarray) -> np.ndarray:
     return 0.5 * (a[0::2] + a[1::2])
 
 
-def _floor(problem: Problem) -> Callable[[np.ndarray], np.ndarray]:
-    """y_sim -> the spectra the sensors would give (the noise model's sensor floor added,
-    :meth:`suspid.method.floor.NoiseFloor.effective`; identity without a floor)."""
+def _floor(problem: Problem, y_sim0: np.ndarray | None = None, estimate: bool = False
+           ) -> tuple[Callable[[np.ndarray], np.ndarray], str]:
+    """y_sim -> the spectra the sensors would give, and where the floor comes from.
+
+    The noise model's sensor floor (:meth:`suspid.method.floor.NoiseFloor.effective`) when it has one; else,
+    with ``estimate``, one estimated on the reference date against ``y_sim0`` ``(v0, n_channels, n_freqs)`` dB
+    as ``noise.floor: auto`` does (:func:`suspid.method.floor.estimate_floor`); else the identity. Where sensor
+    noise masks the vehicle's response the measured spectra do not follow an element's change, and the model's
+    sensitivity there must not say they do."""
     f = getattr(problem.noise_model, "floor_", None)
-    return (lambda y: y) if f is None else f.effective
+    if f is not None:
+        return f.effective, "the noise model's (noise.floor)"
+    if estimate and y_sim0 is not None and problem.reference["y_mes0"].shape[0] >= 3:
+        octaves = problem.config.noise.floor_octaves
+        return (estimate_floor(problem.reference["y_mes0"], y_sim0, problem.freqs, octaves).effective,
+                "estimated on the reference date (localisation.sensor_floor)")
+    return (lambda y: y), "none"
 
 
 def _floor_gain(floor: Callable[[np.ndarray], np.ndarray], y: np.ndarray, h: float = 1e-3) -> np.ndarray:
@@ -186,9 +208,55 @@ def _note(names: list[str]) -> str:
     return f"{len(names)} elements not separable with these sensors ({', '.join(names)}): only their sum is seen"
 
 
-def element_analysis(problem: Problem, options: LocalisationOptions, *, executor=None,
+class _NoCache:
+    """A ledger stand-in that stores nothing (:func:`calibrated_point` called without a run's ledger)."""
+
+    def get_array(self, key: str) -> None:
+        return None
+
+    def put_array(self, key: str, array: np.ndarray) -> None:
+        pass
+
+
+def calibrated_point(problem: Problem, w0: dict[str, float], *, ledger=None, executor=None,
+                     log: Log = lambda s: None) -> tuple[dict[str, float], dict[str, Any]]:
+    """``w0`` with the model parameters estimated on the reference date, and what was done.
+
+    A change of an element is read through the model's sensitivity to it: where the model's resonances sit
+    at other frequencies or with other damping than the vehicle's, the sensitivity has the wrong shape, the
+    least-squares change (a projection on it) comes out smaller than the true one, and another element whose
+    sensitivity happens to overlap the change better may fit better. On the reference date the elements are at
+    their nominal values, so the model parameters that are assumptions (the simulator's
+    :meth:`~suspid.interfaces.Simulator.calibratable` ones, or ``identifiability.model_error.calibration
+    .parameters``, over their assumed ranges) can be estimated there, as the model-error checks do
+    (:func:`suspid.workflows.linearised.calibrate`: Gauss-Newton with a flat gain per channel profiled out).
+    The linearisation point is its point estimate, pinned down or not: the model nearest the reference date.
+    A smooth gain error the same on both dates (sensor transfer functions, unmodelled flexibility) is partly
+    taken for a model parameter there: ``localisation.calibrate: false`` then linearises at the nominal values.
+    ``ledger`` caches the Jacobians (none: nothing is cached).
+    """
+    theta = model_parameters(problem, problem.config.identifiability.model_error)
+    if not theta.names:
+        return w0, {"status": "not calibrated: the simulator declares no calibratable model parameter"}
+    ledger = ledger if ledger is not None else _NoCache()
+    log(f"localisation: model parameters {', '.join(theta.names)} calibrated on the reference date")
+    jac0 = date_jacobian(problem, ledger, problem.reference_segments, {**dict(problem.w0), **w0}, [], theta,
+                         executor)
+    cal = calibrate(problem, ledger, theta, jac0, [], problem.config.identifiability.model_error, executor)
+    estimate = theta.w(np.array(cal["t_hat"]))
+    return {**w0, **estimate}, {"status": "calibrated on the reference date",
+                                "parameters": {n: {"nominal": float(v), "estimate": estimate[n],
+                                                   "sd": float(cal["parameters"][n]["standard_deviation"])}
+                                               for n, v in zip(theta.names, theta.nominal)}}
+
+
+def element_analysis(problem: Problem, options: LocalisationOptions, *, ledger=None, executor=None,
                      log: Log = lambda s: None) -> ElementAnalysis:
-    """Jacobian over the finest groups, observed change and its variance, Fisher information, clusters."""
+    """Jacobian over the finest groups, observed change and its variance, Fisher information, clusters.
+
+    The model is linearised at the identified kinds' nominal values, with the model parameters calibrated on
+    the reference date when ``options.calibrate`` (:func:`calibrated_point`; ``ledger`` caches its
+    Jacobians)."""
     config, simulator = problem.config, problem.simulator
     kinds = _kinds(config, simulator, problem, options)
     finest = finest_groups(simulator.elements(), kinds)
@@ -201,13 +269,21 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
     nominal_all = {p.name: p.nominal for p in simulator.parameters()}
     w0 = {n: float(v) for n, v in problem.w0.items() if "[" not in n} if problem.w0 else {}
     nominal = np.array([w0.get(k, nominal_all[k]) for k in gkinds])
+    calibration: dict[str, Any] = {"status": "off (localisation.calibrate: false)"}
+    y_sim0 = problem.reference["y_sim0"]
+    if options.calibrate:
+        w0, calibration = calibrated_point(problem, w0, ledger=ledger, executor=executor, log=log)
+        if "parameters" in calibration:
+            log("model at the calibrated point on the reference date's segments")
+            y_sim0, _ = _task(simulator, problem.reference_segments, problem.config.spectra)(w0)
+    floor, floor_source = _floor(problem, y_sim0, options.sensor_floor)
+    calibration = {**calibration, "sensor_floor": floor_source}
     log(f"element Jacobian: {len(names)} elements of {', '.join(kinds)} on {len(segments)} segment(s)")
     jac = spectra_jacobian(simulator, w0, names, segments, problem.config.spectra, executor=executor)
     log("model at w0 on the measurement date's segments")
     y0, _ = _task(simulator, problem.segments, problem.config.spectra)(w0)
-    floor = _floor(problem)
     r_mes = problem.y_mes - floor(y0)
-    r_ref = problem.reference["y_mes0"] - floor(problem.reference["y_sim0"])
+    r_ref = problem.reference["y_mes0"] - floor(y_sim0)
     delta, var = change_statistics(r_mes, r_ref, options.floor_db)
     dy = _pair_means(jac.jacobian * _floor_gain(floor, jac.y)[..., None]) * nominal   # dB per unit ln(value)
     if options.channel_gains:
@@ -238,7 +314,7 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, executor
         hyps.append(Hypothesis(g.name, g.kind, sorted(idx), float(nominal[min(idx)]),
                                f"together: {', '.join(parts)}" if len(parts) > 1 else ""))
     return ElementAnalysis(names, gkinds, nominal, J, delta, var, F, S, hyps, options, segments, y0,
-                           [r_mes, r_ref], len(found))
+                           [r_mes, r_ref], len(found), w0=w0, calibration=calibration, floor=floor)
 
 
 # -------------------------------------------------------------------------------------------- observability
@@ -303,8 +379,7 @@ def observability_of(analysis: ElementAnalysis, simulator, problem: Problem, *, 
     if candidates and inseparable:
         log(f"sensor advice: Jacobian of {len(candidates)} candidate channel(s)")
         extended = simulator.with_channels(candidates)
-        w0 = {n: float(v) for n, v in (problem.w0 or {}).items() if "[" not in n}
-        jac = spectra_jacobian(extended, w0, analysis.groups, analysis.segments, problem.config.spectra,
+        jac = spectra_jacobian(extended, analysis.w0, analysis.groups, analysis.segments, problem.config.spectra,
                                executor=executor)
         n_own = analysis.J.shape[0]
         Jc = _pair_means(jac.jacobian)[:, n_own:] * analysis.nominal     # (v/2, n_candidates, n_freqs, n_g)
@@ -351,7 +426,7 @@ def observability(config: Config, *, log: Log = lambda s: None, executor=None) -
     run_dir = config.run_dir()
     with open_run_dir(run_dir, config_name=config.name, config_file=config.source_file, log=log) as ledger:
         problem = build_problem(config, ledger, log, executor)
-        analysis = element_analysis(problem, config.localisation, executor=executor, log=log)
+        analysis = element_analysis(problem, config.localisation, ledger=ledger, executor=executor, log=log)
         result = observability_of(analysis, problem.simulator, problem, executor=executor, log=log)
         result.path = write_json(run_dir / "observability.json", result.to_dict())
     return result
@@ -386,8 +461,8 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
     hypothesis' elements at nominal × e^θ, against the observed change."""
     h = fit.hypothesis
     members = [analysis.groups[i] for i in h.members]
-    w0 = {n: float(v) for n, v in (problem.w0 or {}).items() if "[" not in n}
-    floor = _floor(problem)
+    w0 = analysis.w0
+    floor = analysis.floor or (lambda y: y)
     base = floor(analysis.y0).mean(axis=0)
     simulate = _task(problem.simulator, problem.segments, problem.config.spectra)
     theta = fit.theta
@@ -422,7 +497,8 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
 
 
 def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis: ElementAnalysis | None = None,
-                     moved: Sequence[str] | None = None, executor=None, log: Log = lambda s: None) -> dict[str, Any]:
+                     moved: Sequence[str] | None = None, ledger=None, executor=None,
+                     log: Log = lambda s: None) -> dict[str, Any]:
     """The localisation entry of a result: ``{"named": bool, "rows": [...], "hypotheses": [...]}``.
 
     ``rows``: the named group (none when the best evidence is below ``min_evidence``) as
@@ -430,7 +506,7 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
     ``interval`` in SI units (2 sd), ``alternatives`` the hypotheses within ``near`` of its evidence
     (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
     """
-    analysis = analysis or element_analysis(problem, options, executor=executor, log=log)
+    analysis = analysis or element_analysis(problem, options, ledger=ledger, executor=executor, log=log)
     moved = [k for k in (moved or []) if k in analysis.kinds]
     rows: list[dict[str, Any]] = []
     every: list[HypothesisFit] = []
@@ -444,7 +520,7 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
         every += found[1]
     every.sort(key=lambda f: -f.evidence)
     return {"named": bool(rows), "rows": rows, "hypotheses": [_row(f, analysis) for f in every],
-            "moved": moved, "options": options.model_dump()}
+            "moved": moved, "options": options.model_dump(), "linearised_at": analysis.calibration}
 
 
 def _row(f: HypothesisFit, analysis: ElementAnalysis) -> dict[str, Any]:
@@ -508,6 +584,10 @@ def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = 
         if r["alternatives"]:
             lines.append("  Fit nearly as well: " + ", ".join(
                 f"{a['group']} ({a['value']:.4g} {u}, evidence {a['evidence']:.1f})" for a in r["alternatives"]))
+    cal = entry.get("linearised_at") or {}
+    if cal.get("parameters"):
+        lines += ["", "Model linearised at its model parameters calibrated on the reference date: " + ", ".join(
+            f"{n} {p['estimate']:.4g} (nominal {p['nominal']:.4g})" for n, p in cal["parameters"].items()) + "."]
     lines += ["", "Intervals: 2 standard deviations of the segments' statistics; they do not include model-form "
               "error (how differently model and vehicle respond to an element's change): read the value as about, the "
               "group as the finding (docs/elements.md)."]

@@ -96,7 +96,9 @@ on the traction rods with bogie pitch 9.7 Hz; wheelset longitudinal/spin
 
 Parameters: suspid's names (:data:`SHARED`) with suspid's meaning, per-element
 convention and nominal values (so w0 is comparable), plus this model's own
-(:data:`OWN`). Unknown names raise ``KeyError``.
+(:data:`OWN`). Every suspension element is also its own parameter
+(:data:`ELEMENTS`: ``c_yaw[bogie1,left]``, ``c_prim_z[ws3,right]``, ...), which
+overrides its kind's value. Unknown names raise ``KeyError``.
 
 Files (:func:`generate_date`): ``out_dir/track/<segment>.csv``,
 ``out_dir/accelerations/<segment>.csv`` in suspid's layout and
@@ -184,14 +186,40 @@ X, Y, Z, ROLL, PITCH, YAW = range(6)
 SPIN = 4                      # wheelset slot 4 is the spin perturbation, not a pitch
 
 
+PER_SIDE = ("k_sec_x", "k_sec_y", "c_sec_y", "k_sec_z", "c_sec_z", "c_yaw")
+"""Kinds with one element per side of each bogie, named ``kind[bogieN,side]`` (bogie1 the front one; left is
++y)."""
+PER_AXLEBOX = ("k_prim_x", "k_prim_y", "k_prim_z", "c_prim_z")
+"""Kinds with one element per axlebox, named ``kind[wsN,side]`` (ws1 the leading wheelset; ws1, ws2 in bogie1)."""
+ELEMENTS: dict[str, tuple[str, ...]] = {
+    **{k: tuple(f"{k}[bogie{b},{s}]" for b in (1, 2) for s in ("left", "right")) for k in PER_SIDE},
+    **{k: tuple(f"{k}[ws{j},{s}]" for j in (1, 2, 3, 4) for s in ("left", "right")) for k in PER_AXLEBOX}}
+"""Kind -> its elements' names. A kind name in ``w`` sets every element of the kind; an element name that
+element only (applied after the kinds)."""
+
+
 def parameters(w: Mapping[str, float] | None = None) -> dict[str, float]:
-    """Nominal values of every parameter, updated with ``w`` (unknown names raise KeyError)."""
+    """Nominal values of every parameter, updated with ``w`` (unknown names raise KeyError).
+
+    Element names (:data:`ELEMENTS`) are kept as their own keys; :func:`element` reads them."""
     p = dict(SHARED) | dict(OWN)
+    known = {e for names in ELEMENTS.values() for e in names}
     for k, v in (w or {}).items():
-        if k not in p:
-            raise KeyError(f"unknown parameter '{k}'; known: {', '.join(sorted(p))}")
-        p[k] = float(v)
+        if k not in p and k not in known:
+            raise KeyError(f"unknown parameter '{k}'; known: {', '.join(sorted(p))}, and elements as "
+                           f"'c_yaw[bogie1,left]', 'c_prim_z[ws3,right]'")
+    for k, v in (w or {}).items():
+        if "[" not in k:
+            p[k] = float(v)
+    for k, v in (w or {}).items():
+        if "[" in k:
+            p[k] = float(v)
     return p
+
+
+def element(p: Mapping[str, float], kind: str, *tags: str) -> float:
+    """The value of the element of ``kind`` at ``tags`` (e.g. ``"bogie1", "left"``): its own, else the kind's."""
+    return float(p.get(f"{kind}[{','.join(tags)}]", p[kind]))
 
 
 def static_loads(p: Mapping[str, float]) -> dict[str, float]:
@@ -424,18 +452,19 @@ def build_model(w: Mapping[str, float] | None, speed: float, flexible: bool = Tr
     for ib, xb in enumerate((p["a_bogie"], -p["a_bogie"])):
         bog = f"bogie{ib}"
         for side in (1.0, -1.0):
+            e = lambda kind: element(p, kind, f"bogie{ib + 1}", "left" if side > 0 else "right")  # noqa: E731,B023
             rc = (xb, side * p["b_sec"], p["h_sec"] - hc)
             rbg = (0.0, side * p["b_sec"], p["h_sec"] - hb)
-            link("sec_x", "car", rc, bog, rbg, 0, "kelvin", p["k_sec_x"], 0.0)
-            link("sec_y", "car", rc, bog, rbg, 1, "kelvin", p["k_sec_y"], 0.0)
-            link("sec_y_damper", "car", rc, bog, rbg, 1, "maxwell", p["k_bush_sec_y"], p["c_sec_y"])
-            link("sec_z", "car", rc, bog, rbg, 2, "kelvin", p["k_sec_z"], 0.0)
-            link("sec_z_damper", "car", rc, bog, rbg, 2, "maxwell", p["k_bush_sec_z"], p["c_sec_z"])
+            link("sec_x", "car", rc, bog, rbg, 0, "kelvin", e("k_sec_x"), 0.0)
+            link("sec_y", "car", rc, bog, rbg, 1, "kelvin", e("k_sec_y"), 0.0)
+            link("sec_y_damper", "car", rc, bog, rbg, 1, "maxwell", p["k_bush_sec_y"], e("c_sec_y"))
+            link("sec_z", "car", rc, bog, rbg, 2, "kelvin", e("k_sec_z"), 0.0)
+            link("sec_z_damper", "car", rc, bog, rbg, 2, "maxwell", p["k_bush_sec_z"], e("c_sec_z"))
             _add_preload(K, CAR, loads["secondary"], rc)
             _add_preload(K, BOGIE[ib], -loads["secondary"], rbg)
             ry = (xb, side * p["b_yaw"], p["h_yaw"] - hc)
             ryb = (0.0, side * p["b_yaw"], p["h_yaw"] - hb)
-            link("yaw_damper", "car", ry, bog, ryb, 0, "maxwell", p["k_yaw_series"], p["c_yaw"])
+            link("yaw_damper", "car", ry, bog, ryb, 0, "maxwell", p["k_yaw_series"], e("c_yaw"))
         link("traction_rod", "car", (xb, 0.0, p["h_traction"] - hc), bog, (0.0, 0.0, p["h_traction"] - hb),
              0, "kelvin", p["k_traction"], p["c_traction"])
         row = np.zeros(N_DOF)
@@ -449,7 +478,8 @@ def build_model(w: Mapping[str, float] | None, speed: float, flexible: bool = Tr
         for side in (1.0, -1.0):
             rbg = (xrel, side * p["b_prim"], p["r0"] - hb)
             rw = (0.0, side * p["b_prim"], 0.0)
-            for d, k, c in ((0, p["k_prim_x"], 0.0), (1, p["k_prim_y"], 0.0), (2, p["k_prim_z"], p["c_prim_z"])):
+            e = lambda kind: element(p, kind, f"ws{j + 1}", "left" if side > 0 else "right")  # noqa: E731,B023
+            for d, k, c in ((0, e("k_prim_x"), 0.0), (1, e("k_prim_y"), 0.0), (2, e("k_prim_z"), e("c_prim_z"))):
                 link(f"prim_{'xyz'[d]}", f"bogie{ib}", rbg, f"ws{j}", rw, d, "kelvin", k, c)
             _add_preload(K, BOGIE[ib], loads["axlebox"], rbg)
     # --- wheel-rail contact
