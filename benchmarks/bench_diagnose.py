@@ -191,7 +191,7 @@ def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", 
                       f"{errs} | {first} | {gains} | {time.perf_counter() - t0:.0f} |", flush=True)
 
 
-SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg", "applied"}
+SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg", "applied", "weights"}
 """Effect parameters the table leaves out (fixed in the fits, or repeated)."""
 
 
