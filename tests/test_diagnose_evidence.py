@@ -147,6 +147,34 @@ def test_untilted_lateral_channels_as_controls_remove_the_shared_lateral_motion(
     assert 0.4 < np.std(est, ddof=1) / np.mean(se) < 2.5, (est, se)
 
 
+def test_pooled_tilt_counts_channels_that_err_together_about_once():
+    """Known answers of the random-effects mean: channels that agree within their errors give their GLS mean
+    (τ = 0); a twin pair whose errors are 0.98 correlated counts about once beside an independent channel;
+    channels scattered far beyond their errors are weighted about equally (τ about their spread), and no
+    weight is negative."""
+    from suspid.workflows.diagnose.coupling import pooled_tilt
+
+    def rows(betas, cov):
+        names = [f"c{i}" for i in range(len(betas))]
+        return [{"channel": n, "beta": b, "se": math.sqrt(cov[i][i]),
+                 "covariance": {m: cov[i][j] for j, m in enumerate(names)}}
+                for i, (n, b) in enumerate(zip(names, betas))]
+
+    sd = 0.002
+    same = pooled_tilt(rows([0.0698, 0.0698, 0.0698], np.diag([sd ** 2] * 3)))
+    assert same["tau"] == 0.0 and same["angle_deg"] == pytest.approx(4.0, abs=0.01)
+    assert same["se_deg"] == pytest.approx(math.degrees(sd / math.sqrt(3)), rel=0.01)
+    pair = np.array([[1, 0.98, 0], [0.98, 1, 0], [0, 0, 1]]) * sd ** 2
+    w = pooled_tilt(rows([0.070, 0.0701, 0.0699], pair))["weights"]
+    assert w["c2"] == pytest.approx(0.5, abs=0.02) and w["c0"] + w["c1"] == pytest.approx(0.5, abs=0.02)
+    uneven = np.array([[1, 0.98 * 2, 0], [0.98 * 2, 4, 0], [0, 0, 1]]) * sd ** 2     # the GLS would go negative
+    w = pooled_tilt(rows([0.070, 0.071, 0.070], uneven))["weights"]
+    assert min(w.values()) >= 0 and sum(w.values()) == pytest.approx(1.0)
+    spread = pooled_tilt(rows([0.060, 0.070, 0.080], np.diag([1e-4, 1e-3, 1e-3]) * sd ** 2))
+    assert spread["tau"] == pytest.approx(0.01, rel=0.3) and max(spread["weights"].values()) < 0.4
+    assert spread["angle_deg"] == pytest.approx(4.0, abs=0.05)
+
+
 def test_lateral_bracket_resonance_is_no_tilt_on_either_channel_of_the_pair():
     """A bracket resonance (14 Hz) on one carbody lateral sensor: neither that channel nor its untouched twin is
     taken for a tilted sensor."""
