@@ -211,7 +211,11 @@ def _independent_row(case: str, seed: int, path: Path, d: dict, seconds: float) 
     mark = {n: "" if ident.get(n, True) else " (n.i.)" for n in eb}    # not identifiable at the end
     errs = ", ".join(f"{n} {eb[n]:+.1f} → {ea[n]:+.1f}{mark[n]}" if n in ea else f"{n} {eb[n]:+.1f}{mark[n]}"
                      for n in eb)
-    first = d["unexplained"][0]["text"] if d["unexplained"] else "-"
+    first = "-"
+    if d["unexplained"]:
+        u = d["unexplained"][0]
+        first = (f"{u['channel']} {u['f_low_hz']:.3g}-{u['f_high_hz']:.3g} Hz {u['magnitude_db']:+.1f} dB"
+                 + (f" ({u['kind']})" if u.get("kind") else ""))
     gains = ", ".join(f"{g['channel']} {100 * (g['gain'] - 1):+.1f} %"
                       for g in d.get("channel_gains") or [] if g["significant"]) or "-"
     sus = d.get("suspension") or {}

@@ -1,6 +1,6 @@
 """The coupling test: vertical acceleration leaking into a lateral channel at the same point (a tilted sensor).
 
-Method: ``docs/diagnose.md``, "Sensor tilt from the coupling".
+Overview: ``docs/diagnose.md``, "How it works", step 4.
 
 A lateral accelerometer tilted by α reads x = cos α a_lat + sin α a_vert + n_x. The
 vertical channel at the same point reads v = a_vert + n_v, n_x and n_v the sensors'
