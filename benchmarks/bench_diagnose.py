@@ -16,14 +16,16 @@ errors in % of the admissible interval) instead.
 
     python benchmarks/bench_diagnose.py [--demo] [--seeds 3 4 5]
     python benchmarks/bench_diagnose.py --independent [--cases bending tilt ...] [--seeds 3 4 5] [--floor auto]
-        [--keep DIR]
+        [--keep DIR] [--from DIR]
 
 ``--floor`` sets ``noise.floor`` of the reference-date noise model of the independent experiments:
 ``none``, ``auto``, or ``spec=<density>`` (the sensors' noise density, (m/s²)²/Hz one-sided; the
 independent train's sensors have 1e-8). ``--at nominal`` diagnoses at the nominal parameters (the truth of
 the null cases) instead of the identified ones: the noise model's share of the flags, without the
 identification's error. ``--keep DIR`` writes the experiments (data, configs, runs) under DIR instead of a
-temporary folder, for a look at their ``diagnosis.json`` afterwards.
+temporary folder, for a look at their ``diagnosis.json`` afterwards; ``--from DIR`` prints the table of experiments
+already diagnosed under DIR (a ``--keep`` folder, or the ``--basetemp`` of the acceptance run
+``pytest -m acceptance tests/test_diagnose_independent.py --basetemp DIR``) without running anything.
 """
 
 from __future__ import annotations
@@ -97,9 +99,12 @@ def main() -> None:
     ap.add_argument("--floor", default="none", help="noise.floor of the independent experiments' noise model: "
                     "none, auto or spec=<density in (m/s²)²/Hz>")
     ap.add_argument("--keep", type=Path, default=None, help="keep the independent experiments under this folder")
+    ap.add_argument("--from", dest="source", type=Path, default=None,
+                    help="print the independent table from experiments already diagnosed in this folder (a --keep "
+                         "folder, or pytest's --basetemp of the acceptance run)")
     args = ap.parse_args()
     if args.independent:
-        return independent(args.seeds, args.cases, args.floor, args.at, args.keep)
+        return independent(args.seeds, args.cases, args.floor, args.at, args.keep, args.source)
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"# bench_diagnose  {datetime.date.today()}  python {platform.python_version()}  {platform.machine()}  "
           f"{os.cpu_count()} cpus  load average {load:.2f}")
@@ -141,57 +146,87 @@ def main() -> None:
 
 
 def independent(seeds: list[int], cases: list[str] | None, floor: str = "none", at: str = "identified",
-                keep: Path | None = None) -> None:
-    """The table of the experiments on the independent train (docs/diagnose.md, section 2)."""
+                keep: Path | None = None, source: Path | None = None) -> None:
+    """The table of the experiments on the independent train (docs/diagnose.md, "Measured accuracy").
+
+    :param source: a folder of experiments already diagnosed (``--keep`` of an earlier run, or the
+        ``--basetemp`` of ``pytest -m acceptance tests/test_diagnose_independent.py``): their rows are printed
+        from their ``diagnosis.json`` (the s column: the diagnosis's own wall time), nothing is run.
+    """
     import contextlib
 
     from independent import effects as HE
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"# bench_diagnose --independent --floor {floor} --at {at}  {datetime.date.today()}  {os.cpu_count()} cpus  load average {load:.2f}")
+    print(f"# bench_diagnose --independent --floor {floor} --at {at}  {datetime.date.today()}  {os.cpu_count()} cpus  "
+          f"load average {load:.2f}" + (f"  (rows read from {source})" if source is not None else ""))
     print("| case (seed) | named (steps) | effect parameters | flagged before → after each step | "
           "errors before → after (% of interval; n.i.: not identifiable under the data-group check) | "
-          "unexplained (first) | channel-level gains | s |")
-    print("|---|---|---|---|---|---|---|---|")
+          "unexplained (first) | channel-level gains | reported suspension (D joint fit / re-identified) | s |")
+    print("|---|---|---|---|---|---|---|---|---|")
     folder = contextlib.nullcontext(str(keep)) if keep is not None else tempfile.TemporaryDirectory()
     with folder as tmp:
         for seed in seeds:
             for case in cases or list(HE.CASES):
                 c = HE.CASES[case]
                 t0 = time.perf_counter()
-                path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds, w_ref=c.w_ref, noise_asd=c.noise_asd,
-                                  noise=_noise_options(floor), diagnose={"at": at})
-                d = suspid.diagnose(path).diagnosis
-                result_json = path.parent / "runs" / "config" / "before" / "result.json"
-                res = json.loads(result_json.read_text()) if result_json.is_file() else None   # none at nominal
-                truth = json.loads((path.parent / "measurement" / "truth.json").read_text())["parameters"]
-
-                def err(gap):
-                    if res is None:
-                        return {}
-                    return {n: 100 * (v - truth[n]) / (res["bounds"][n][1] - res["bounds"][n][0])
-                            for n, v in (gap or {}).get("w", {}).items()}
-
-                eb, ea = err(d["gap_before"]), err(d["gap_after"])
-                params = "; ".join(f"{e['name']}: " + ", ".join(_value(k, v) for k, v in e["parameters"].items()
-                                                               if k not in SKIP)
-                                   for e in d["effects"]) or "-"
-                seq = " → ".join([f"{100 * d['gap_before']['share_flagged']:.1f} %"]
-                                 + [f"{100 * q['share_flagged_after']:.1f} %" for q in d["sequence"]
-                                    if q["share_flagged_after"] is not None])
-                final = d["gap_after"] or d["gap_before"]
-                ident = (final.get("suspension_fit") or {}).get("identifiable") or {}
-                mark = {n: "" if ident.get(n, True) else " (n.i.)" for n in eb}    # not identifiable at the end
-                errs = ", ".join(f"{n} {eb[n]:+.1f} → {ea[n]:+.1f}{mark[n]}" if n in ea else f"{n} {eb[n]:+.1f}{mark[n]}"
-                                 for n in eb)
-                first = d["unexplained"][0]["text"] if d["unexplained"] else "-"
-                gains = ", ".join(f"{g['channel']} {100 * (g['gain'] - 1):+.1f} %"
-                                  for g in d.get("channel_gains") or [] if g["significant"]) or "-"
-                print(f"| {case} ({seed}) | {', '.join(d['named_effects']) or 'nothing'} | {params} | {seq} | "
-                      f"{errs} | {first} | {gains} | {time.perf_counter() - t0:.0f} |", flush=True)
+                if source is not None:
+                    found = sorted(Path(source).glob(f"**/{case}-{seed}/config.yaml"))
+                    if not found:
+                        print(f"| {case} ({seed}) | not in {source} | | | | | | | |", flush=True)
+                        continue
+                    path = found[0]
+                    d = json.loads((path.parent / "runs" / "config" / "diagnosis.json").read_text())
+                    seconds = d["wall_time_s"]
+                else:
+                    path = HE.prepare(Path(tmp) / f"{case}-{seed}", c.hidden, seed=seed, speeds_kmh=c.speeds,
+                                      w_ref=c.w_ref, noise_asd=c.noise_asd, noise=_noise_options(floor),
+                                      diagnose={"at": at})
+                    d = suspid.diagnose(path).diagnosis
+                    seconds = time.perf_counter() - t0
+                print(_independent_row(case, seed, path, d, seconds), flush=True)
 
 
-SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg", "applied"}
+def _independent_row(case: str, seed: int, path: Path, d: dict, seconds: float) -> str:
+    """One row of the independent table: ``d`` the diagnosis of the experiment whose config is ``path``."""
+    result_json = path.parent / "runs" / "config" / "before" / "result.json"
+    res = json.loads(result_json.read_text()) if result_json.is_file() else None   # none at nominal
+    truth = json.loads((path.parent / "measurement" / "truth.json").read_text())["parameters"]
+
+    def err(gap):
+        if res is None:
+            return {}
+        return {n: 100 * (v - truth[n]) / (res["bounds"][n][1] - res["bounds"][n][0])
+                for n, v in (gap or {}).get("w", {}).items()}
+
+    eb, ea = err(d["gap_before"]), err(d["gap_after"])
+    params = "; ".join(f"{e['name']}: " + ", ".join(_value(k, v) for k, v in e["parameters"].items()
+                                                   if k not in SKIP)
+                       for e in d["effects"]) or "-"
+    seq = " → ".join([f"{100 * d['gap_before']['share_flagged']:.1f} %"]
+                     + [f"{100 * q['share_flagged_after']:.1f} %" for q in d["sequence"]
+                        if q["share_flagged_after"] is not None])
+    final = d["gap_after"] or d["gap_before"]
+    ident = (final.get("suspension_fit") or {}).get("identifiable") or {}
+    mark = {n: "" if ident.get(n, True) else " (n.i.)" for n in eb}    # not identifiable at the end
+    errs = ", ".join(f"{n} {eb[n]:+.1f} → {ea[n]:+.1f}{mark[n]}" if n in ea else f"{n} {eb[n]:+.1f}{mark[n]}"
+                     for n in eb)
+    first = "-"
+    if d["unexplained"]:
+        u = d["unexplained"][0]
+        first = (f"{u['channel']} {u['f_low_hz']:.3g}-{u['f_high_hz']:.3g} Hz {u['magnitude_db']:+.1f} dB"
+                 + (f" ({u['kind']})" if u.get("kind") else ""))
+    gains = ", ".join(f"{g['channel']} {100 * (g['gain'] - 1):+.1f} %"
+                      for g in d.get("channel_gains") or [] if g["significant"]) or "-"
+    sus = d.get("suspension") or {}
+    reported = (f"{'joint fit' if sus['source'].startswith('joint') else 're-identification'} (D "
+                f"{sus['D_joint_fit']:.0f} / " + (f"{sus['D_reidentified']:.0f})" if sus.get("D_reidentified")
+                                                  is not None else "-)")) if sus else "-"
+    return (f"| {case} ({seed}) | {', '.join(d['named_effects']) or 'nothing'} | {params} | {seq} | {errs} | "
+            f"{first} | {gains} | {reported} | {seconds:.0f} |")
+
+
+SKIP = {"length_m", "wheel_diameter_m", "phase_rad", "modal_mass_kg", "gravity_roll", "angles_deg", "applied", "weights"}
 """Effect parameters the table leaves out (fixed in the fits, or repeated)."""
 
 

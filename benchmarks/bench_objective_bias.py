@@ -7,7 +7,7 @@ the truth, the maximiser of J for the likelihood (eq. 6), the overlap (eq. 7-8)
 and the mean-spectrum objective (the diagnosis's criterion D up to a constant
 factor per channel: squared mean-residual over the noise variance), in % of
 each admissible interval. Why ``suspid diagnose`` fits the base model's
-suspension under D (docs/diagnose.md, "The base model's suspension").
+suspension under D (docs/diagnose.md, "How it works", step 1).
 
     python benchmarks/bench_objective_bias.py [--seeds 3 4 5] [--segments 24]
 

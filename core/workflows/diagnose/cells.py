@@ -1,6 +1,6 @@
 """Cells of the discrepancy map: speed group × channel × band, and the averages over them.
 
-Method: ``docs/diagnose.md``, "Locate".
+Overview: ``docs/diagnose.md``, "How it works", step 2.
 """
 
 from __future__ import annotations

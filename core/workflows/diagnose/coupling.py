@@ -1,6 +1,6 @@
 """The coupling test: vertical acceleration leaking into a lateral channel at the same point (a tilted sensor).
 
-Method: ``docs/diagnose.md``, "Sensor tilt from the coupling".
+Overview: ``docs/diagnose.md``, "How it works", step 4.
 
 A lateral accelerometer tilted by α reads x = cos α a_lat + sin α a_vert + n_x. The
 vertical channel at the same point reads v = a_vert + n_v, n_x and n_v the sensors'
@@ -51,8 +51,26 @@ channels at ``alpha``), its bands agree, and, with a twin, either the pair's dif
 is significant and this channel's own coupling is the further from the model's, or
 the twin is tilted alike (a shared tilt: both differ from the model, their difference
 does not). Its estimate (``estimate``) is the pair's difference when its twin is not
-tilted (the difference removes what both ends share), else β - β_model. The angle is
-asin of it (the calibration gains of both channels enter as their ratio).
+tilted (the difference removes what both ends share); else the estimate with controls
+below, against the model's coupling; without untilted lateral channels, β - β_model. The
+angle is asin of it (the calibration gains of both channels enter as their ratio: the
+angle is in the units of the channels' calibrations).
+
+**Controls.** The estimate's error is the lateral motion's chance correlation with the
+instruments over a finite record (S_{a_lat z} / S_vz: zero in expectation, not in one
+measurement), and the lateral channels of one vehicle share most of their motion: the
+errors of a shared tilt's channels move together, and a test on the twin cannot remove
+them. The lateral channels the test finds untilted carry that motion without the tilt:
+per speed group and frequency the channel's part they predict, x̃ = x - Σ_j g_j c_j with
+g = S_cc⁻¹ S_cx (least squares over the group's records), is removed before the estimate.
+What remains is the tilt, the lateral motion the untilted channels do not see, and the
+sensor noise. The vehicle's own coupling the controls share goes with them; the model's
+coupling is corrected alike (β_model minus the controls' β_model through g). g is taken as
+known in the jackknife (its estimation error is of order the number of controls over the
+number of Welch windows, a bias toward zero of the same order).
+
+**One angle from several channels** (:func:`pooled_tilt`): a random-effects mean under
+the estimates' jackknife covariance.
 """
 
 from __future__ import annotations
@@ -87,11 +105,14 @@ class _Estimate:
     """β of one channel in bands, with every delete-one-record value (jackknife).
 
     :ivar num, den: ``(n_bands,)`` the estimator's sums; :ivar num_jk, den_jk: ``(n_records, n_bands)`` the
-        same sums without each record.
+        same sums without each record; :ivar rho: ``(n_controls,)`` how much of each control's coupling the
+        removal of its part takes from β (the model's coupling is corrected by it).
     """
 
-    def __init__(self, num: np.ndarray, den: np.ndarray, num_jk: np.ndarray, den_jk: np.ndarray) -> None:
+    def __init__(self, num: np.ndarray, den: np.ndarray, num_jk: np.ndarray, den_jk: np.ndarray,
+                 rho: np.ndarray | None = None) -> None:
         self.num, self.den, self.num_jk, self.den_jk = num, den, num_jk, den_jk
+        self.rho = np.zeros(0) if rho is None else rho
 
     @property
     def n(self) -> int:
@@ -141,17 +162,22 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
     :param n_bands: bands (equal in log frequency) of the constancy test.
     :returns: per lateral channel with a vertical partner and instruments: ``{channel, vertical, twin,
         instruments, beta, se, t, p, angle_deg, significant, n_segments, beta_raw, se_raw, beta_model,
-        beta_reference, t_own, beta_pair, se_pair, t_pair, bands, constancy_p, constant, note}``; ``beta`` is the
-        estimate of sin α (the coupling beyond the model's and the reference date's), ``beta_raw`` the
-        channel's own coupling.
+        beta_reference, t_own, beta_pair, se_pair, t_pair, bands, constancy_p, constant, estimate, controls,
+        covariance, note}``; ``beta`` is the estimate of sin α (the coupling beyond the model's and the reference
+        date's), ``beta_raw`` the channel's own coupling, ``covariance`` the jackknife covariance of ``beta``
+        with the other tilted channels' (:func:`pooled_tilt`).
     """
     names = list(channels)
     lateral = [c for c in names if vertical_partner(c, names) is not None and instruments(c, names)]
     model_coupling = dict(model_coupling or {})
-    est = {c: _estimate(records, names, c, f_band, segment_seconds, groups, n_bands) for c in lateral}
-    ref = ({c: _estimate(reference, names, c, f_band, segment_seconds, reference_groups, n_bands)
-            for c in lateral} if reference is not None else {})
+    spec = _spectra(records, segment_seconds, groups)
+    ref_spec = _spectra(reference, segment_seconds, reference_groups) if reference is not None else None
+    if spec is None:
+        return []
+    est = {c: _estimate(spec, names, c, f_band, n_bands) for c in lateral}
+    ref = ({c: _estimate(ref_spec, names, c, f_band, n_bands) for c in lateral} if ref_spec is not None else {})
     rows: dict[str, dict[str, Any]] = {}
+    jk: dict[str, np.ndarray] = {}          # the delete-one-record values of each row's beta
     for c in lateral:
         e = est[c]
         if e is None or e.n < 3:
@@ -162,6 +188,7 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
         if r is not None and r.n >= 3:
             b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
         beta, se = b_raw - b0, math.hypot(se_raw, se0)
+        jk[c] = e.beta_jk()
         n = e.n if r is None else min(e.n, r.n)
         t_own = beta / se if se > 0 else 0.0
         # constancy: the band estimates about their common value
@@ -181,7 +208,7 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
                    "beta_reference": None if r is None else r.beta(), "t_own": t_own,
                    "bands": [None if not math.isfinite(v) else float(v) for v in bands],
                    "constancy_p": constancy_p, "beta_pair": None, "se_pair": None, "t_pair": None,
-                   "p_pair": None, "note": None}
+                   "p_pair": None, "controls": [], "covariance": {}, "note": None}
     for c, row in rows.items():
         t_name = twin(c, list(rows))
         if t_name is None or est[t_name].n != est[c].n:
@@ -195,6 +222,7 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
         t_pair = d / se_d if se_d > 0 else 0.0
         row.update(twin=t_name, beta_pair=d, se_pair=se_d, t_pair=t_pair,
                    p_pair=float(2 * student_t.sf(abs(t_pair), max(row["n_segments"] - 1, 1))))
+        row["_pair_jk"] = d_jk
     tests = max(1, len(rows))
     level = alpha / tests
     for c, row in rows.items():
@@ -217,65 +245,181 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
         row["significant"] = bool(own_sig and why is None)
         row["note"] = why
         row["estimate"] = "against the model's coupling"
+    untilted = [c for c, row in rows.items() if not row["significant"]]
     for c, row in rows.items():
-        # a tilted channel whose twin is not tilted: the pair's difference is the better estimate (it removes the
-        # vehicle's own coupling and the estimation error both ends share: the same track under both)
-        if row["significant"] and row["twin"] is not None and not rows[row["twin"]]["significant"]:
+        pair_jk = row.pop("_pair_jk", None)
+        if not row["significant"]:
+            pass
+        elif row["twin"] is not None and not rows[row["twin"]]["significant"]:
+            # a tilted channel whose twin is not tilted: the pair's difference is the better estimate (it removes
+            # the vehicle's own coupling and the estimation error both ends share: the same track under both)
             row.update(beta=row["beta_pair"], se=row["se_pair"], t=row["t_pair"],
                        estimate=f"against its twin {row['twin']}")
+            jk[c] = pair_jk
+        elif untilted:
+            # the lateral motion the untilted lateral channels also see, removed before the estimate (module
+            # docstring, "Controls"): most of the estimate's error, and what the vehicle's own coupling they share
+            e = _estimate(spec, names, c, f_band, n_bands, controls=untilted)
+            r = (_estimate(ref_spec, names, c, f_band, n_bands, controls=untilted)
+                 if ref_spec is not None else None)
+            if e is not None and e.n == rows[c]["n_segments"]:
+                b0 = row["beta_model"] - sum(e.rho[j] * rows[u]["beta_model"] for j, u in enumerate(untilted))
+                se0 = 0.0
+                if r is not None and r.n >= 3:
+                    b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
+                beta, se = e.beta() - b0, math.hypot(_jackknife_se(e.beta_jk()), se0)
+                row.update(beta=beta, se=se, t=beta / se if se > 0 else 0.0, controls=list(untilted),
+                           estimate="against the model's coupling, the lateral motion of "
+                                    f"{', '.join(untilted)} removed")
+                jk[c] = e.beta_jk()
         row["angle_deg"] = math.degrees(math.asin(max(-1.0, min(1.0, row["beta"]))))
+    tilted = [c for c, row in rows.items() if row["significant"]]
+    for c in tilted:
+        for o in tilted:
+            if jk[c].shape == jk[o].shape:
+                rows[c]["covariance"][o] = float(_jackknife_cov(np.column_stack([jk[c], jk[o]]))[0, 1])
     return [rows[c] for c in lateral if c in rows]
 
 
-def _estimate(records: Sequence, names: list[str], channel: str, f_band: tuple[float, float],
-              segment_seconds: float, groups: Sequence | None, n_bands: int) -> _Estimate | None:
-    """The instrumental-variable sums of ``channel`` (module docstring), in ``n_bands`` bands, with their
-    delete-one-record values. None when fewer than 3 records or 3 bins are usable."""
-    k, kv = names.index(channel), names.index(vertical_partner(channel, names))
-    kz = [names.index(z) for z in instruments(channel, names)]
+def pooled_tilt(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """One angle from several tilted channels' estimates (their magnitudes |β|), with its standard error.
+
+    A random-effects mean: the channels measure one angle, each with its estimation error (the jackknife
+    covariance C of :func:`coupling_test`'s ``covariance``: channels whose errors move together, such as twins
+    on the same track, count about once) and a channel's own deviation of variance τ² that the covariance
+    does not hold (the ratio of its lateral and vertical calibration gains, its mounting), τ² estimated from
+    the scatter of the channels beyond C (the DerSimonian-Laird moment estimator, with C in place of the
+    diagonal). The weights (C + τ² I)⁻¹ 1 are kept non-negative (a channel with a negative weight is left out
+    and the rest solved again: a negative weight extrapolates from a difference of the channels). Without a
+    usable covariance, C = diag(se²).
+
+    :returns: ``{angle_deg, se_deg, tau, weights}``: the angle and its standard error in degrees, τ (in sin α)
+        and the weight of each channel.
+    """
+    chans = [r["channel"] for r in rows]
+    b = np.array([abs(r["beta"]) for r in rows])
+    sign = np.array([1.0 if r["beta"] >= 0 else -1.0 for r in rows])
+    try:
+        C = np.array([[r["covariance"][o] for o in chans] for r in rows]) * np.outer(sign, sign)
+        np.linalg.cholesky(C)
+    except (KeyError, TypeError, np.linalg.LinAlgError):
+        C = np.diag([r["se"] ** 2 for r in rows])
+    n = len(chans)
+    tau2 = 0.0
+    if n >= 2:
+        Ci = np.linalg.inv(C)
+        one = np.ones(n)
+        s1 = one @ Ci @ one
+        mu = one @ Ci @ b / s1
+        q = float((b - mu) @ Ci @ (b - mu))
+        denom = float(np.trace(Ci) - one @ Ci @ Ci @ one / s1)
+        tau2 = max(0.0, (q - (n - 1)) / denom) if denom > 0 else 0.0
+    keep = list(range(n))
+    while True:
+        V = C[np.ix_(keep, keep)] + tau2 * np.eye(len(keep))
+        w = np.linalg.solve(V, np.ones(len(keep)))
+        if np.all(w >= 0) or len(keep) == 1:
+            break
+        keep.pop(int(np.argmin(w)))
+    se = math.sqrt(1.0 / w.sum())
+    w = w / w.sum()
+    weights = {c: 0.0 for c in chans} | {chans[i]: float(x) for i, x in zip(keep, w)}
+    beta = float(w @ b[keep])
+    angle = math.degrees(math.asin(min(1.0, beta)))
+    return {"angle_deg": angle, "se_deg": math.degrees(se / math.sqrt(max(1e-12, 1.0 - min(beta, 0.999) ** 2))),
+            "tau": math.sqrt(tau2), "weights": weights}
+
+
+class _Spectra:
+    """The records' Welch cross-spectral matrices: ``f`` ``(F,)`` Hz, ``S`` ``(n_records, K, K, F)`` with
+    S[i, a, b] = E[conj(A) B] of record i (scipy's convention), ``groups`` ``(n_records,)`` speed-group labels."""
+
+    def __init__(self, f: np.ndarray, S: np.ndarray, groups: np.ndarray) -> None:
+        self.f, self.S, self.groups = f, S, groups
+
+
+def _spectra(records: Sequence, segment_seconds: float, groups: Sequence | None) -> _Spectra | None:
+    """The cross-spectral matrix of every record (all channels at once, Welch), or None when fewer than 3 records
+    of at least 16 samples at one sampling rate."""
     labels = list(groups) if groups is not None else [0] * len(records)
     usable = [(r, g) for r, g in zip(records, labels) if np.asarray(r.accelerations).shape[1] >= 16]
     if len(usable) < 3:
         return None
     fs = usable[0][0].fs
     usable = [(r, g) for r, g in usable if r.fs == fs]
+    if len(usable) < 3:
+        return None
     acc = [np.asarray(r.accelerations, float) for r, _ in usable]
-    labels = [g for _, g in usable]
     nper = min(min(a.shape[1] for a in acc), int(round(segment_seconds * fs)))
+    out = [csd(a[:, None, :], a[None, :, :], fs=fs, nperseg=nper) for a in acc]
+    return _Spectra(out[0][0], np.array([s for _, s in out]), np.array([str(g) for _, g in usable]))
 
-    def cross(i: int, j: int) -> tuple[np.ndarray, np.ndarray]:
-        """Welch cross-spectra S_ij ``(n_records, F)`` of rows i and j of each record (its whole length)."""
-        out = [csd(a[i], a[j], fs=fs, nperseg=nper) for a in acc]
-        return out[0][0], np.array([c for _, c in out])
 
-    f, s_xx = cross(k, k)
-    s_xx = np.real(s_xx)
+def _estimate(spec: _Spectra | None, names: list[str], channel: str, f_band: tuple[float, float], n_bands: int,
+              controls: Sequence[str] = ()) -> _Estimate | None:
+    """The instrumental-variable sums of ``channel`` (module docstring), in ``n_bands`` bands, with their
+    delete-one-record values; with ``controls`` (lateral channels), the channel's lateral motion they predict
+    removed first. None when fewer than 3 records or 3 bins are usable."""
+    if spec is None:
+        return None
+    k, kv = names.index(channel), names.index(vertical_partner(channel, names))
+    kz = [names.index(z) for z in instruments(channel, names)]
+    kc = [names.index(c) for c in controls]
+    S, f, lab = spec.S, spec.f, spec.groups
+    s_xx = np.real(S[:, k, k])
     use = (f >= f_band[0]) & (f <= f_band[1]) & (f > 0) & (s_xx.mean(axis=0) > 0)
     if use.sum() < 3:
         return None
+    S = S[..., use]
     fu = f[use]
     edges = np.geomspace(fu[0], fu[-1] * (1 + 1e-9), n_bands + 1)
     band = np.clip(np.searchsorted(edges, fu, side="right") - 1, 0, n_bands - 1)
-    n_rec = len(acc)
-    num, den = np.zeros(n_bands), np.zeros(n_bands)
-    num_jk, den_jk = np.zeros((n_rec, n_bands)), np.zeros((n_rec, n_bands))
-    sxx_mean = s_xx.mean(axis=0)[use]
-    lab = np.array([str(g) for g in labels])
-    for kzi in kz:
-        s_zz = np.real(cross(kzi, kzi)[1])
-        s_xz, s_vz = cross(k, kzi)[1], cross(kv, kzi)[1]
-        a, b = s_xz[:, use], s_vz[:, use]
-        w = 1.0 / (sxx_mean * np.maximum(s_zz.mean(axis=0)[use], 1e-300))
+    n_rec = S.shape[0]
+    # the controls' prediction of the channel, per speed group (the controls' transfer to the channel is the
+    # vehicle's, one per speed): x~ = x - Σ_j g_j c_j, g = S_cc⁻¹ S_cx, and g without each record (jackknife)
+    p = len(kc)
+    gam = np.zeros((n_rec, fu.size, p), dtype=complex)          # g of each record's group
+    gam_jk = np.zeros((n_rec, fu.size, p), dtype=complex)       # g of its group without it
+    if kc:
+        Scc_r = np.moveaxis(S[:, kc][:, :, kc], -1, 1)            # (n_rec, F, p, p)
+        Scx_r = np.moveaxis(S[:, kc, k], -1, 1)                   # (n_rec, F, p)
         for g in np.unique(lab):
             sel = lab == g
-            A, B = a[sel].sum(axis=0), b[sel].sum(axis=0)
-            dn = np.real(a[sel] * np.conj(b[sel]))                   # (n_g, F) a record with itself
+            Scc, Scx = Scc_r[sel].sum(axis=0), Scx_r[sel].sum(axis=0)
+            gam[sel] = np.einsum("fij,fj->fi", np.linalg.pinv(Scc, rcond=1e-12), Scx)[None]
+            gam_jk[sel] = np.einsum("rfij,rfj->rfi", np.linalg.pinv(Scc[None] - Scc_r[sel], rcond=1e-12),
+                                    Scx[None] - Scx_r[sel])
+    # the residual's power, for the weights: E|X~|² = S_xx - 2 Re(g^H S_cx) + g^H S_cc g
+    s_res = np.real(S[:, k, k]) - (np.real(np.einsum("rfj,rjf->rf", gam, np.conj(S[:, kc, k]))) if kc else 0.0)
+    num, den = np.zeros(n_bands), np.zeros(n_bands)
+    num_jk, den_jk = np.zeros((n_rec, n_bands)), np.zeros((n_rec, n_bands))
+    rho_num = np.zeros(p)                            # the controls' share of the model's coupling (docstring)
+    sxx_mean = np.maximum(s_res.mean(axis=0), 1e-300)
+    kcv = [names.index(vertical_partner(names[j], names)) if vertical_partner(names[j], names) else None
+           for j in kc]
+    for kzi in kz:
+        s_zz = np.real(S[:, kzi, kzi])
+        ax, ac, b = S[:, k, kzi], np.moveaxis(S[:, kc, kzi], 1, -1), S[:, kv, kzi]   # ac: (n_rec, F, p)
+        w = 1.0 / (sxx_mean * np.maximum(s_zz.mean(axis=0), 1e-300))
+        for g in np.unique(lab):
+            sel = lab == g
+            Ax, Ac, B = ax[sel].sum(axis=0), ac[sel].sum(axis=0), b[sel].sum(axis=0)
+            dx = ax[sel] * np.conj(b[sel])                           # (n_g, F) a record with itself
+            dc = ac[sel] * np.conj(b[sel])[..., None]                # (n_g, F, p)
             dd = np.abs(b[sel]) ** 2
-            N_f = np.real(A * np.conj(B)) - dn.sum(axis=0)
+            G, Gj = gam[sel][0], gam_jk[sel]
+            A = Ax - np.einsum("fj,fj->f", np.conj(G), Ac)
+            N_f = np.real(A * np.conj(B) - (dx.sum(axis=0) - np.einsum("fj,fj->f", np.conj(G), dc.sum(axis=0))))
             D_f = np.abs(B) ** 2 - dd.sum(axis=0)
-            # without record i of the group: sums (A - a_i), (B - b_i), its own product removed
-            Nj = np.real((A - a[sel]) * np.conj(B - b[sel])) - (dn.sum(axis=0) - dn)
+            # without record i of the group: sums without it, its own product removed, g without it
+            A_j = (Ax - ax[sel]) - np.einsum("rfj,rfj->rf", np.conj(Gj), Ac[None] - ac[sel])
+            diag_j = (dx.sum(axis=0) - dx) - np.einsum("rfj,rfj->rf", np.conj(Gj), dc.sum(axis=0)[None] - dc)
+            Nj = np.real(A_j * np.conj(B - b[sel]) - diag_j)
             Dj = np.abs(B - b[sel]) ** 2 - (dd.sum(axis=0) - dd)
+            for j, kv_j in enumerate(kcv):           # the control's vertical in place of the control
+                if kv_j is not None:
+                    Cj = np.conj(G[:, j]) * S[sel][:, kv_j, kzi].sum(axis=0)
+                    rho_num[j] += float((w * np.real(Cj * np.conj(B))).sum())
             for bb in range(n_bands):
                 on = band == bb
                 nb, db = float((w * N_f)[on].sum()), float((w * D_f)[on].sum())
@@ -285,4 +429,5 @@ def _estimate(records: Sequence, names: list[str], channel: str, f_band: tuple[f
                 den_jk[~sel, bb] += db
                 num_jk[sel, bb] += (Nj[:, on] * w[on]).sum(axis=1)
                 den_jk[sel, bb] += (Dj[:, on] * w[on]).sum(axis=1)
-    return _Estimate(num, den, num_jk, den_jk)
+    rho = rho_num / den.sum() if den.sum() > 0 else np.zeros(len(kc))
+    return _Estimate(num, den, num_jk, den_jk, rho)

@@ -1,6 +1,6 @@
 """Fitting candidate explanations: a registered effect's parameters, or the generic bump.
 
-Method: ``docs/diagnose.md``, "Name".
+Overview: ``docs/diagnose.md``, "How it works", step 3.
 """
 
 from __future__ import annotations

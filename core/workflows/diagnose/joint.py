@@ -1,6 +1,6 @@
 """The suspension and the named effects' parameters fitted together, under the diagnosis's own criterion D.
 
-Method: ``docs/diagnose.md``, "Fit the suspension under D" and "Add, fit jointly".
+Overview: ``docs/diagnose.md``, "How it works", steps 1 and 5.
 
 D = Σ (m / σ)² over every (speed group, channel, frequency bin), m the group mean of y_mes - y_sim - μ_B and σ
 its null sd (:class:`.fit.Discrepancy`), is a weighted least-squares criterion on the mean log-spectra: the

@@ -1,6 +1,6 @@
 """The discrepancy map: the three tests per cell, false discovery control, the gap measures.
 
-Method: ``docs/diagnose.md``, "Locate".
+Overview: ``docs/diagnose.md``, "How it works", step 2.
 """
 
 from __future__ import annotations

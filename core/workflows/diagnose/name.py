@@ -1,6 +1,6 @@
 """Naming: rank every candidate effect against the generic alternatives and decide which, if any, is named.
 
-Method: ``docs/diagnose.md``, "Name".
+Overview: ``docs/diagnose.md``, "How it works", step 3.
 """
 
 from __future__ import annotations

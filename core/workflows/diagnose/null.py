@@ -1,6 +1,6 @@
 """The null distributions of the cell statistics: analytic, then calibrated by a parametric bootstrap.
 
-Method: ``docs/diagnose.md``, "Locate".
+Overview: ``docs/diagnose.md``, "How it works", step 2.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The models compared: the base model and the one augmented with the named effect (``augmented.yaml``).
 
-Method: ``docs/diagnose.md``, "Add and re-identify".
+Overview: ``docs/diagnose.md``, "How it works", step 5.
 """
 
 from __future__ import annotations

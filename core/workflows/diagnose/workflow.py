@@ -30,7 +30,7 @@ from suspid.workflows.tasks import simulate_spectra
 from suspid.workflows.trust import checks_report, trust_states
 
 from .cells import CellGrid, make_cells
-from .coupling import coupling_test
+from .coupling import coupling_test, pooled_tilt
 from .fit import Discrepancy
 from .joint import check_groups, fit_jointly
 from .locate import locate
@@ -408,9 +408,9 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
                           unexplained=unexplained_regions(current.dmap, [], None))   # what stays flagged, as it is
             return record, None
     record["reason"] = ("sensor-tilt from the coupling of vertical into lateral at the same point (instrumental "
-                        "variables, against the model's own coupling and the twin's): " + "; ".join(
-                            f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} (t = {r['t']:.1f}, angle "
-                            f"{abs(r['angle_deg']):.2f}°, flagged cells there {r['evidence']['flagged_before']} → "
+                        "variables): " + "; ".join(
+                            f"{r['channel']}: β = {r['beta']:.4f} ± {r['se']:.4f} {r['estimate']} "
+                            f"(t = {r['t']:.1f}, angle {abs(r['angle_deg']):.2f}°, flagged cells there {r['evidence']['flagged_before']} → "
                             f"{r['evidence']['flagged_after']})" for r in tilted)
                         + "; corrected in the measured records (data.corrections)"
                         + (f"; dropped: {'; '.join(dropped)}" if dropped else ""))
@@ -422,11 +422,12 @@ def _tilt_from_coupling(config: Config, named, in_data: dict[str, list[dict[str,
 
 
 def _tilt_parameters(tilted: list[dict[str, Any]]) -> dict[str, Any]:
-    """The coupling route's sensor-tilt: the angle weighted by 1/se² over the channels, each channel's own."""
-    w8 = np.array([1.0 / r["se"] ** 2 for r in tilted])
-    angle = float(np.sum(w8 * [abs(r["angle_deg"]) for r in tilted]) / np.sum(w8))
-    return {"angle_deg": angle, "channels": [r["channel"] for r in tilted],
-            "angles_deg": {r["channel"]: r["angle_deg"] for r in tilted}, "applied": CORRECTED}
+    """The coupling route's sensor-tilt: one angle pooled over the channels (:func:`.coupling.pooled_tilt`), each
+    channel's own."""
+    pooled = pooled_tilt(tilted)
+    return {"angle_deg": pooled["angle_deg"], "angle_se_deg": pooled["se_deg"],
+            "channels": [r["channel"] for r in tilted], "angles_deg": {r["channel"]: r["angle_deg"] for r in tilted},
+            "weights": pooled["weights"], "applied": CORRECTED}
 
 
 CORRECTED = "data.corrections"
