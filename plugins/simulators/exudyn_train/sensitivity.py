@@ -48,6 +48,12 @@ from scipy import fft as sfft
 from suspid.elements import kind_of
 from suspid.infra.threads import single_blas_thread
 
+try:  # numba is a dependency; without it the products fall back to numpy
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised only without numba
+    njit = None
+HAVE_NUMBA = njit is not None
+
 from .model import GEOMETRY, LinearSystem, TrainModel
 from .solvers import FrequencyResponse, InputSpectra, fft_plan
 
@@ -307,19 +313,44 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
     return out
 
 
+def _combine_numpy(dH: np.ndarray, U: np.ndarray, out: np.ndarray) -> None:
+    """out[p, c, f] = Σ_in dH[p, in, c, f] U[in, f] (the reference of the compiled :func:`_combine`)."""
+    np.multiply(dH[:, 0], U[0], out=out)
+    out += dH[:, 1] * U[1]
+    out += dH[:, 2] * U[2]
+
+
+if HAVE_NUMBA:
+    @njit(cache=True, nogil=True)
+    def _combine(dH, U, out):  # pragma: no cover - compiled
+        n_p, _, n_out, nf = dH.shape
+        for k in range(n_p):
+            for c in range(n_out):
+                for f in range(nf):
+                    out[k, c, f] = dH[k, 0, c, f] * U[0, f] + dH[k, 1, c, f] * U[1, f] + dH[k, 2, c, f] * U[2, f]
+else:  # pragma: no cover - without numba
+    _combine = _combine_numpy
+
+
 def record_derivatives(response: FrequencyResponse, derivatives: list[MatrixDerivative], segments: list,
                        fs: float, taper_m: float, settle_s: float, spectra: InputSpectra) -> list[np.ndarray]:
-    """Per segment ``(n_p, n_sensors, n_t)``: the derivatives of the records
-    :func:`.solvers.simulate_frequency` makes (same FFT length, same track spectra), (m/s²) per SI unit."""
+    """Per segment ``(n_p, n_sensors, n_t)`` float32: the derivatives of the records
+    :func:`.solvers.simulate_frequency` makes (same FFT length, same track spectra), (m/s²) per SI unit.
+
+    The products ∂H/∂p U (a compiled loop) and their inverse FFTs run in single precision
+    (:data:`RECORD_PRECISION`), one segment at a time (its arrays stay in cache); the records stay single
+    precision: the spectra's derivatives (:func:`suspid.method.jacobian.spectra_derivatives`) take them as
+    they are.
+    """
     n_ts, n_fft = fft_plan(response, segments, fs, settle_s)
     dH = receptance_derivatives(response, derivatives, np.arange(n_fft // 2 + 1) * fs / n_fft)
-    dH = dH.astype(RECORD_PRECISION)
-    out = []
+    dH = np.ascontiguousarray(dH, dtype=RECORD_PRECISION)
+    n_p, _, n_out, nf = dH.shape
+    out: list[np.ndarray] = []
+    dY = np.empty((n_p, n_out, nf), dtype=RECORD_PRECISION)
     with single_blas_thread():
-        for seg, n in zip(segments, n_ts):
+        for seg, n in zip(segments, n_ts):   # one segment at a time: its products and records stay in cache
             U = spectra.get(seg, fs, n_fft, taper_m).astype(RECORD_PRECISION)           # (3, n_f)
-            dY = dH[:, 0] * U[0]
-            dY += dH[:, 1] * U[1]
-            dY += dH[:, 2] * U[2]
-            out.append(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n], dtype=float))
+            _combine(dH, U, dY)
+            out.append(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n]))      # float32
     return out
