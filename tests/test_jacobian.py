@@ -154,17 +154,47 @@ def test_grouped_matrix_derivatives_equal_the_one_by_one_ones(train):
     names = sim.differentiable([p.name for p in sim.parameters()])
     v0 = sim.values({})
     model = sim._model(v0, 83.3, TimeFeatures())
-    S.matrix_derivatives(model, v0, 83.3, names, model.linear_system())            # learns the patterns
+    S._point_derivatives(model, v0, 83.3, names, model.linear_system())           # learns the patterns
     groups = S._groups(names, S._PATTERNS[model][tuple(names)])
     assert len(groups) <= len(names) // 2
     values = sim.values({"k_sec_z": 2.8e5, "c_sec_z": 1.4e4, "c_yaw": 2.1e5, "m_car": 5.0e4, "conicity": 0.2})
     model.update(values, 83.3)
     base = model.linear_system()
-    grouped = S.matrix_derivatives(model, values, 83.3, names, base)
+    grouped = S._point_derivatives(model, values, 83.3, names, base)
     single = [S._single(model, values, 83.3, n, base) for n in names]
     for n, a, b in zip(names, grouped, single):
         for f in ("dM", "dK", "dD", "dG"):
             np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f"{n} {f}")
+
+
+@pytest.mark.parametrize("preset", ["conventional-hs", "tgv-articulated"])
+def test_point_independent_matrix_derivatives_are_the_same_everywhere(train, preset):
+    """The kinds whose matrix derivatives are kept between calls: the same derivative (to rounding) at a point
+    where every differentiable parameter moved by up to 10 %; a mass's derivative moves (it is not kept)."""
+    from suspid.plugins.simulators.exudyn_train import sensitivity as S
+    from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
+
+    sim = train(solver="frequency", vehicle=preset)
+    names = sim.differentiable([p.name for p in sim.parameters()])
+    kept = [n for n in names if S.kind_of(n) in S.POINT_INDEPENDENT]
+    assert len(kept) >= 20 and "m_car" in names and "m_car" not in kept
+    v0 = sim.values({})
+    rng = np.random.default_rng(1)
+    v1 = {**v0, **{n: v0[n] * (1 + 0.1 * rng.uniform(-1, 1)) for n in names}}
+    model = sim._model(v0, 83.3, TimeFeatures())
+
+    def derivatives(values, which):
+        model.update(values, 83.3)
+        base = model.linear_system()
+        return [S._single(model, values, 83.3, n, base) for n in which]
+
+    for n, a, b in zip(kept + ["m_car"], derivatives(v0, kept + ["m_car"]), derivatives(v1, kept + ["m_car"])):
+        rel = max(float(np.max(np.abs(getattr(a, f) - getattr(b, f)))) / float(np.max(np.abs(getattr(a, f))))
+                  for f in ("dM", "dK", "dD", "dG") if np.any(getattr(a, f)))
+        if n == "m_car":
+            assert rel > 1e-3
+        else:
+            assert rel < 1e-7, (n, rel)
 
 
 def test_linearised_shift_is_the_refit_of_a_linear_model():

@@ -132,6 +132,17 @@ Pattern = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 _PATTERNS: "weakref.WeakKeyDictionary[TrainModel, dict[tuple[str, ...], list[Pattern]]]" = weakref.WeakKeyDictionary()
 
+POINT_INDEPENDENT = (LINEAR - {"conicity", "kalker_scale"}) | {
+    "I_car_x", "I_car_y", "I_car_z", "I_bogie_x", "I_bogie_y", "I_bogie_z", "I_ws_x", "I_ws_y", "I_ws_z"}
+"""Kinds whose matrix derivatives do not depend on where they are taken (for a given model, speed and
+geometry): a spring's or a damper's rate multiplies a deformation set by the geometry alone (∂K/∂k, ∂D/∂c
+constant), an inertia multiplies an angular acceleration, and its gyroscopic term the spin the speed sets.
+Not so the masses (the wheel loads set the Hertzian stiffness and Kalker's coefficients), the wheelbase
+``l0``, the rail radius, the conicity and the creep scale (their terms are products with other
+parameters). ``tests/test_jacobian.py`` checks the claim on both presets."""
+
+_KEPT: "weakref.WeakKeyDictionary[TrainModel, dict[tuple, MatrixDerivative]]" = weakref.WeakKeyDictionary()
+
 
 def _pattern(d: MatrixDerivative) -> Pattern:
     return d.dM != 0, d.dK != 0, d.dD != 0, d.dG != 0
@@ -169,8 +180,26 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
     on it. A group whose difference changes an entry outside all its patterns (a parameter that reaches
     further at this point) is differentiated again one by one, and its patterns renewed.
 
+    A parameter of :data:`POINT_INDEPENDENT` kind is differentiated once per model, speed and set of element
+    groups given their own values: its derivative is kept and read again at any other point.
+
     :raises ValueError: a parameter moves the sensors' matrices or the wheelsets (geometry): not differentiable here.
     """
+    kept = _KEPT.setdefault(model, {})
+    context = (float(speed), tuple(sorted(k for k in values if "[" in k)))
+    found = {n: kept.get((n,) + context) for n in names if kind_of(n) in POINT_INDEPENDENT}
+    todo = [n for n in names if found.get(n) is None]
+    if todo:
+        for n, d in zip(todo, _point_derivatives(model, values, speed, todo, base)):
+            found[n] = d
+            if kind_of(n) in POINT_INDEPENDENT:
+                kept[(n,) + context] = d
+    return [found[n] for n in names]  # type: ignore[misc]
+
+
+def _point_derivatives(model: TrainModel, values: dict[str, float], speed: float, names: list[str],
+                       base: LinearSystem) -> list[MatrixDerivative]:
+    """:func:`matrix_derivatives` at ``values`` (every one computed), sharing linearisations after a first call."""
     key = tuple(names)
     known = _PATTERNS.setdefault(model, {})
     try:
