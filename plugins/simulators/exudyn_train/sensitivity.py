@@ -138,10 +138,11 @@ POINT_INDEPENDENT = (LINEAR - {"conicity", "kalker_scale"}) | {
 geometry): a spring's or a damper's rate multiplies a deformation set by the geometry alone (∂K/∂k, ∂D/∂c
 constant), an inertia multiplies an angular acceleration, and its gyroscopic term the spin the speed sets.
 Not so the masses (the wheel loads set the Hertzian stiffness and Kalker's coefficients), the wheelbase
-``l0``, the rail radius, the conicity and the creep scale (their terms are products with other
-parameters). ``tests/test_jacobian.py`` checks the claim on both presets."""
+``l0``, the rail radius, the conicity and the creep scale (their terms are products among themselves), whose
+derivatives depend on these parameters only. ``tests/test_jacobian.py`` checks both claims on both presets."""
 
 _KEPT: "weakref.WeakKeyDictionary[TrainModel, dict[tuple, MatrixDerivative]]" = weakref.WeakKeyDictionary()
+"""Per model: the matrix derivatives kept between calls (:func:`matrix_derivatives`)."""
 
 
 def _pattern(d: MatrixDerivative) -> Pattern:
@@ -180,20 +181,27 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
     on it. A group whose difference changes an entry outside all its patterns (a parameter that reaches
     further at this point) is differentiated again one by one, and its patterns renewed.
 
-    A parameter of :data:`POINT_INDEPENDENT` kind is differentiated once per model, speed and set of element
-    groups given their own values: its derivative is kept and read again at any other point.
+    The matrices are A(θ) + Σ_r w_r B_r: the rates and inertias w_r (:data:`POINT_INDEPENDENT`) enter
+    linearly with matrices B_r of the geometry and the speed, the other parameters θ (masses, wheelbase,
+    conicity, creep scale, rail radius) through A. So ∂/∂w_r = B_r is the same at every point and ∂/∂θ
+    depends on θ alone: each derivative is kept (per model, speed and set of element groups given their own
+    values) and read again wherever θ has not moved: an identification of rates linearises the model for the
+    first Jacobian only.
 
     :raises ValueError: a parameter moves the sensors' matrices or the wheelsets (geometry): not differentiable here.
     """
     kept = _KEPT.setdefault(model, {})
     context = (float(speed), tuple(sorted(k for k in values if "[" in k)))
-    found = {n: kept.get((n,) + context) for n in names if kind_of(n) in POINT_INDEPENDENT}
-    todo = [n for n in names if found.get(n) is None]
+    others = tuple(sorted((k, float(v)) for k, v in values.items() if kind_of(k) not in POINT_INDEPENDENT))
+
+    def key(n: str) -> tuple:
+        return (n,) + context + (() if kind_of(n) in POINT_INDEPENDENT else others)
+
+    found = {n: kept.get(key(n)) for n in names}
+    todo = [n for n in names if found[n] is None]
     if todo:
         for n, d in zip(todo, _point_derivatives(model, values, speed, todo, base)):
-            found[n] = d
-            if kind_of(n) in POINT_INDEPENDENT:
-                kept[(n,) + context] = d
+            found[n] = kept[key(n)] = d
     return [found[n] for n in names]  # type: ignore[misc]
 
 
