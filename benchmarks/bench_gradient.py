@@ -241,7 +241,7 @@ def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: i
 
 
 # ------------------------------------------------------------------------------------------- maximiser
-def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path) -> None:
+def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, objectives: list[str]) -> None:
     """Where J's maximiser lies on the quickstart, per seed, for several draws of the noise paths b_i.
 
     The run's J uses one fixed path b_i per segment (common random numbers, eq. 4): its maximiser moves with
@@ -251,9 +251,12 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path) ->
     three re-linearisations), with K paths per segment for each K of ``paths`` (the v K modelled spectra
     y_sim_i + b_ik against the v measured ones: the same objective with less of the paths' own noise). Errors
     in % of each admissible interval against w_ref. The spread over draws is what the paths add; what stays
-    as K grows is the measured spectra's own error."""
+    as K grows is the measured spectra's own error and the objective's. ``objectives``: besides the config's
+    (``config``), other objective plugins on the same data and paths (``mean-spectrum``: the mean spectra's
+    weighted least squares)."""
     from scipy.optimize import minimize
 
+    from suspid import registry
     from suspid.config import load_config
     from suspid.infra.lock import open_run_dir
     from suspid.infra.seeds import rng as named_rng
@@ -283,46 +286,45 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path) ->
                 cache[key] = (res.y, res.jacobian * x)             # dy / dlog w
             return cache[key]
 
-        for k in range(draws):
-            for K in paths:
-                if k == 0 and K == 1:
-                    b = problem.b
-                else:
-                    b = problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-{k}-{K}"), speeds * K)
-                fn = ObjectiveFunction(problem.objective, problem.y_mes, problem.freqs, b, weights=problem.weights,
-                                       channels=problem.channels, floor=problem.noise_model.floor_)
-                x = w_ref.copy()
-                for _ in range(3):
-                    y, jac = linear_model(x)
+        for k, K, objective in ((k, K, o) for o in objectives for k in range(draws) for K in paths):
+            if k == 0 and K == 1:
+                b = problem.b
+            else:
+                b = problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-{k}-{K}"), speeds * K)
+            plugin = problem.objective if objective == "config" else registry.get("objective", objective)()
+            fn = ObjectiveFunction(plugin, problem.y_mes, problem.freqs, b, weights=problem.weights,
+                                   channels=problem.channels, floor=problem.noise_model.floor_)
+            x = w_ref.copy()
+            for _ in range(3):
+                y, jac = linear_model(x)
 
-                    def negJ(u, y=y, jac=jac, x=x):
-                        z = np.log(bounds[:, 0] + u * width) - np.log(x)
-                        return -fn.evaluate(np.tile(y + jac @ z, (K, 1, 1)))[0]
+                def negJ(u, y=y, jac=jac, x=x):
+                    z = np.log(bounds[:, 0] + u * width) - np.log(x)
+                    return -fn.evaluate(np.tile(y + jac @ z, (K, 1, 1)))[0]
 
-                    u0 = (x - bounds[:, 0]) / width
-                    lo, hi = np.clip(u0 - 0.15, 0, 1), np.clip(u0 + 0.15, 0, 1)
-                    r = minimize(negJ, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)),
-                                 options={"maxiter": 40, "eps": 1e-5})
-                    x = bounds[:, 0] + np.clip(r.x, lo, hi) * width
-                err = 100 * (x - w_ref) / width
-                row = {"seed": seed, "draw": k, "paths_per_segment": K,
-                       "errors": dict(zip(names, np.round(err, 2).tolist())), "worst": float(np.max(np.abs(err)))}
-                rows.append(row)
-                print(json.dumps(row), flush=True)
+                u0 = (x - bounds[:, 0]) / width
+                lo, hi = np.clip(u0 - 0.15, 0, 1), np.clip(u0 + 0.15, 0, 1)
+                r = minimize(negJ, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                             options={"maxiter": 40, "eps": 1e-5})
+                x = bounds[:, 0] + np.clip(r.x, lo, hi) * width
+            err = 100 * (x - w_ref) / width
+            row = {"seed": seed, "objective": objective, "draw": k, "paths_per_segment": K,
+                   "errors": dict(zip(names, np.round(err, 2).tolist())), "worst": float(np.max(np.abs(err)))}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
     out.mkdir(parents=True, exist_ok=True)
     (out / "maximiser.json").write_text(json.dumps(rows, indent=1))
     print()
-    print("| seed | paths per segment | worst error of J's maximiser per draw (%) | mean over draws per component (%) | "
+    print("| seed | objective | paths per segment | worst error of J's maximiser per draw (%) | mean over draws per component (%) | "
           "sd over draws per component (%) |")
-    print("|---|---|---|---|---|")
-    for seed in seeds:
-        for K in paths:
-            sel = [r for r in rows if r["seed"] == seed and r["paths_per_segment"] == K]
-            E = np.array([[r["errors"][n] for n in sel[0]["errors"]] for r in sel])
-            worst = ", ".join(f"{r['worst']:.2f}" for r in sel)
-            means = ", ".join(f"{n} {m:+.2f}" for n, m in zip(sel[0]["errors"], E.mean(axis=0)))
-            sds = ", ".join(f"{sd:.2f}" for sd in (E.std(axis=0, ddof=1) if len(E) > 1 else np.zeros(E.shape[1])))
-            print(f"| {seed} | {K} | {worst} | {means} | {sds} |")
+    print("|---|---|---|---|---|---|")
+    for seed, objective, K in ((s_, o, K) for s_ in seeds for o in objectives for K in paths):
+        sel = [r for r in rows if r["seed"] == seed and r["paths_per_segment"] == K and r["objective"] == objective]
+        E = np.array([[r["errors"][n] for n in sel[0]["errors"]] for r in sel])
+        worst = ", ".join(f"{r['worst']:.2f}" for r in sel)
+        means = ", ".join(f"{n} {m:+.2f}" for n, m in zip(sel[0]["errors"], E.mean(axis=0)))
+        sds = ", ".join(f"{sd:.2f}" for sd in (E.std(axis=0, ddof=1) if len(E) > 1 else np.zeros(E.shape[1])))
+        print(f"| {seed} | {objective} | {K} | {worst} | {means} | {sds} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -330,6 +332,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("part", choices=["jacobian", "identify", "maximiser"])
     ap.add_argument("--draws", type=int, default=4, help="maximiser: draws of the noise paths per seed")
     ap.add_argument("--paths", type=int, nargs="+", default=[1, 8], help="maximiser: paths per segment K")
+    ap.add_argument("--objectives", nargs="+", default=["config"],
+                    help="maximiser: 'config' (the config's objective) and/or objective plugins")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     ap.add_argument("--problems", nargs="+", choices=list(PROBLEMS), default=list(PROBLEMS))
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_gradient"))
@@ -342,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.part == "jacobian":
         jacobian_part(args.repeats, args.segments)
     elif args.part == "maximiser":
-        maximiser_part(args.seeds, args.draws, args.paths, args.out)
+        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives)
     else:
         identify_part(args.problems, args.seeds, args.out, args.table1_m0, args.reuse)
     return 0

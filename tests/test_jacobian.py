@@ -223,3 +223,31 @@ def test_an_undeclared_parameter_is_a_one_line_error(train, segments):
 
     with pytest.raises(SuspidError, match="'no_such' not declared|no_such.* not declared"):
         spectra_jacobian(train(solver="frequency"), {}, ["k_sec_z", "no_such"], segments, SPECTRA)
+
+
+@pytest.mark.parametrize("window,detrend", [("boxcar", "mean"), ("boxcar", "linear"), ("hann", "none"),
+                                            ("hann", "mean")])
+def test_record_spectrum_derivatives_match_differences_of_the_spectrum(window, detrend):
+    """Y's derivative along given record derivatives (double and single precision) against central differences
+    of Y itself, for every window and detrend (the compiled cell sums and the numpy reference alike)."""
+    from suspid.method import spectra as SP
+
+    rng = np.random.default_rng(4)
+    fs, n_t = 100.0, 1000
+    a = rng.standard_normal((3, n_t)) + 0.3
+    d = rng.standard_normal((2, 3, n_t))
+    opt = {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 40, "window": window, "detrend": detrend}
+    y, dy = SP.record_spectrum_derivatives(a, d, fs, opt)
+    _, dy32 = SP.record_spectrum_derivatives(a, d.astype(np.float32), fs, opt)
+    h = 1e-6
+    for k in range(2):
+        fd = (SP.record_spectrum(a + h * d[k], fs, opt) - SP.record_spectrum(a - h * d[k], fs, opt)) / (2 * h)
+        np.testing.assert_allclose(dy[k], fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(fd)))
+        np.testing.assert_allclose(dy32[k], fd, rtol=1e-3, atol=1e-4 * np.max(np.abs(fd)))
+    opt_ = SP.parse_options(SP.SpectraOptions, opt, "spectra")
+    _, mean, a_hat, start, stop = SP._record_power(a, fs, opt_)
+    prepared = SP._prepare(d.reshape(-1, n_t), opt_) if (window, detrend) != ("boxcar", "mean") else d
+    raw = np.fft.rfft(prepared, axis=-1).reshape(2, 3, -1)
+    ref = np.empty_like(dy)
+    SP._cell_derivatives_numpy(a_hat, raw, start, stop, mean, 1.0 / (fs * np.sqrt(n_t / fs)), ref)
+    np.testing.assert_allclose(dy, ref, rtol=1e-10, atol=1e-12 * np.max(np.abs(ref)))
