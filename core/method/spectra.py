@@ -262,7 +262,7 @@ def _record_power(a: np.ndarray, fs: float, opt: SpectraOptions, what: str = "re
 
 def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.ndarray, fs: float,
                                 options: SpectraOptions | Mapping[str, Any] | None = None,
-                                name: str = "") -> tuple[np.ndarray, np.ndarray]:
+                                name: str = "", out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Y (:func:`record_spectrum`) and its derivatives from those of the accelerations.
 
     Detrend, window and transform are linear, so dÂ is the amplitude of dA; with P_j the mean of |Â|² over
@@ -271,6 +271,8 @@ def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.n
 
     :param d_accelerations: ``(n_p, n_channels, n_t)``, (m/s²) per unit of each parameter; single precision
         is kept (the transform and the products in float32, the sums over each cell in double).
+    :param out: where to write dY, ``(n_p, n_channels, n_freqs)`` float (a view of a larger array: a caller's
+        Jacobian in its own layout), or ``None``.
     :returns: ``Y (n_channels, n_freqs)`` dB and ``dY (n_p, n_channels, n_freqs)`` dB per unit.
     """
     opt = parse_options(SpectraOptions, options, "spectra")
@@ -288,9 +290,9 @@ def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.n
         da_hat = sp_fft.rfft(d, axis=-1)
     else:
         da_hat = sp_fft.rfft(_prepare(d.reshape(-1, n_t), opt), axis=-1).reshape(d.shape[:-1] + (-1,))
-    dy = np.empty(da_hat.shape[:-1] + (start.size,))
+    dy = np.empty(da_hat.shape[:-1] + (start.size,)) if out is None else out
     _cell_derivatives(np.ascontiguousarray(a_hat), da_hat.reshape(-1, *a_hat.shape), start, stop, mean,
-                      scale, dy.reshape(-1, *mean.shape))
+                      scale, dy.reshape(-1, *mean.shape) if out is None else dy)
     return y, dy
 
 
