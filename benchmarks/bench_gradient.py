@@ -96,35 +96,37 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
         simulate_spectra(sim, w, segments, config.spectra)
         spectra_jacobian(sim, w, identified, segments, config.spectra)
         spectra_jacobian(sim, w, names_all, segments, config.spectra)
-        plain, per_record, r_q, r_all = [], [], [], []
+        plain, per_record, r_q, r_all, c_q, c_all = [], [], [], [], [], []
+
+        def timed(fn, *args):
+            t, c = time.perf_counter(), time.process_time()
+            fn(*args)
+            return time.perf_counter() - t, time.process_time() - c
+
         for k in range(repeats):
             wk = {**w, identified[0]: w.get(identified[0], sim.values({})[identified[0]]) * (1 + 1e-6 * (k + 1))}
-            t = time.perf_counter()
-            simulate_spectra(sim, wk, segments, config.spectra)
-            p = time.perf_counter() - t
+            p, pc = timed(simulate_spectra, sim, wk, segments, config.spectra)
             plain.append(p)
-            t = time.perf_counter()     # again at the same w: the receptance is cached, the per-record work is left
-            simulate_spectra(sim, wk, segments, config.spectra)
-            per_record.append((time.perf_counter() - t) / p)
-            t = time.perf_counter()
-            spectra_jacobian(sim, wk, identified, segments, config.spectra)
-            r_q.append((time.perf_counter() - t) / p)
+            # again at the same w: the receptance is cached, the per-record work is left
+            per_record.append(timed(simulate_spectra, sim, wk, segments, config.spectra)[0] / p)
+            j, jc = timed(spectra_jacobian, sim, wk, identified, segments, config.spectra)
+            r_q.append(j / p)
+            c_q.append(jc / pc)
             wk = {**wk, identified[0]: wk[identified[0]] * (1 + 1e-7)}     # a new point for the plain solve too
-            t = time.perf_counter()
-            simulate_spectra(sim, wk, segments, config.spectra)
-            p2 = time.perf_counter() - t
-            plain.append(p2)
-            t = time.perf_counter()
-            spectra_jacobian(sim, wk, names_all, segments, config.spectra)
-            r_all.append((time.perf_counter() - t) / p2)
+            p, pc = timed(simulate_spectra, sim, wk, segments, config.spectra)
+            plain.append(p)
+            j, jc = timed(spectra_jacobian, sim, wk, names_all, segments, config.spectra)
+            r_all.append(j / p)
+            c_all.append(jc / pc)
 
         def ms(x):
             return f"{statistics.mean(x):.2f} ± {statistics.stdev(x) if len(x) > 1 else 0.0:.2f}"
 
         print(f"  cost on {len(segments)} segments, {repeats} repeats, each ratio against the plain solve timed just "
               f"before it (mean ± sd): plain solve {statistics.mean(plain):.3f} ± {statistics.stdev(plain):.3f} s; "
-              f"y + Jacobian for the q = {len(identified)} identified {ms(r_q)} plain (central FD: "
-              f"{2 * len(identified) + 1}); for all {len(names_all)} {ms(r_all)} plain (central FD: {2 * len(names_all) + 1})")
+              f"y + Jacobian for the q = {len(identified)} identified {ms(r_q)} plain in wall time, {ms(c_q)} in CPU "
+              f"time (central FD: {2 * len(identified) + 1}); for all {len(names_all)} {ms(r_all)} plain in wall time, "
+              f"{ms(c_all)} in CPU time (central FD: {2 * len(names_all) + 1})")
         print(f"  first call of a fresh simulator for all {len(names_all)}: {cold:.3f} s = {cold / cold_plain:.2f} "
               f"plain (its own plain solve {cold_plain:.3f} s)")
         pr = statistics.mean(per_record)
