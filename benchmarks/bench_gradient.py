@@ -136,6 +136,47 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
               f"{1 + len(names_all) * pr:.2f} for all {len(names_all)}")
 
 
+def cost_part(problems: list[str], repeats: int) -> None:
+    """The jacobian part's cost figures alone (no accuracy check), for whichever suspid is installed: one
+    JSON line per problem and parameter set, wall and CPU ratios to a plain solve timed just before each
+    Jacobian. Run with another checkout's interpreter to compare versions in the same conditions, e.g.
+    ``/path/to/main/.venv/bin/python benchmarks/bench_gradient.py cost`` beside this checkout's."""
+    import suspid
+    from suspid.config import build_simulator, load_config
+    from suspid.workflows.jacobian import spectra_jacobian
+    from suspid.workflows.problem import synthetic_track
+    from suspid.workflows.tasks import simulate_spectra
+
+    header(f"cost  suspid from {Path(suspid.__file__).parent}")
+    for problem in problems:
+        config = load_config(PROBLEMS[problem])
+        sim = build_simulator(config)
+        names = sim.differentiable([p.name for p in sim.parameters()])
+        ident = list(config.parameters)
+        segments = synthetic_track(config, "measurement")
+        w = {n: float(v) for n, v in config.data.w_ref.items()}
+        simulate_spectra(sim, w, segments, config.spectra)
+        for which in (names, ident):
+            spectra_jacobian(sim, w, which, segments, config.spectra)
+        rows = {"all": [], "q": []}
+        for k in range(repeats):
+            for which, asked in (("all", names), ("q", ident)):
+                wk = {**w, ident[0]: w[ident[0]] * (1 + 1e-6 * (k + 1) + (1e-7 if which == "q" else 0.0))}
+                t, c = time.perf_counter(), time.process_time()
+                simulate_spectra(sim, wk, segments, config.spectra)
+                p, pc = time.perf_counter() - t, time.process_time() - c
+                t, c = time.perf_counter(), time.process_time()
+                spectra_jacobian(sim, wk, asked, segments, config.spectra)
+                rows[which].append(((time.perf_counter() - t) / p, (time.process_time() - c) / pc, pc))
+        for which, sel in rows.items():
+            wall, cpu, plain = zip(*sel)
+            print(json.dumps({"problem": problem, "parameters": which, "n_p": len(names if which == "all" else ident),
+                              "wall_ratio": round(statistics.mean(wall), 2), "wall_sd": round(statistics.stdev(wall), 2),
+                              "cpu_ratio": round(statistics.mean(cpu), 2), "cpu_sd": round(statistics.stdev(cpu), 2),
+                              "plain_cpu_s": round(statistics.mean(plain), 3), "load": round(os.getloadavg()[0], 1)}),
+                  flush=True)
+
+
 # ------------------------------------------------------------------------------------------- identify
 RUNS = {
     "ego": {"ego.refine.enabled": False},
@@ -331,7 +372,7 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("part", choices=["jacobian", "identify", "maximiser"])
+    ap.add_argument("part", choices=["jacobian", "cost", "identify", "maximiser"])
     ap.add_argument("--draws", type=int, default=4, help="maximiser: draws of the noise paths per seed")
     ap.add_argument("--paths", type=int, nargs="+", default=[1, 8], help="maximiser: paths per segment K")
     ap.add_argument("--objectives", nargs="+", default=["config"],
@@ -347,6 +388,8 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(ROOT))
     if args.part == "jacobian":
         jacobian_part(args.repeats, args.segments)
+    elif args.part == "cost":
+        cost_part(args.problems, args.repeats)
     elif args.part == "maximiser":
         maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives)
     else:
