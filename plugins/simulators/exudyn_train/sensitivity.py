@@ -343,7 +343,9 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
         n_ld = 1 if response.Ld is None else 2           # the right-first order applies L and Ld apart
         # which order is cheaper per frequency: O for every touched row once, then a small product per
         # parameter; or per parameter Psi[:, rows] W, then z, then the sensors (right to left)
-        by_rows = m2 * n_out * n_rows + sum(n_out * p_[0].size * 3 for p_ in plans)
+        pairs = _conjugate_pairs(response)
+        # O's product: complex by complex, or (conjugate pairs) complex by real, half the work
+        by_rows = m2 * n_out * n_rows // (2 if pairs is not None else 1) + sum(n_out * p_[0].size * 3 for p_ in plans)
         by_parameter = sum(m2 * p_[0].size * 3 + n_ld * n_out * m2 * 3 for p_ in plans)
         right_first = by_parameter < by_rows
         if not right_first:
@@ -353,7 +355,6 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
             if response.Ld is not None:
                 T_z += (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
             del T_L
-            pairs = _conjugate_pairs(response)
             if pairs is not None:
                 # a real system's modes come in conjugate pairs (m, m+1) whose outer products are conjugate:
                 # z_m T_m + z_m+1 conj(T_m) = (z_m + z_m+1) Re T_m + i (z_m - z_m+1) Im T_m, a product of a
