@@ -251,3 +251,27 @@ def test_record_spectrum_derivatives_match_differences_of_the_spectrum(window, d
     ref = np.empty_like(dy)
     SP._cell_derivatives_numpy(a_hat, raw, start, stop, mean, 1.0 / (fs * np.sqrt(n_t / fs)), ref)
     np.testing.assert_allclose(dy, ref, rtol=1e-10, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def test_compiled_loops_equal_their_numpy_references():
+    """The receptance derivatives' compiled contraction and the records' products against the numpy forms
+    used without numba."""
+    from suspid.plugins.simulators.exudyn_train import sensitivity as S
+
+    rng = np.random.default_rng(2)
+
+    def cplx(*shape):
+        return rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+
+    O_t, W = cplx(7, 4, 16), cplx(9, 3, 16)
+    stack_rows, offsets = rng.integers(0, 7, 9), np.array([0, 2, 2, 6, 9])
+    a = cplx(4, 3, 4, 40)
+    b = a.copy()
+    S._contract(O_t, W, stack_rows, offsets, a, 5)
+    S._contract_numpy(O_t, W, stack_rows, offsets, b, 5)
+    np.testing.assert_allclose(a, b, rtol=1e-12)
+    dH, U = cplx(5, 3, 4, 33).astype(np.complex64), cplx(3, 33).astype(np.complex64)
+    x, y = np.empty((5, 4, 33), np.complex64), np.empty((5, 4, 33), np.complex64)
+    S._combine(dH, U, x)
+    S._combine_numpy(dH, U, y)
+    np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-5)
