@@ -142,8 +142,9 @@ Not so the masses (the wheel loads set the Hertzian stiffness and Kalker's coeff
 ``l0``, the rail radius, the conicity and the creep scale (their terms are products among themselves), whose
 derivatives depend on these parameters only. ``tests/test_jacobian.py`` checks both claims on both presets."""
 
-_KEPT: "weakref.WeakKeyDictionary[TrainModel, dict[tuple, MatrixDerivative]]" = weakref.WeakKeyDictionary()
-"""Per model: the matrix derivatives kept between calls (:func:`matrix_derivatives`)."""
+_KEPT: "weakref.WeakKeyDictionary[TrainModel, dict]" = weakref.WeakKeyDictionary()
+"""Per model: the matrix derivatives kept between calls (:func:`matrix_derivatives`): the rates' and inertias'
+per speed and element groups, the others' at the latest values of the parameters they depend on."""
 
 
 def _pattern(d: MatrixDerivative) -> Pattern:
@@ -186,23 +187,30 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
     linearly with matrices B_r of the geometry and the speed, the other parameters θ (masses, wheelbase,
     conicity, creep scale, rail radius) through A. So ∂/∂w_r = B_r is the same at every point and ∂/∂θ
     depends on θ alone: each derivative is kept (per model, speed and set of element groups given their own
-    values) and read again wherever θ has not moved: an identification of rates linearises the model for the
-    first Jacobian only.
+    values; the θ-dependent ones for the latest θ only) and read again wherever θ has not moved: an
+    identification of rates linearises the model for the first Jacobian only.
 
     :raises ValueError: a parameter moves the sensors' matrices or the wheelsets (geometry): not differentiable here.
     """
     kept = _KEPT.setdefault(model, {})
     context = (float(speed), tuple(sorted(k for k in values if "[" in k)))
-    others = tuple(sorted((k, float(v)) for k, v in values.items() if kind_of(k) not in POINT_INDEPENDENT))
+    others = context + tuple(sorted((k, float(v)) for k, v in values.items()
+                                    if kind_of(k) not in POINT_INDEPENDENT))
+    if kept.get("others") != others:       # θ moved: only the latest θ's derivatives are kept (bounded memory)
+        kept["others"], kept["at_others"] = others, {}
+    rates, at_others = kept.setdefault("rates", {}), kept["at_others"]
+
+    def store(n: str) -> dict:
+        return rates if kind_of(n) in POINT_INDEPENDENT else at_others
 
     def key(n: str) -> tuple:
-        return (n,) + context + (() if kind_of(n) in POINT_INDEPENDENT else others)
+        return (n,) + context if kind_of(n) in POINT_INDEPENDENT else n
 
-    found = {n: kept.get(key(n)) for n in names}
+    found = {n: store(n).get(key(n)) for n in names}
     todo = [n for n in names if found[n] is None]
     if todo:
         for n, d in zip(todo, _point_derivatives(model, values, speed, todo, base)):
-            found[n] = kept[key(n)] = d
+            found[n] = store(n)[key(n)] = d
     return [found[n] for n in names]  # type: ignore[misc]
 
 
