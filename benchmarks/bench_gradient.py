@@ -284,7 +284,8 @@ def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: i
 
 
 # ------------------------------------------------------------------------------------------- maximiser
-def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, objectives: list[str]) -> None:
+def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, objectives: list[str],
+                   overrides: list[str] = (), synthetic: bool = False) -> None:
     """Where J's maximiser lies on the quickstart, per seed, for several draws of the noise paths b_i.
 
     The run's J uses one fixed path b_i per segment (common random numbers, eq. 4): its maximiser moves with
@@ -296,7 +297,10 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
     in % of each admissible interval against w_ref. The spread over draws is what the paths add; what stays
     as K grows is the measured spectra's own error and the objective's. ``objectives``: besides the config's
     (``config``), other objective plugins on the same data and paths (``mean-spectrum``: the mean spectra's
-    weighted least squares)."""
+    weighted least squares). ``overrides``: ``key=value`` changes of the quickstart config (e.g. the
+    measurement process without its sensor floor) to see what moves the maximiser. ``synthetic``: the
+    measured spectra replaced by the model's own, y_sim_i(w_ref) + b*_i with b* a fresh draw of B: what the
+    estimator itself does where the data follow its model exactly."""
     from scipy.optimize import minimize
 
     from suspid import registry
@@ -307,10 +311,10 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
     from suspid.workflows.jacobian import spectra_jacobian
     from suspid.workflows.problem import build_problem, segment_speeds
 
-    header("maximiser")
+    header(f"maximiser {' '.join(overrides)}{' synthetic' if synthetic else ''}")
     rows = []
     for seed in seeds:
-        config = load_config(PROBLEMS["quickstart"], [f"seed={seed}"])
+        config = load_config(PROBLEMS["quickstart"], [f"seed={seed}", *overrides])
         with open_run_dir(out / f"maximiser-{seed}", config_name=config.name, config_file=config.source_file,
                           fresh=True, log=lambda s: None) as ledger:
             problem = build_problem(config, ledger)
@@ -319,6 +323,14 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
         w_ref = np.array([float(config.data.w_ref[n]) for n in names])
         v = len(problem.segments)
         speeds = segment_speeds(problem.segments)
+        y_mes = problem.y_mes
+        if synthetic:
+            from suspid.method.noise import modelled_spectra
+            from suspid.workflows.tasks import simulate_spectra
+
+            y_ref = simulate_spectra(problem.simulator, dict(zip(names, w_ref)), problem.segments, config.spectra)[0]
+            y_mes = modelled_spectra(y_ref, problem.noise_model.sample(v, named_rng(seed, "bench-synthetic"), speeds),
+                                     problem.noise_model.floor_)
         cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
 
         def linear_model(x):
@@ -335,7 +347,7 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
             else:
                 b = problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-{k}-{K}"), speeds * K)
             plugin = problem.objective if objective == "config" else registry.get("objective", objective)()
-            fn = ObjectiveFunction(plugin, problem.y_mes, problem.freqs, b, weights=problem.weights,
+            fn = ObjectiveFunction(plugin, y_mes, problem.freqs, b, weights=problem.weights,
                                    channels=problem.channels, floor=problem.noise_model.floor_)
             x = w_ref.copy()
             for _ in range(3):
@@ -375,6 +387,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("part", choices=["jacobian", "cost", "identify", "maximiser"])
     ap.add_argument("--draws", type=int, default=4, help="maximiser: draws of the noise paths per seed")
     ap.add_argument("--paths", type=int, nargs="+", default=[1, 8], help="maximiser: paths per segment K")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="maximiser: a change of the quickstart config (repeatable)")
+    ap.add_argument("--synthetic", action="store_true",
+                    help="maximiser: measured spectra replaced by y_sim(w_ref) plus a draw of B")
     ap.add_argument("--objectives", nargs="+", default=["config"],
                     help="maximiser: 'config' (the config's objective) and/or objective plugins")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
@@ -391,7 +407,7 @@ def main(argv: list[str] | None = None) -> int:
     elif args.part == "cost":
         cost_part(args.problems, args.repeats)
     elif args.part == "maximiser":
-        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives)
+        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives, args.set, args.synthetic)
     else:
         identify_part(args.problems, args.seeds, args.out, args.table1_m0, args.reuse)
     return 0
