@@ -7,8 +7,9 @@ Two parts, each measured in one run so that the ratios hold on a loaded machine:
    differentiates, its analytic derivatives of the records against central finite
    differences (relative step 1e-3, the 2-norm over channels and samples); then the cost of
    the spectra's Jacobian (the records' derivatives carried through eq. 1-2, y included) for
-   the identified q parameters and for all of them, against a plain solve of the same
-   segments (median of ``--repeats``).
+   the identified q parameters and for all of them, each call against a plain solve of the
+   same segments timed just before it (mean ± sd over ``--repeats``), and the first call of a
+   fresh simulator (nothing kept between calls yet) against its own plain solve.
 2. ``identify``: both problems over ``--seeds``, three methods from the same config:
    the paper's EGO (``ego.refine`` off; on the Table 1 analogue the paper's loop of the
    ``ego.refine`` run, which is the same run up to its stop), EGO + refinement, and ``gauss-newton``. For each run:
@@ -81,33 +82,99 @@ def jacobian_part(repeats: int, n_segments: int | None) -> None:
               f"difference to central FD {errors[worst]:.2e} ({worst}); median {statistics.median(errors.values()):.1e} "
               f"[{time.perf_counter() - t0:.0f} s]")
         print("  per parameter: " + ", ".join(f"{n} {e:.1e}" for n, e in errors.items()))
-        # cost, on the run's segments
+        # cost, on the run's segments; the first call of a fresh simulator (nothing kept: sparsity patterns, the
+        # point-independent matrix derivatives, the compiled loops already compiled) apart from the later ones
         w = {n: float(v) for n, v in config.data.w_ref.items()}
+        fresh = build_simulator(config)
+        simulate_spectra(fresh, w, segments, config.spectra)
+        t = time.perf_counter()
+        simulate_spectra(fresh, {**w, identified[0]: w[identified[0]] * (1 + 1e-7)}, segments, config.spectra)
+        cold_plain = time.perf_counter() - t
+        t = time.perf_counter()
+        spectra_jacobian(fresh, w, names_all, segments, config.spectra)
+        cold = time.perf_counter() - t
         simulate_spectra(sim, w, segments, config.spectra)
         spectra_jacobian(sim, w, identified, segments, config.spectra)
-        plain, per_record, jac_q, jac_all = [], [], [], []
+        spectra_jacobian(sim, w, names_all, segments, config.spectra)
+        plain, per_record, r_q, r_all, c_q, c_all = [], [], [], [], [], []
+
+        def timed(fn, *args):
+            t, c = time.perf_counter(), time.process_time()
+            fn(*args)
+            return time.perf_counter() - t, time.process_time() - c
+
         for k in range(repeats):
             wk = {**w, identified[0]: w.get(identified[0], sim.values({})[identified[0]]) * (1 + 1e-6 * (k + 1))}
-            t = time.perf_counter()
-            simulate_spectra(sim, wk, segments, config.spectra)
-            plain.append(time.perf_counter() - t)
-            t = time.perf_counter()     # again at the same w: the receptance is cached, the per-record work is left
-            simulate_spectra(sim, wk, segments, config.spectra)
-            per_record.append(time.perf_counter() - t)
-            t = time.perf_counter()
-            spectra_jacobian(sim, wk, identified, segments, config.spectra)
-            jac_q.append(time.perf_counter() - t)
-            t = time.perf_counter()
-            spectra_jacobian(sim, wk, names_all, segments, config.spectra)
-            jac_all.append(time.perf_counter() - t)
-        p, pr, jq, ja = (statistics.median(x) for x in (plain, per_record, jac_q, jac_all))
-        print(f"  cost on {len(segments)} segments (median of {repeats}): plain solve {p:.3f} s; y + Jacobian for the "
-              f"q = {len(identified)} identified {jq:.3f} s = {jq / p:.2f} plain (central FD: {2 * len(identified) + 1}); "
-              f"for all {len(names_all)} {ja:.3f} s = {ja / p:.2f} plain (central FD: {2 * len(names_all) + 1})")
-        print(f"  per-record work of a plain solve (receptance cached: products, inverse FFTs, spectra) {pr:.3f} s = "
-              f"{pr / p:.2f} of it; n_p derivative records of every segment at that cost per record: "
-              f"1 + n_p x {pr / p:.2f} = {1 + len(identified) * pr / p:.2f} plain for q = {len(identified)}, "
-              f"{1 + len(names_all) * pr / p:.2f} for all {len(names_all)}")
+            p, pc = timed(simulate_spectra, sim, wk, segments, config.spectra)
+            plain.append(p)
+            # again at the same w: the receptance is cached, the per-record work is left
+            per_record.append(timed(simulate_spectra, sim, wk, segments, config.spectra)[0] / p)
+            j, jc = timed(spectra_jacobian, sim, wk, identified, segments, config.spectra)
+            r_q.append(j / p)
+            c_q.append(jc / pc)
+            wk = {**wk, identified[0]: wk[identified[0]] * (1 + 1e-7)}     # a new point for the plain solve too
+            p, pc = timed(simulate_spectra, sim, wk, segments, config.spectra)
+            plain.append(p)
+            j, jc = timed(spectra_jacobian, sim, wk, names_all, segments, config.spectra)
+            r_all.append(j / p)
+            c_all.append(jc / pc)
+
+        def ms(x):
+            return f"{statistics.mean(x):.2f} ± {statistics.stdev(x) if len(x) > 1 else 0.0:.2f}"
+
+        print(f"  cost on {len(segments)} segments, {repeats} repeats, each ratio against the plain solve timed just "
+              f"before it (mean ± sd): plain solve {statistics.mean(plain):.3f} ± {statistics.stdev(plain):.3f} s; "
+              f"y + Jacobian for the q = {len(identified)} identified {ms(r_q)} plain in wall time, {ms(c_q)} in CPU "
+              f"time (central FD: {2 * len(identified) + 1}); for all {len(names_all)} {ms(r_all)} plain in wall time, "
+              f"{ms(c_all)} in CPU time (central FD: {2 * len(names_all) + 1})")
+        print(f"  first call of a fresh simulator for all {len(names_all)}: {cold:.3f} s = {cold / cold_plain:.2f} "
+              f"plain (its own plain solve {cold_plain:.3f} s)")
+        pr = statistics.mean(per_record)
+        print(f"  per-record work of a plain solve (receptance cached: products, inverse FFTs, spectra) {ms(per_record)} "
+              f"of it; n_p derivative records of every segment at that cost per record: "
+              f"1 + n_p x {pr:.2f} = {1 + len(identified) * pr:.2f} plain for q = {len(identified)}, "
+              f"{1 + len(names_all) * pr:.2f} for all {len(names_all)}")
+
+
+def cost_part(problems: list[str], repeats: int) -> None:
+    """The jacobian part's cost figures alone (no accuracy check), for whichever suspid is installed: one
+    JSON line per problem and parameter set, wall and CPU ratios to a plain solve timed just before each
+    Jacobian. Run with another checkout's interpreter to compare versions in the same conditions, e.g.
+    ``/path/to/main/.venv/bin/python benchmarks/bench_gradient.py cost`` beside this checkout's."""
+    import suspid
+    from suspid.config import build_simulator, load_config
+    from suspid.workflows.jacobian import spectra_jacobian
+    from suspid.workflows.problem import synthetic_track
+    from suspid.workflows.tasks import simulate_spectra
+
+    header(f"cost  suspid from {Path(suspid.__file__).parent}")
+    for problem in problems:
+        config = load_config(PROBLEMS[problem])
+        sim = build_simulator(config)
+        names = sim.differentiable([p.name for p in sim.parameters()])
+        ident = list(config.parameters)
+        segments = synthetic_track(config, "measurement")
+        w = {n: float(v) for n, v in config.data.w_ref.items()}
+        simulate_spectra(sim, w, segments, config.spectra)
+        for which in (names, ident):
+            spectra_jacobian(sim, w, which, segments, config.spectra)
+        rows = {"all": [], "q": []}
+        for k in range(repeats):
+            for which, asked in (("all", names), ("q", ident)):
+                wk = {**w, ident[0]: w[ident[0]] * (1 + 1e-6 * (k + 1) + (1e-7 if which == "q" else 0.0))}
+                t, c = time.perf_counter(), time.process_time()
+                simulate_spectra(sim, wk, segments, config.spectra)
+                p, pc = time.perf_counter() - t, time.process_time() - c
+                t, c = time.perf_counter(), time.process_time()
+                spectra_jacobian(sim, wk, asked, segments, config.spectra)
+                rows[which].append(((time.perf_counter() - t) / p, (time.process_time() - c) / pc, pc))
+        for which, sel in rows.items():
+            wall, cpu, plain = zip(*sel)
+            print(json.dumps({"problem": problem, "parameters": which, "n_p": len(names if which == "all" else ident),
+                              "wall_ratio": round(statistics.mean(wall), 2), "wall_sd": round(statistics.stdev(wall), 2),
+                              "cpu_ratio": round(statistics.mean(cpu), 2), "cpu_sd": round(statistics.stdev(cpu), 2),
+                              "plain_cpu_s": round(statistics.mean(plain), 3), "load": round(os.getloadavg()[0], 1)}),
+                  flush=True)
 
 
 # ------------------------------------------------------------------------------------------- identify
@@ -216,9 +283,116 @@ def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: i
                   f"{np.median(eq) if eq else float('nan'):.1f} |")
 
 
+# ------------------------------------------------------------------------------------------- maximiser
+def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, objectives: list[str],
+                   overrides: list[str] = (), synthetic: bool = False) -> None:
+    """Where J's maximiser lies on the quickstart, per seed, for several draws of the noise paths b_i.
+
+    The run's J uses one fixed path b_i per segment (common random numbers, eq. 4): its maximiser moves with
+    the draw as well as with the measured spectra. For each seed (its measured spectra and noise model B as
+    the run builds them) and each of ``draws`` draws (draw 0: the run's own paths), J's maximiser is found by
+    Gauss-Newton steps from w_ref (the spectra linearised in log w with the analytic Jacobian, J kept exact,
+    three re-linearisations), with K paths per segment for each K of ``paths`` (the v K modelled spectra
+    y_sim_i + b_ik against the v measured ones: the same objective with less of the paths' own noise). Errors
+    in % of each admissible interval against w_ref. The spread over draws is what the paths add; what stays
+    as K grows is the measured spectra's own error and the objective's. ``objectives``: besides the config's
+    (``config``), other objective plugins on the same data and paths (``mean-spectrum``: the mean spectra's
+    weighted least squares). ``overrides``: ``key=value`` changes of the quickstart config (e.g. the
+    measurement process without its sensor floor) to see what moves the maximiser. ``synthetic``: the
+    measured spectra replaced by the model's own, y_sim_i(w_ref) + b*_i with b* a fresh draw of B: what the
+    estimator itself does where the data follow its model exactly."""
+    from scipy.optimize import minimize
+
+    from suspid import registry
+    from suspid.config import load_config
+    from suspid.infra.lock import open_run_dir
+    from suspid.infra.seeds import rng as named_rng
+    from suspid.method.objective import ObjectiveFunction
+    from suspid.workflows.jacobian import spectra_jacobian
+    from suspid.workflows.problem import build_problem, segment_speeds
+
+    header(f"maximiser {' '.join(overrides)}{' synthetic' if synthetic else ''}")
+    rows = []
+    for seed in seeds:
+        config = load_config(PROBLEMS["quickstart"], [f"seed={seed}", *overrides])
+        with open_run_dir(out / f"maximiser-{seed}", config_name=config.name, config_file=config.source_file,
+                          fresh=True, log=lambda s: None) as ledger:
+            problem = build_problem(config, ledger)
+        names, bounds = problem.names, np.asarray(problem.bounds, dtype=float)
+        width = bounds[:, 1] - bounds[:, 0]
+        w_ref = np.array([float(config.data.w_ref[n]) for n in names])
+        v = len(problem.segments)
+        speeds = segment_speeds(problem.segments)
+        y_mes = problem.y_mes
+        if synthetic:
+            from suspid.method.noise import modelled_spectra
+            from suspid.workflows.tasks import simulate_spectra
+
+            y_ref = simulate_spectra(problem.simulator, dict(zip(names, w_ref)), problem.segments, config.spectra)[0]
+            y_mes = modelled_spectra(y_ref, problem.noise_model.sample(v, named_rng(seed, "bench-synthetic"), speeds),
+                                     problem.noise_model.floor_)
+        cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+        def linear_model(x):
+            key = tuple(np.round(x, 9))
+            if key not in cache:
+                res = spectra_jacobian(problem.simulator, dict(zip(names, x)), names, problem.segments,
+                                       config.spectra)
+                cache[key] = (res.y, res.jacobian * x)             # dy / dlog w
+            return cache[key]
+
+        for k, K, objective in ((k, K, o) for o in objectives for k in range(draws) for K in paths):
+            if k == 0 and K == 1:
+                b = problem.b
+            else:
+                b = problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-{k}-{K}"), speeds * K)
+            plugin = problem.objective if objective == "config" else registry.get("objective", objective)()
+            fn = ObjectiveFunction(plugin, y_mes, problem.freqs, b, weights=problem.weights,
+                                   channels=problem.channels, floor=problem.noise_model.floor_)
+            x = w_ref.copy()
+            for _ in range(3):
+                y, jac = linear_model(x)
+
+                def negJ(u, y=y, jac=jac, x=x):
+                    z = np.log(bounds[:, 0] + u * width) - np.log(x)
+                    return -fn.evaluate(np.tile(y + jac @ z, (K, 1, 1)))[0]
+
+                u0 = (x - bounds[:, 0]) / width
+                lo, hi = np.clip(u0 - 0.15, 0, 1), np.clip(u0 + 0.15, 0, 1)
+                r = minimize(negJ, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                             options={"maxiter": 40, "eps": 1e-5})
+                x = bounds[:, 0] + np.clip(r.x, lo, hi) * width
+            err = 100 * (x - w_ref) / width
+            row = {"seed": seed, "objective": objective, "draw": k, "paths_per_segment": K,
+                   "errors": dict(zip(names, np.round(err, 2).tolist())), "worst": float(np.max(np.abs(err)))}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "maximiser.json").write_text(json.dumps(rows, indent=1))
+    print()
+    print("| seed | objective | paths per segment | worst error of J's maximiser per draw (%) | mean over draws per component (%) | "
+          "sd over draws per component (%) |")
+    print("|---|---|---|---|---|---|")
+    for seed, objective, K in ((s_, o, K) for s_ in seeds for o in objectives for K in paths):
+        sel = [r for r in rows if r["seed"] == seed and r["paths_per_segment"] == K and r["objective"] == objective]
+        E = np.array([[r["errors"][n] for n in sel[0]["errors"]] for r in sel])
+        worst = ", ".join(f"{r['worst']:.2f}" for r in sel)
+        means = ", ".join(f"{n} {m:+.2f}" for n, m in zip(sel[0]["errors"], E.mean(axis=0)))
+        sds = ", ".join(f"{sd:.2f}" for sd in (E.std(axis=0, ddof=1) if len(E) > 1 else np.zeros(E.shape[1])))
+        print(f"| {seed} | {objective} | {K} | {worst} | {means} | {sds} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("part", choices=["jacobian", "identify"])
+    ap.add_argument("part", choices=["jacobian", "cost", "identify", "maximiser"])
+    ap.add_argument("--draws", type=int, default=4, help="maximiser: draws of the noise paths per seed")
+    ap.add_argument("--paths", type=int, nargs="+", default=[1, 8], help="maximiser: paths per segment K")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="maximiser: a change of the quickstart config (repeatable)")
+    ap.add_argument("--synthetic", action="store_true",
+                    help="maximiser: measured spectra replaced by y_sim(w_ref) plus a draw of B")
+    ap.add_argument("--objectives", nargs="+", default=["config"],
+                    help="maximiser: 'config' (the config's objective) and/or objective plugins")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
     ap.add_argument("--problems", nargs="+", choices=list(PROBLEMS), default=list(PROBLEMS))
     ap.add_argument("--out", type=Path, default=Path("/tmp/bench_gradient"))
@@ -230,6 +404,10 @@ def main(argv: list[str] | None = None) -> int:
     sys.path.insert(0, str(ROOT))
     if args.part == "jacobian":
         jacobian_part(args.repeats, args.segments)
+    elif args.part == "cost":
+        cost_part(args.problems, args.repeats)
+    elif args.part == "maximiser":
+        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives, args.set, args.synthetic)
     else:
         identify_part(args.problems, args.seeds, args.out, args.table1_m0, args.reuse)
     return 0

@@ -154,17 +154,55 @@ def test_grouped_matrix_derivatives_equal_the_one_by_one_ones(train):
     names = sim.differentiable([p.name for p in sim.parameters()])
     v0 = sim.values({})
     model = sim._model(v0, 83.3, TimeFeatures())
-    S.matrix_derivatives(model, v0, 83.3, names, model.linear_system())            # learns the patterns
+    S._point_derivatives(model, v0, 83.3, names, model.linear_system())           # learns the patterns
     groups = S._groups(names, S._PATTERNS[model][tuple(names)])
     assert len(groups) <= len(names) // 2
     values = sim.values({"k_sec_z": 2.8e5, "c_sec_z": 1.4e4, "c_yaw": 2.1e5, "m_car": 5.0e4, "conicity": 0.2})
     model.update(values, 83.3)
     base = model.linear_system()
-    grouped = S.matrix_derivatives(model, values, 83.3, names, base)
+    grouped = S._point_derivatives(model, values, 83.3, names, base)
     single = [S._single(model, values, 83.3, n, base) for n in names]
     for n, a, b in zip(names, grouped, single):
         for f in ("dM", "dK", "dD", "dG"):
             np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f"{n} {f}")
+
+
+@pytest.mark.parametrize("preset", ["conventional-hs", "tgv-articulated"])
+def test_point_independent_matrix_derivatives_are_the_same_everywhere(train, preset):
+    """The structure the kept matrix derivatives rest on: the kept kinds' derivatives are the same (to rounding)
+    at a point where every differentiable parameter moved by up to 10 %, a mass's and the conicity's are not;
+    and every derivative is the same where only the kept kinds moved."""
+    from suspid.plugins.simulators.exudyn_train import sensitivity as S
+    from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
+
+    sim = train(solver="frequency", vehicle=preset)
+    names = sim.differentiable([p.name for p in sim.parameters()])
+    kept = [n for n in names if S.kind_of(n) in S.POINT_INDEPENDENT]
+    assert len(kept) >= 20 and "m_car" in names and "m_car" not in kept
+    v0 = sim.values({})
+    rng = np.random.default_rng(1)
+    v1 = {**v0, **{n: v0[n] * (1 + 0.1 * rng.uniform(-1, 1)) for n in names}}
+    model = sim._model(v0, 83.3, TimeFeatures())
+
+    def derivatives(values, which):
+        model.update(values, 83.3)
+        base = model.linear_system()
+        return [S._single(model, values, 83.3, n, base) for n in which]
+
+    def rel(a, b):
+        return max(float(np.max(np.abs(getattr(a, f) - getattr(b, f)))) / float(np.max(np.abs(getattr(a, f))))
+                   for f in ("dM", "dK", "dD", "dG") if np.any(getattr(a, f)))
+
+    at_v0 = derivatives(v0, names)
+    for n, a, b in zip(names, at_v0, derivatives(v1, names)):
+        if n in kept:
+            assert rel(a, b) < 1e-7, (n, rel(a, b))
+        elif n in ("m_car", "conicity"):
+            assert rel(a, b) > 1e-3, n
+    # the others' derivatives depend on the others alone: the same where only the kept kinds moved
+    v2 = {**v0, **{n: v1[n] for n in kept}}
+    for n, a, b in zip(names, at_v0, derivatives(v2, names)):
+        assert rel(a, b) < 1e-7, (n, rel(a, b))
 
 
 def test_linearised_shift_is_the_refit_of_a_linear_model():
@@ -185,3 +223,71 @@ def test_an_undeclared_parameter_is_a_one_line_error(train, segments):
 
     with pytest.raises(SuspidError, match="'no_such' not declared|no_such.* not declared"):
         spectra_jacobian(train(solver="frequency"), {}, ["k_sec_z", "no_such"], segments, SPECTRA)
+
+
+@pytest.mark.parametrize("window,detrend", [("boxcar", "mean"), ("boxcar", "linear"), ("hann", "none"),
+                                            ("hann", "mean")])
+def test_record_spectrum_derivatives_match_differences_of_the_spectrum(window, detrend):
+    """Y's derivative along given record derivatives (double and single precision) against central differences
+    of Y itself, for every window and detrend (the compiled cell sums and the numpy reference alike)."""
+    from suspid.method import spectra as SP
+
+    rng = np.random.default_rng(4)
+    fs, n_t = 100.0, 1000
+    a = rng.standard_normal((3, n_t)) + 0.3
+    d = rng.standard_normal((2, 3, n_t))
+    opt = {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 40, "window": window, "detrend": detrend}
+    y, dy = SP.record_spectrum_derivatives(a, d, fs, opt)
+    _, dy32 = SP.record_spectrum_derivatives(a, d.astype(np.float32), fs, opt)
+    h = 1e-6
+    for k in range(2):
+        fd = (SP.record_spectrum(a + h * d[k], fs, opt) - SP.record_spectrum(a - h * d[k], fs, opt)) / (2 * h)
+        np.testing.assert_allclose(dy[k], fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(fd)))
+        np.testing.assert_allclose(dy32[k], fd, rtol=1e-3, atol=1e-4 * np.max(np.abs(fd)))
+    opt_ = SP.parse_options(SP.SpectraOptions, opt, "spectra")
+    _, mean, a_hat, start, stop = SP._record_power(a, fs, opt_)
+    prepared = SP._prepare(d.reshape(-1, n_t), opt_) if (window, detrend) != ("boxcar", "mean") else d
+    raw = np.fft.rfft(prepared, axis=-1).reshape(2, 3, -1)
+    ref = np.empty_like(dy)
+    SP._cell_derivatives_numpy(a_hat, raw, start, stop, mean, 1.0 / (fs * np.sqrt(n_t / fs)), ref)
+    np.testing.assert_allclose(dy, ref, rtol=1e-10, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def test_compiled_loops_equal_their_numpy_references():
+    """The receptance derivatives' compiled contraction and the records' products against the numpy forms
+    used without numba."""
+    from suspid.plugins.simulators.exudyn_train import sensitivity as S
+
+    rng = np.random.default_rng(2)
+
+    def cplx(*shape):
+        return rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+
+    O_t, W = cplx(7, 4, 16), cplx(9, 3, 16)
+    stack_rows, offsets = rng.integers(0, 7, 9), np.array([0, 2, 2, 6, 9])
+    a = cplx(4, 3, 4, 40)
+    b = a.copy()
+    S._contract(O_t, W, stack_rows, offsets, a, 5)
+    S._contract_numpy(O_t, W, stack_rows, offsets, b, 5)
+    np.testing.assert_allclose(a, b, rtol=1e-12)
+    dH, U = cplx(5, 3, 4, 33).astype(np.complex64), cplx(3, 33).astype(np.complex64)
+    x, y = np.empty((5, 4, 33), np.complex64), np.empty((5, 4, 33), np.complex64)
+    S._combine(dH, U, x)
+    S._combine_numpy(dH, U, y)
+    np.testing.assert_allclose(x, y, rtol=1e-5, atol=1e-5)
+
+
+def test_kept_matrix_derivatives_give_a_fresh_simulators_jacobian(train):
+    """After a Jacobian at one point, the one at another point (suspension rates moved, then a mass too) equals
+    that of a fresh simulator there: what is kept between calls does not change the derivatives."""
+    sim = train(solver="frequency")
+    names = sim.differentiable([p.name for p in sim.parameters()])
+    segs = sample_segments(1, length_m=300.0, speed_mps=83.3, seed=7)
+    sim.simulate_jacobian({"k_sec_z": 2.9e5, "c_yaw": 2.2e5}, segs, names)
+    for w in ({"k_sec_z": 3.2e5, "c_yaw": 2.6e5, "k_prim_z": 1.3e6},
+              {"k_sec_z": 3.2e5, "c_yaw": 2.6e5, "m_car": 4.6e4}):
+        (_, kept), = sim.simulate_jacobian(w, segs, names)
+        (_, fresh), = train(solver="frequency").simulate_jacobian(w, segs, names)
+        for k, n in enumerate(names):
+            err = np.linalg.norm(kept[k] - fresh[k]) / np.linalg.norm(fresh[k])
+            assert err < 1e-5, (w, n, err)

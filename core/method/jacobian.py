@@ -30,7 +30,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from suspid.interfaces import Response
-from suspid.method.spectra import SpectraOptions, record_spectrum_derivatives
+from suspid.method.spectra import SpectraOptions, frequency_grid, record_spectrum_derivatives
 from suspid.options import parse_options
 
 __all__ = ["SpectraJacobian", "spectra_derivatives", "gauss_newton_information", "linearised_shift",
@@ -52,12 +52,15 @@ def spectra_derivatives(responses: Sequence[Response], d_accelerations: Sequence
     :returns: ``y (v, n_channels, n_freqs)`` dB and ``dy (v, n_channels, n_freqs, n_p)`` dB per SI unit.
     """
     opt = parse_options(SpectraOptions, options, "spectra")
-    ys, dys = [], []
+    ys, dys = [], None
     for i, (r, da) in enumerate(zip(responses, d_accelerations)):
-        y, dy = record_spectrum_derivatives(r.accelerations, da, r.fs, opt, name=r.segment or str(i))
+        n_p, n_ch = np.shape(da)[0], np.shape(r.accelerations)[0]
+        if dys is None:     # written in place, each segment's (n_p, n_channels, n_freqs) a view of its slot
+            dys = np.empty((len(responses), n_ch, frequency_grid(opt)[0].size, n_p))
+        y, _ = record_spectrum_derivatives(r.accelerations, da, r.fs, opt, name=r.segment or str(i),
+                                           out=np.moveaxis(dys[i], -1, 0))
         ys.append(y)
-        dys.append(np.moveaxis(dy, 0, -1))
-    return np.stack(ys), np.stack(dys)
+    return np.stack(ys), dys
 
 
 @dataclass

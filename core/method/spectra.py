@@ -55,7 +55,13 @@ from typing import Any, Literal, Mapping, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
+from scipy import fft as sp_fft
 from scipy.special import digamma
+
+try:  # numba is a dependency; without it the spectra's derivatives fall back to numpy
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised only without numba
+    njit = None
 
 from suspid.options import parse_options
 from suspid.errors import DataError
@@ -256,32 +262,72 @@ def _record_power(a: np.ndarray, fs: float, opt: SpectraOptions, what: str = "re
 
 def record_spectrum_derivatives(accelerations: np.ndarray, d_accelerations: np.ndarray, fs: float,
                                 options: SpectraOptions | Mapping[str, Any] | None = None,
-                                name: str = "") -> tuple[np.ndarray, np.ndarray]:
+                                name: str = "", out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Y (:func:`record_spectrum`) and its derivatives from those of the accelerations.
 
     Detrend, window and transform are linear, so dÂ is the amplitude of dA; with P_j the mean of |Â|² over
     cell j, Y_j = 5 log10 P_j and dY_j = (5 / ln 10) dP_j / P_j, dP_j the cell mean of 2 Re(conj(Â) dÂ)
     (0 where P_j sits at the amplitude floor).
 
-    :param d_accelerations: ``(n_p, n_channels, n_t)``, (m/s²) per unit of each parameter.
+    :param d_accelerations: ``(n_p, n_channels, n_t)``, (m/s²) per unit of each parameter; single precision
+        is kept (the transform and the products in float32, the sums over each cell in double).
+    :param out: where to write dY, ``(n_p, n_channels, n_freqs)`` float (a view of a larger array: a caller's
+        Jacobian in its own layout), or ``None``.
     :returns: ``Y (n_channels, n_freqs)`` dB and ``dY (n_p, n_channels, n_freqs)`` dB per unit.
     """
     opt = parse_options(SpectraOptions, options, "spectra")
     what = f"record '{name}'" if name else "record"
     a = _checked(accelerations, fs, what)
     y, mean, a_hat, start, stop = _record_power(a, fs, opt, what)
-    d = np.asarray(d_accelerations, dtype=float)
+    d = np.asarray(d_accelerations)
+    if d.dtype not in (np.float32, np.float64):
+        d = d.astype(float)
+    n_t = d.shape[-1]
+    scale = 1.0 / (fs * math.sqrt(n_t / fs))
     if opt.detrend == "mean" and opt.window == "boxcar":
-        # removing a constant moves line 0 alone, which no cell of Ω holds: the transform of d as it is
-        da_hat = np.fft.rfft(d, axis=-1) / (fs * math.sqrt(d.shape[-1] / fs))
+        # removing a constant moves line 0 alone, which no cell of Ω holds: the transform of d as it is, in
+        # d's own precision (single-precision records of a simulator's derivatives stay single)
+        da_hat = sp_fft.rfft(d, axis=-1)
     else:
-        da_hat = fourier_amplitude(d, fs, opt)[1]
+        da_hat = sp_fft.rfft(_prepare(d.reshape(-1, n_t), opt), axis=-1).reshape(d.shape[:-1] + (-1,))
+    dy = np.empty(da_hat.shape[:-1] + (start.size,)) if out is None else out
+    _cell_derivatives(np.ascontiguousarray(a_hat), da_hat.reshape(-1, *a_hat.shape), start, stop, mean,
+                      scale, dy.reshape(-1, *mean.shape) if out is None else dy)
+    return y, dy
+
+
+def _cell_derivatives_numpy(a_hat: np.ndarray, da_hat: np.ndarray, start: np.ndarray, stop: np.ndarray,
+                            mean: np.ndarray, scale: float, out: np.ndarray) -> None:
+    """out ``(n_p, n_channels, n_freqs)`` = (5 / ln 10) ∂P / P with ∂P the cell means of 2 Re(conj(Â) scale dÂ)
+    (0 where P sits at the amplitude floor); ``a_hat (n_channels, n_lines)``, ``da_hat (n_p, n_channels,
+    n_lines)`` unscaled. The reference of the compiled :func:`_cell_derivatives`."""
     top = int(np.max(stop)) + 1                   # lines above the grid's last cell are not read
     a_top, da_top = a_hat[:, :top], da_hat[..., :top]
-    dmean = cell_means(2.0 * (a_top.real[None] * da_top.real + a_top.imag[None] * da_top.imag), start, stop)
+    dmean = cell_means(2.0 * scale * (a_top.real[None] * da_top.real + a_top.imag[None] * da_top.imag),
+                       start, stop)
     live = mean > AMPLITUDE_FLOOR ** 2
-    dy = np.where(live[None], (5.0 / math.log(10.0)) * dmean / np.where(live, mean, 1.0)[None], 0.0)
-    return y, dy
+    out[...] = np.where(live[None], (5.0 / math.log(10.0)) * dmean / np.where(live, mean, 1.0)[None], 0.0)
+
+
+if njit is not None:
+    @njit(cache=True, nogil=True)
+    def _cell_derivatives(a_hat, da_hat, start, stop, mean, scale, out):  # pragma: no cover - compiled
+        factor = 2.0 * scale * 5.0 / math.log(10.0)
+        floor = AMPLITUDE_FLOOR ** 2
+        n_p, n_ch = da_hat.shape[0], da_hat.shape[1]
+        for k in range(n_p):
+            for c in range(n_ch):
+                for j in range(start.size):
+                    if not mean[c, j] > floor:
+                        out[k, c, j] = 0.0
+                        continue
+                    acc = 0.0
+                    for line in range(start[j] + 1, stop[j] + 1):
+                        x, dx = a_hat[c, line], da_hat[k, c, line]
+                        acc += x.real * dx.real + x.imag * dx.imag
+                    out[k, c, j] = factor * acc / ((stop[j] - start[j]) * mean[c, j])
+else:  # pragma: no cover - without numba
+    _cell_derivatives = _cell_derivatives_numpy
 
 
 def compute_spectra(responses: Sequence[Response],

@@ -59,7 +59,9 @@ class JacobianTask:
             raise PluginBugError(f"{registry.describe('simulator', sim.name)} failed to differentiate at "
                                  f"w = {dict(w)}: {type(exc).__name__}: {exc}") from exc
         responses = [r for r, _ in pairs]
-        grads = [np.asarray(g, dtype=float) for _, g in pairs]
+        # single-precision derivatives stay single (the spectra's derivatives read them as they are)
+        grads = [g if isinstance(g, np.ndarray) and g.dtype in (np.float32, np.float64) else np.asarray(g, dtype=float)
+                 for _, g in pairs]
         for r, g in zip(responses, grads):
             if g.shape != (len(self.names),) + np.shape(r.accelerations):
                 raise PluginBugError(f"{registry.describe('simulator', sim.name)}: simulate_jacobian returned "

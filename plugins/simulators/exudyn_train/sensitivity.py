@@ -44,9 +44,16 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import fft as sfft
+from scipy import sparse
 
 from suspid.elements import kind_of
 from suspid.infra.threads import single_blas_thread
+
+try:  # numba is a dependency; without it the products fall back to numpy
+    from numba import njit
+except ImportError:  # pragma: no cover - exercised only without numba
+    njit = None
+HAVE_NUMBA = njit is not None
 
 from .model import GEOMETRY, LinearSystem, TrainModel
 from .solvers import FrequencyResponse, InputSpectra, fft_plan
@@ -126,6 +133,19 @@ Pattern = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 _PATTERNS: "weakref.WeakKeyDictionary[TrainModel, dict[tuple[str, ...], list[Pattern]]]" = weakref.WeakKeyDictionary()
 
+POINT_INDEPENDENT = (LINEAR - {"conicity", "kalker_scale"}) | {
+    "I_car_x", "I_car_y", "I_car_z", "I_bogie_x", "I_bogie_y", "I_bogie_z", "I_ws_x", "I_ws_y", "I_ws_z"}
+"""Kinds whose matrix derivatives do not depend on where they are taken (for a given model, speed and
+geometry): a spring's or a damper's rate multiplies a deformation set by the geometry alone (∂K/∂k, ∂D/∂c
+constant), an inertia multiplies an angular acceleration, and its gyroscopic term the spin the speed sets.
+Not so the masses (the wheel loads set the Hertzian stiffness and Kalker's coefficients), the wheelbase
+``l0``, the rail radius, the conicity and the creep scale (their terms are products among themselves), whose
+derivatives depend on these parameters only. ``tests/test_jacobian.py`` checks both claims on both presets."""
+
+_KEPT: "weakref.WeakKeyDictionary[TrainModel, dict]" = weakref.WeakKeyDictionary()
+"""Per model: the matrix derivatives kept between calls (:func:`matrix_derivatives`): the rates' and inertias'
+per speed and element groups, the others' at the latest values of the parameters they depend on."""
+
 
 def _pattern(d: MatrixDerivative) -> Pattern:
     return d.dM != 0, d.dK != 0, d.dD != 0, d.dG != 0
@@ -163,8 +183,40 @@ def matrix_derivatives(model: TrainModel, values: dict[str, float], speed: float
     on it. A group whose difference changes an entry outside all its patterns (a parameter that reaches
     further at this point) is differentiated again one by one, and its patterns renewed.
 
+    The matrices are A(θ) + Σ_r w_r B_r: the rates and inertias w_r (:data:`POINT_INDEPENDENT`) enter
+    linearly with matrices B_r of the geometry and the speed, the other parameters θ (masses, wheelbase,
+    conicity, creep scale, rail radius) through A. So ∂/∂w_r = B_r is the same at every point and ∂/∂θ
+    depends on θ alone: each derivative is kept (per model, speed and set of element groups given their own
+    values; the θ-dependent ones for the latest θ only) and read again wherever θ has not moved: an
+    identification of rates linearises the model for the first Jacobian only.
+
     :raises ValueError: a parameter moves the sensors' matrices or the wheelsets (geometry): not differentiable here.
     """
+    kept = _KEPT.setdefault(model, {})
+    context = (float(speed), tuple(sorted(k for k in values if "[" in k)))
+    others = context + tuple(sorted((k, float(v)) for k, v in values.items()
+                                    if kind_of(k) not in POINT_INDEPENDENT))
+    if kept.get("others") != others:       # θ moved: only the latest θ's derivatives are kept (bounded memory)
+        kept["others"], kept["at_others"] = others, {}
+    rates, at_others = kept.setdefault("rates", {}), kept["at_others"]
+
+    def store(n: str) -> dict:
+        return rates if kind_of(n) in POINT_INDEPENDENT else at_others
+
+    def key(n: str) -> tuple:
+        return (n,) + context if kind_of(n) in POINT_INDEPENDENT else n
+
+    found = {n: store(n).get(key(n)) for n in names}
+    todo = [n for n in names if found[n] is None]
+    if todo:
+        for n, d in zip(todo, _point_derivatives(model, values, speed, todo, base)):
+            found[n] = store(n)[key(n)] = d
+    return [found[n] for n in names]  # type: ignore[misc]
+
+
+def _point_derivatives(model: TrainModel, values: dict[str, float], speed: float, names: list[str],
+                       base: LinearSystem) -> list[MatrixDerivative]:
+    """:func:`matrix_derivatives` at ``values`` (every one computed), sharing linearisations after a first call."""
     key = tuple(names)
     known = _PATTERNS.setdefault(model, {})
     try:
@@ -214,6 +266,22 @@ def _support(*matrices: np.ndarray, axis: int) -> np.ndarray:
     return np.flatnonzero(hit)
 
 
+def _conjugate_pairs(response: FrequencyResponse) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(first, real)``: the modes m with m + 1 their exact conjugate (eigenvalue and eigenvector, as LAPACK
+    returns a real matrix's complex pairs) and the real modes; ``None`` when they do not cover every mode."""
+    lam, V = response.eigenvalues, response.V
+    first = np.flatnonzero(lam.imag > 0)
+    real = np.flatnonzero(lam.imag == 0)
+    if first.size and first[-1] + 1 >= lam.size:
+        return None
+    if 2 * first.size + real.size != lam.size or np.intersect1d(first + 1, np.concatenate([first, real])).size:
+        return None
+    if not (np.array_equal(lam[first + 1], np.conj(lam[first]))
+            and np.array_equal(V[:, first + 1], np.conj(V[:, first]))):
+        return None
+    return first, real
+
+
 def receptance_derivatives(response: FrequencyResponse, derivatives: list[MatrixDerivative],
                            freqs: np.ndarray) -> np.ndarray:
     """∂H/∂p ``(n_p, 3, n_sensors, n_freqs)`` in the layout of :meth:`.solvers.FrequencyResponse.by_input`.
@@ -241,6 +309,27 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
     all_cols = np.unique(np.concatenate([c for *_, c in plans] + [np.zeros(0, int)]))
     row_at = {r: i for i, r in enumerate(all_rows)}
     col_at = {c: i for i, c in enumerate(all_cols)}
+    # every parameter's force rows stacked: W = ∂F U - ∂Z Q for all of them from three sparse products
+    # (∂K on the positions read, ∂D and ∂M on the velocities) and one with the wheelsets' delays (∂G)
+    offsets = np.cumsum([0] + [pl[0].size for pl in plans])
+    n_stack = int(offsets[-1])
+    entries: dict[str, tuple[list, list, list]] = {"K": ([], [], []), "D": ([], [], []), "M": ([], [], [])}
+    dG_stack = np.zeros((lin.G.shape[0], n_stack, 3))
+    for d, (rows, k_cols, v_cols, _), lo in zip(derivatives, plans, offsets):
+        for key, mat, cols, state in (("K", d.dK, k_cols, position_of[k_cols]), ("D", d.dD, v_cols, p + v_cols),
+                                      ("M", d.dM, v_cols, p + v_cols)):
+            block = mat[np.ix_(rows, cols)]
+            i, j = np.nonzero(block)
+            entries[key][0].append(lo + i)
+            entries[key][1].append(np.array([col_at[c] for c in state], dtype=int)[j] if j.size else j)
+            entries[key][2].append(block[i, j])
+        dG_stack[:, lo:lo + rows.size, :] = d.dG[:, rows, :]
+    stacked = {key: sparse.csr_matrix((np.concatenate(v) if v else np.zeros(0), (np.concatenate(i).astype(int),
+                                                                                 np.concatenate(j).astype(int))),
+                                      shape=(n_stack, len(all_cols)))
+               for key, (i, j, v) in entries.items()}
+    dG_flat = dG_stack.reshape(dG_stack.shape[0], -1).T                                # (n_stack 3, n_w)
+    stack_rows = np.array([row_at[r] for pl in plans for r in pl[0]], dtype=np.int64)  # O's column of each
     f = np.asarray(freqs, dtype=float)
     nf = f.size
     n_out = lin.C.shape[0]
@@ -253,19 +342,33 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
         # sensors per unit force on the touched coordinates: (-ω² C + C_disp) V diag(z) V^-1 [0; M^-1]
         Psi = response.Vinv[:, p:] @ response.Minv[:, all_rows]                      # (m2, n_rows)
         V_cols = response.V[all_cols]                                                  # (n_cols, m2)
-        # O(ω) = Σ_m z_m(ω) (-ω² L[:, m] + Ld[:, m]) Psi[m, :]: two products of (n_f, m2) by the modes'
-        # outer products (m2, n_out n_rows), one large matrix product each instead of n_f small ones
+        # O(ω) = Σ_m z_m(ω) (-ω² L[:, m] + Ld[:, m]) Psi[m, :]. With -ω² z_m = (iω)² / (iω - λ_m)
+        # = iω + λ_m + λ_m² z_m it is iω A0 + A1 + Σ_m z_m (λ_m² L[:, m] + Ld[:, m]) Psi[m, :] (A0, A1 the
+        # modal sums of L Psi and λ L Psi, constant in ω): one product of (n_f, m2) by the modes' outer
+        # products (m2, n_out n_rows) instead of two (L and Ld), one large matrix product instead of n_f
+        # small ones
         n_rows = all_rows.size
-        n_ld = 1 if response.Ld is None else 2
+        n_ld = 1 if response.Ld is None else 2           # the right-first order applies L and Ld apart
         # which order is cheaper per frequency: O for every touched row once, then a small product per
         # parameter; or per parameter Psi[:, rows] W, then z, then the sensors (right to left)
-        by_rows = n_ld * m2 * n_out * n_rows + sum(n_out * p_[0].size * 3 for p_ in plans)
+        pairs = _conjugate_pairs(response)
+        # O's product: complex by complex, or (conjugate pairs) complex by real, half the work
+        by_rows = m2 * n_out * n_rows // (2 if pairs is not None else 1) + sum(n_out * p_[0].size * 3 for p_ in plans)
         by_parameter = sum(m2 * p_[0].size * 3 + n_ld * n_out * m2 * 3 for p_ in plans)
         right_first = by_parameter < by_rows
         if not right_first:
             T_L = (response.L[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
-            T_Ld = None if response.Ld is None else \
-                (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
+            A0, A1 = T_L.sum(axis=0), lam @ T_L
+            T_z = (lam ** 2)[:, None] * T_L
+            if response.Ld is not None:
+                T_z += (response.Ld[:, :, None] * Psi[None]).transpose(1, 0, 2).reshape(m2, n_out * n_rows)
+            del T_L
+            if pairs is not None:
+                # a real system's modes come in conjugate pairs (m, m+1) whose outer products are conjugate:
+                # z_m T_m + z_m+1 conj(T_m) = (z_m + z_m+1) Re T_m + i (z_m - z_m+1) Im T_m, a product of a
+                # complex (n_f, m2) by a real (m2, n_out n_rows) matrix: half the work of a complex one
+                first, real = pairs
+                T_z = np.ascontiguousarray(np.concatenate([T_z[first].real, T_z[first].imag, T_z[real].real]))
         for lo in range(0, nf, FREQUENCY_BLOCK):
             sl = slice(lo, min(nf, lo + FREQUENCY_BLOCK))
             w = 2 * math.pi * f[sl]
@@ -276,50 +379,103 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
             S = (response.Rt @ E).reshape(m2, 3, -1) * z.T[:, None, :]                 # (m2, 3, b)
             X = (V_cols @ S.reshape(m2, -1)).reshape(len(all_cols), 3, -1)             # (n_cols, 3, b)
             if not right_first:
-                O = ((-(w ** 2))[:, None] * z) @ T_L                                   # (b, n_out n_rows)
-                if T_Ld is not None:
-                    O += z @ T_Ld
+                if pairs is None:
+                    O = z @ T_z                                                        # (b, n_out n_rows)
+                else:
+                    zc = np.concatenate([z[:, first] + z[:, first + 1], 1j * (z[:, first] - z[:, first + 1]),
+                                         z[:, real]], axis=1)
+                    O = np.concatenate([zc.real, zc.imag]) @ T_z                       # rows: real parts, imag parts
+                    b_ = zc.shape[0]
+                    O = O[:b_] + 1j * O[b_:]
+                O += s[:, None] * A0[None] + A1[None]
                 O = O.reshape(-1, n_out, n_rows)                                       # (b, n_out, n_rows)
-            for k, (d, (rows, k_cols, v_cols, state_cols)) in enumerate(zip(derivatives, plans)):
+            nb = X.shape[2]
+            Xf = X.reshape(len(all_cols), 3 * nb)
+            dZq = (stacked["K"] @ Xf + stacked["D"] @ Xf).reshape(n_stack, 3, nb)
+            dZq += (stacked["M"] @ Xf).reshape(n_stack, 3, nb) * s[None, None, :]
+            W = (dG_flat @ E).reshape(n_stack, 3, nb) - dZq                            # (n_stack, 3, b)
+            if not right_first:
+                _contract(np.ascontiguousarray(O.transpose(2, 1, 0)), W, stack_rows, offsets, out, lo)
+                continue
+            for k, (rows, *_) in enumerate(plans):
                 if rows.size == 0:
                     continue
-                nb = X.shape[2]
-                Xk = X[[col_at[c] for c in position_of[k_cols]]].reshape(len(k_cols), 3 * nb)   # (nk, 3 b)
-                Xv = X[[col_at[c] for c in p + v_cols]].reshape(len(v_cols), 3 * nb)          # (nv, 3 b)
+                # (-ω² L + Ld) diag(z) Psi[:, rows] W, right to left
                 r = rows.size
-                dZq = (d.dK[np.ix_(rows, k_cols)] @ Xk + d.dD[np.ix_(rows, v_cols)] @ Xv).reshape(r, 3, nb)
-                dZq += (d.dM[np.ix_(rows, v_cols)] @ Xv).reshape(r, 3, nb) * s[None, None, :]
-                # dF(ω) = Σ_j dG_j e^{iω a_j / v}
-                dF = (d.dG[:, rows, :].reshape(d.dG.shape[0], -1).T @ E).reshape(r, 3, nb)
-                if right_first:
-                    # (-ω² L + Ld) diag(z) Psi[:, rows] W, right to left
-                    u = (Psi[:, [row_at[i] for i in rows]] @ (dF - dZq).reshape(r, 3 * nb)).reshape(m2, 3, nb)
-                    u *= z.T[:, None, :]
-                    u = u.reshape(m2, 3 * nb)
-                    res = (response.L @ u).reshape(n_out, 3, nb) * (-(w ** 2))[None, None, :]
-                    if response.Ld is not None:
-                        res += (response.Ld @ u).reshape(n_out, 3, nb)
-                    out[k, :, :, sl] = res.transpose(1, 0, 2)
-                    continue
-                Or = O[:, :, [row_at[i] for i in rows]]                                 # (b, n_out, r)
-                W = np.ascontiguousarray((dF - dZq).transpose(2, 0, 1))                 # (b, r, 3)
-                out[k, :, :, sl] = (Or @ W).transpose(2, 1, 0)                          # (3, n_out, b)
+                Wk = W[offsets[k]:offsets[k + 1]].reshape(r, 3 * nb)
+                u = (Psi[:, [row_at[i] for i in rows]] @ Wk).reshape(m2, 3, nb)
+                u *= z.T[:, None, :]
+                u = u.reshape(m2, 3 * nb)
+                res = (response.L @ u).reshape(n_out, 3, nb) * (-(w ** 2))[None, None, :]
+                if response.Ld is not None:
+                    res += (response.Ld @ u).reshape(n_out, 3, nb)
+                out[k, :, :, sl] = res.transpose(1, 0, 2)
     return out
+
+
+def _contract_numpy(O_t: np.ndarray, W: np.ndarray, stack_rows: np.ndarray, offsets: np.ndarray, out: np.ndarray,
+                    lo: int) -> None:
+    """out[k, in, c, lo + f] += Σ_r O_t[stack_rows[r], c, f] W[r, in, f] over parameter k's stacked rows r
+    (the reference of the compiled :func:`_contract`)."""
+    nb = W.shape[2]
+    for k in range(len(offsets) - 1):
+        sl = slice(offsets[k], offsets[k + 1])
+        out[k, :, :, lo:lo + nb] += np.einsum("rcf,rif->icf", O_t[stack_rows[sl]], W[sl])
+
+
+if HAVE_NUMBA:
+    @njit(cache=True, nogil=True)
+    def _contract(O_t, W, stack_rows, offsets, out, lo):  # pragma: no cover - compiled
+        n_out, nb = O_t.shape[1], W.shape[2]
+        for k in range(offsets.size - 1):
+            for r in range(offsets[k], offsets[k + 1]):
+                col = stack_rows[r]
+                for i in range(3):
+                    for c in range(n_out):
+                        for f in range(nb):
+                            out[k, i, c, lo + f] += O_t[col, c, f] * W[r, i, f]
+else:  # pragma: no cover - without numba
+    _contract = _contract_numpy
+
+
+def _combine_numpy(dH: np.ndarray, U: np.ndarray, out: np.ndarray) -> None:
+    """out[p, c, f] = Σ_in dH[p, in, c, f] U[in, f] (the reference of the compiled :func:`_combine`)."""
+    np.multiply(dH[:, 0], U[0], out=out)
+    out += dH[:, 1] * U[1]
+    out += dH[:, 2] * U[2]
+
+
+if HAVE_NUMBA:
+    @njit(cache=True, nogil=True)
+    def _combine(dH, U, out):  # pragma: no cover - compiled
+        n_p, _, n_out, nf = dH.shape
+        for k in range(n_p):
+            for c in range(n_out):
+                for f in range(nf):
+                    out[k, c, f] = dH[k, 0, c, f] * U[0, f] + dH[k, 1, c, f] * U[1, f] + dH[k, 2, c, f] * U[2, f]
+else:  # pragma: no cover - without numba
+    _combine = _combine_numpy
 
 
 def record_derivatives(response: FrequencyResponse, derivatives: list[MatrixDerivative], segments: list,
                        fs: float, taper_m: float, settle_s: float, spectra: InputSpectra) -> list[np.ndarray]:
-    """Per segment ``(n_p, n_sensors, n_t)``: the derivatives of the records
-    :func:`.solvers.simulate_frequency` makes (same FFT length, same track spectra), (m/s²) per SI unit."""
+    """Per segment ``(n_p, n_sensors, n_t)`` float32: the derivatives of the records
+    :func:`.solvers.simulate_frequency` makes (same FFT length, same track spectra), (m/s²) per SI unit.
+
+    The products ∂H/∂p U (a compiled loop) and their inverse FFTs run in single precision
+    (:data:`RECORD_PRECISION`), one segment at a time (its arrays stay in cache); the records stay single
+    precision: the spectra's derivatives (:func:`suspid.method.jacobian.spectra_derivatives`) take them as
+    they are.
+    """
     n_ts, n_fft = fft_plan(response, segments, fs, settle_s)
     dH = receptance_derivatives(response, derivatives, np.arange(n_fft // 2 + 1) * fs / n_fft)
-    dH = dH.astype(RECORD_PRECISION)
-    out = []
+    dH = np.ascontiguousarray(dH, dtype=RECORD_PRECISION)
+    n_p, _, n_out, nf = dH.shape
+    out: list[np.ndarray] = []
+    dY = np.empty((n_p, n_out, nf), dtype=RECORD_PRECISION)
     with single_blas_thread():
-        for seg, n in zip(segments, n_ts):
+        for seg, n in zip(segments, n_ts):   # one segment at a time: its products and records stay in cache
             U = spectra.get(seg, fs, n_fft, taper_m).astype(RECORD_PRECISION)           # (3, n_f)
-            dY = dH[:, 0] * U[0]
-            dY += dH[:, 1] * U[1]
-            dY += dH[:, 2] * U[2]
-            out.append(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n], dtype=float))
+            _combine(dH, U, dY)
+            out.append(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n]))      # float32
     return out
