@@ -245,14 +245,14 @@ def test_scenario_flags_the_degrading_parameter_at_the_right_date_and_nothing_el
 
 
 def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatch):
-    from suspid.workflows import identify
+    from suspid.workflows import driver
     from suspid.infra.threads import single_blas_thread
 
     monitor = "monitor:\n  scenario: {parameter: c_sec_z, dates: [2026-01-01, 2026-03-01]}\n"
     small = BASE.replace("n_segments: 24", "n_segments: 8").replace("n_initial: 8", "n_initial: 6") \
         .replace("  k_sec_z: {}\n", "")
     path = _write(tmp_path, monitor, small.replace("max_iter: 10", "max_iter: 2"))
-    real = identify.evaluate_many
+    real = driver.evaluate_many
 
     def interrupted(problem, ledger, X_si, executor, on_done=lambda i, ev, reused: None, **kwargs):
         if problem.config.name.endswith("2026-03-01"):  # Ctrl-C after 3 design points of the second date
@@ -260,12 +260,12 @@ def test_interrupted_monitor_resumes_from_the_dates_ledgers(tmp_path, monkeypatc
             raise KeyboardInterrupt
         return real(problem, ledger, X_si, executor, on_done, **kwargs)
 
-    monkeypatch.setattr(identify, "evaluate_many", interrupted)
+    monkeypatch.setattr(driver, "evaluate_many", interrupted)
     with single_blas_thread(), pytest.raises(KeyboardInterrupt):
         suspid.monitor(path)
     out = tmp_path / "runs" / "mon"
     assert not (out / "monitor.json").exists() and not (out / "dates" / "2026-03-01" / "result.json").exists()
-    monkeypatch.setattr(identify, "evaluate_many", real)
+    monkeypatch.setattr(driver, "evaluate_many", real)
     with single_blas_thread():
         suspid.monitor(path)
     results = {d: json.loads((out / "dates" / d / "result.json").read_text()) for d in ("2026-01-01", "2026-03-01")}
