@@ -47,3 +47,21 @@ def test_block_replaced_on_success_kept_on_failure_appended_when_new(tmp_path):
     before = text
     assert ra.update_results(results, benches[2:], quick=True, python=sys.executable) == []
     assert results.read_text() == before
+
+
+def test_every_benchmark_has_quick_sizes_and_the_summary_totals_the_wall_times(tmp_path):
+    ra = _run_all()
+    assert all(b.quick for b in ra.BENCHMARKS), [b.name for b in ra.BENCHMARKS if not b.quick]
+    assert len({b.name for b in ra.BENCHMARKS}) == len(ra.BENCHMARKS)
+    slow = tmp_path / "bench_slow.py"
+    slow.write_text("import time\ntime.sleep(0.3)\nprint('| x |')\n")
+    results = tmp_path / "RESULTS.md"
+    results.write_text("# Results\n")
+    timings = []
+    ra.update_results(results, [ra.Benchmark("slow", (str(slow),), (str(slow),), "sleeps")], quick=True,
+                      python=sys.executable, timings=timings)
+    (name, wall, status), = timings
+    assert (name, status) == ("slow", "ok") and 0.3 <= wall < 30
+    summary = ra.timing_summary(timings + [("other", 60.0, "failed")], quick=True, load_before="1", load_after="2")
+    assert "quick sizes" in summary and "failed" in summary
+    assert summary.splitlines()[-1].split()[:2] == ["total", f"{wall + 60:.0f}"]
