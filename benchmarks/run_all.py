@@ -138,7 +138,7 @@ BENCHMARKS: tuple[Benchmark, ...] = (
     _b("diagnose_independent", "benchmarks/bench_diagnose.py --independent",
        "benchmarks/bench_diagnose.py --independent --cases tilt",
        "discrepancy workflow on the independent train"),
-    _b("floor", "benchmarks/bench_floor.py", f"benchmarks/bench_floor.py {Q}",
+    _b("floor", "benchmarks/bench_floor.py --seeds 7 8", f"benchmarks/bench_floor.py {Q}",
        "sensor-noise floor on equal data"),
     _b("objective_bias", "benchmarks/bench_objective_bias.py", "benchmarks/bench_objective_bias.py --seeds 3 --segments 12",
        "where each objective puts the suspension on the independent train"),
