@@ -115,7 +115,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        "--set 'study.variants=[{name: overlap-m0-60, set: {design.n_initial: 60}}]' "
        "--set data.track.n_segments=20 --set ego.max_iter=20 --set ego.refine.max_iter=10",
        "the Table 1 analogue (tgv-articulated)"),
-    _b("methods", f"-m suspid study configs/methods.yaml --fresh --set output.dir={WORK}/methods",
+    _b("methods", f"-m suspid study configs/methods.yaml --fresh --set output.dir={WORK}/methods "
+       "--set 'study.seeds=[1, 2, 3]'",
        f"-m suspid study configs/methods.yaml --fresh --set output.dir={WORK}/methods-quick "
        "--set study.seeds=[1] --set optimizer.budget=60 --set design.n_initial=30 --set ego.max_iter=30 "
        "--set data.track.n_segments=12",
