@@ -128,6 +128,9 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        f"benchmarks/bench_independent.py --seeds 7 --dates damaged --objectives overlap --segments 12 "
        f"--n-initial 15 --max-iter 10 --out {WORK}/independent-quick",
        "the two-date protocol on the independent train's data (tests/independent)"),
+    _b("fleet_demo", "-m suspid fleet demo configs/fleet-demo.yaml --no-serve",
+       "-m suspid fleet demo configs/fleet-demo.yaml --no-serve",
+       "the demo fleet: degrading elements' verdicts and forecasts (serial, frequency solver)"),
     _b("coverage", f"benchmarks/bench_coverage.py --seeds 20 --out {WORK}/coverage",
        f"benchmarks/bench_coverage.py --seeds 2 --out {WORK}/coverage-quick {Q}",
        "interval coverage over seeds (quickstart)"),
