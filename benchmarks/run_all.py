@@ -70,7 +70,8 @@ Q = "--set data.track.n_segments=12 --set design.n_initial=15 --set ego.max_iter
 BENCHMARKS: tuple[Benchmark, ...] = (
     _b("startup", "benchmarks/bench_startup.py --runs 15", "benchmarks/bench_startup.py --runs 5",
        "wall time of `suspid --help` against a bare interpreter"),
-    _b("objectives", "benchmarks/bench_objectives.py --repeat 5", "benchmarks/bench_objectives.py --repeat 2 --subset 10",
+    _b("objectives", "benchmarks/bench_objectives.py --repeat 5",
+       "benchmarks/bench_objectives.py --repeat 2 --subset 10",
        "one evaluation of J, likelihood (numba kernel vs numpy) and overlap"),
     _b("baseline_objectives", "benchmarks/bench_baseline_objectives.py --repeat 5",
        "benchmarks/bench_baseline_objectives.py --repeat 2", "one evaluation of J, mean-spectrum and wasserstein"),
@@ -147,7 +148,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        "discrepancy workflow on the independent train"),
     _b("floor", "benchmarks/bench_floor.py --seeds 7 8", f"benchmarks/bench_floor.py {Q}",
        "sensor-noise floor on equal data"),
-    _b("objective_bias", "benchmarks/bench_objective_bias.py", "benchmarks/bench_objective_bias.py --seeds 3 --segments 12",
+    _b("objective_bias", "benchmarks/bench_objective_bias.py",
+       "benchmarks/bench_objective_bias.py --seeds 3 --segments 12",
        "where each objective puts the suspension on the independent train"),
     _b("model_form", f"benchmarks/bench_model_form.py {WORK}/model_form",
        f"benchmarks/bench_model_form.py {WORK}/model_form-quick --seeds 7 --w-refs quickstart --objectives overlap "
