@@ -58,7 +58,7 @@ parameters: {{k_sec_z: {{}}, c_sec_z: {{}}, c_sec_y: {{}}}}
 data:
   source: experiment
   track: {{spectrum: german-low, n_segments: 16, length_m: 1000.0, speed_kmh: 300.0}}
-  w_ref: {{k_sec_z: 340.0e3, c_sec_z: 14.0e3, c_sec_y: 11.0e3}}
+  w_ref: {{k_sec_z: 280.0e3, c_sec_z: 14.0e3, c_sec_y: 21.0e3}}   # the quickstart's damaged values
 spectra: {{f_min_hz: 0.4, f_max_hz: 20.0, n_freqs: 120}}
 design: {{n_initial: 12}}
 ego: {{max_iter: {m1}, batch: {batch}}}
