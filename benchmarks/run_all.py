@@ -33,6 +33,7 @@ import argparse
 import datetime
 import os
 import re
+import resource
 import shlex
 import signal
 import subprocess
@@ -172,6 +173,22 @@ BENCHMARKS: tuple[Benchmark, ...] = (
 MARK = "<!-- run_all:{name} {end} -->"
 
 
+@dataclass(frozen=True)
+class Timing:
+    """What one benchmark of an invocation cost: wall time, CPU time of its processes (s), and its status."""
+
+    name: str
+    wall_s: float
+    cpu_s: float
+    status: str  # "ok" | "failed" | "skipped"
+
+
+def children_cpu() -> float:
+    """User + system CPU seconds of the terminated child processes (and theirs, once waited for) so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def markers(name: str) -> tuple[str, str]:
     """The begin and end marker lines of benchmark ``name``'s block in RESULTS.md."""
     return MARK.format(name=name, end="begin"), MARK.format(name=name, end="end")
@@ -247,10 +264,10 @@ def run_one(argv: tuple[str, ...], *, python: str = sys.executable, prefix: str 
 
 
 def update_results(results: Path, benches: list[Benchmark], *, quick: bool,
-                   python: str = sys.executable, timings: list[tuple[str, float, str]] | None = None) -> list[str]:
+                   python: str = sys.executable, timings: list[Timing] | None = None) -> list[str]:
     """Run ``benches`` one by one, rewriting ``results`` after each success; returns the names that failed.
 
-    ``timings``, if given, receives (name, wall time in s, "ok" | "failed" | "skipped") per benchmark.
+    ``timings``, if given, receives a :class:`Timing` per benchmark.
     """
     failed = []
     timings = [] if timings is None else timings
@@ -259,19 +276,19 @@ def update_results(results: Path, benches: list[Benchmark], *, quick: bool,
         argv = bench.quick if quick else bench.argv
         if argv is None:
             print(f"[{i}/{len(benches)}] {bench.name}: skipped in --quick (run it without --quick)", flush=True)
-            timings.append((bench.name, 0.0, "skipped"))
+            timings.append(Timing(bench.name, 0.0, 0.0, "skipped"))
             continue
         print(f"[{i}/{len(benches)}] {bench.name}: {shlex.join(('python', *argv))}", flush=True)
         load = load_average()
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), children_cpu()
         status, output = run_one(argv, python=python, prefix=f"  {bench.name}| ")
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, children_cpu() - cpu0
         if status != 0 or not output.strip():
             why = f"exit status {status}" if status != 0 else "no output"
             print(f"[{i}/{len(benches)}] {bench.name}: FAILED ({why}, {wall:.0f} s); its old block is kept",
                   flush=True)
             failed.append(bench.name)
-            timings.append((bench.name, wall, "failed"))
+            timings.append(Timing(bench.name, wall, cpu, "failed"))
             continue
         date = datetime.date.today().isoformat()
         block = render_block(bench, argv, output, date=date, commit=commit, load=load)
@@ -279,18 +296,22 @@ def update_results(results: Path, benches: list[Benchmark], *, quick: bool,
 
         write_text(results, replace_block(results.read_text(encoding="utf-8"), bench.name, block))
         print(f"[{i}/{len(benches)}] {bench.name}: done in {wall:.0f} s, written to {results.name}", flush=True)
-        timings.append((bench.name, wall, "ok"))
+        timings.append(Timing(bench.name, wall, cpu, "ok"))
     return failed
 
 
-def timing_summary(timings: list[tuple[str, float, str]], *, quick: bool, load_before: str, load_after: str) -> str:
-    """The wall time of every benchmark of this invocation and their total, as a text table."""
-    width = max([len(name) for name, _, _ in timings] + [9])
+def timing_summary(timings: list[Timing], *, quick: bool, load_before: str, load_after: str) -> str:
+    """The wall and CPU time of every benchmark of this invocation and their totals, as a text table.
+
+    The CPU time (user + system of the benchmark's processes) hardly depends on the machine's load: on an
+    idle 2-core machine a serial benchmark's wall time is about its CPU time, a parallel one's less.
+    """
+    width = max([len(t.name) for t in timings] + [9])
     lines = [f"run_all timing ({'quick' if quick else 'full'} sizes; load average before {load_before}, "
-             f"after {load_after}):", f"  {'benchmark':<{width}}  wall (s)  status"]
-    lines += [f"  {name:<{width}}  {wall:8.0f}  {status}" for name, wall, status in timings]
-    total = sum(wall for _, wall, _ in timings)
-    lines.append(f"  {'total':<{width}}  {total:8.0f}  ({total / 60:.1f} min)")
+             f"after {load_after}):", f"  {'benchmark':<{width}}  wall (s)  CPU (s)  status"]
+    lines += [f"  {t.name:<{width}}  {t.wall_s:8.0f}  {t.cpu_s:7.0f}  {t.status}" for t in timings]
+    wall, cpu = sum(t.wall_s for t in timings), sum(t.cpu_s for t in timings)
+    lines.append(f"  {'total':<{width}}  {wall:8.0f}  {cpu:7.0f}  (wall {wall / 60:.1f} min, CPU {cpu / 60:.1f} min)")
     return "\n".join(lines)
 
 
@@ -316,7 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run_all: {args.results}: no such file (expected RESULTS.md)", file=sys.stderr)
         return 2
     benches = [by_name[n] for n in args.only] if args.only else list(BENCHMARKS)
-    timings: list[tuple[str, float, str]] = []
+    timings: list[Timing] = []
     load_before = load_average()
     try:
         failed = update_results(args.results, benches, quick=args.quick, timings=timings)

@@ -60,8 +60,9 @@ def test_every_benchmark_has_quick_sizes_and_the_summary_totals_the_wall_times(t
     timings = []
     ra.update_results(results, [ra.Benchmark("slow", (str(slow),), (str(slow),), "sleeps")], quick=True,
                       python=sys.executable, timings=timings)
-    (name, wall, status), = timings
-    assert (name, status) == ("slow", "ok") and 0.3 <= wall < 30
-    summary = ra.timing_summary(timings + [("other", 60.0, "failed")], quick=True, load_before="1", load_after="2")
+    (t,) = timings
+    assert (t.name, t.status) == ("slow", "ok") and 0.3 <= t.wall_s < 30 and 0 < t.cpu_s < t.wall_s
+    other = ra.Timing("other", 60.0, 50.0, "failed")
+    summary = ra.timing_summary(timings + [other], quick=True, load_before="1", load_after="2")
     assert "quick sizes" in summary and "failed" in summary
-    assert summary.splitlines()[-1].split()[:2] == ["total", f"{wall + 60:.0f}"]
+    assert summary.splitlines()[-1].split()[:3] == ["total", f"{t.wall_s + 60:.0f}", f"{t.cpu_s + 50:.0f}"]
