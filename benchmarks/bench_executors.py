@@ -203,6 +203,20 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _wait_listening(port: int, timeout_s: float) -> None:
+    """Return once something accepts connections on 127.0.0.1:``port`` (the scheduler we started takes a few
+    seconds to listen on a busy machine, and the executor's probe refuses an address nobody listens on)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+            return
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+
+
 def scheduler_memory(n_tasks: int, n_tasks_before: int) -> None:
     """Section 4 of the module docstring."""
     import cloudpickle
@@ -245,6 +259,7 @@ def _scheduler_rss(fn, items) -> tuple[int, int, float]:
                                 "--no-dashboard"], **quiet) for _ in range(2)]
     scheduler = psutil.Process(procs[0].pid)
     try:
+        _wait_listening(port, 120.0)
         with DaskExecutor(address=address, n_workers=2, timeout_s=120) as executor:
             time.sleep(1.0)  # let the scheduler settle
             base = scheduler.memory_info().rss
