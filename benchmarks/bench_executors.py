@@ -51,7 +51,7 @@ from suspid.workflows.tasks import SpectraTask
 from suspid.data.track import synthetic_segments
 
 EXPERIMENT = """\
-name: bench-batch
+name: bench-batch-{batch}   # a run directory per batch size (a run directory holds one config)
 seed: 11
 simulator: {{plugin: exudyn-train, options: {{solver: frequency}}}}
 parameters: {{k_sec_z: {{}}, c_sec_z: {{}}, c_sec_y: {{}}}}
