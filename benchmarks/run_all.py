@@ -189,6 +189,15 @@ def children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+PROGRESS = re.compile(r"━.* eta \d")
+"""A progress bar's line (rich): echoed while a benchmark runs, left out of its block."""
+
+
+def strip_progress(output: str) -> str:
+    """``output`` without its progress-bar lines."""
+    return "".join(line for line in output.splitlines(keepends=True) if not PROGRESS.search(line))
+
+
 def markers(name: str) -> tuple[str, str]:
     """The begin and end marker lines of benchmark ``name``'s block in RESULTS.md."""
     return MARK.format(name=name, end="begin"), MARK.format(name=name, end="end")
@@ -291,7 +300,7 @@ def update_results(results: Path, benches: list[Benchmark], *, quick: bool,
             timings.append(Timing(bench.name, wall, cpu, "failed"))
             continue
         date = datetime.date.today().isoformat()
-        block = render_block(bench, argv, output, date=date, commit=commit, load=load)
+        block = render_block(bench, argv, strip_progress(output), date=date, commit=commit, load=load)
         from suspid.infra.files import write_text  # atomic: an interrupt leaves the previous file
 
         write_text(results, replace_block(results.read_text(encoding="utf-8"), bench.name, block))

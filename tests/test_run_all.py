@@ -66,3 +66,10 @@ def test_every_benchmark_has_quick_sizes_and_the_summary_totals_the_wall_times(t
     summary = ra.timing_summary(timings + [other], quick=True, load_before="1", load_after="2")
     assert "quick sizes" in summary and "failed" in summary
     assert summary.splitlines()[-1].split()[:3] == ["total", f"{t.wall_s + 60:.0f}", f"{t.cpu_s + 50:.0f}"]
+
+
+def test_progress_bars_are_left_out_of_a_block_and_tables_kept():
+    ra = _run_all()
+    out = ("variant a\nego ━━━━━━━━━━ 89/89 0:00:55 eta 0:00:00 J_max 0.87\n"
+           "┏━━━━━━━━━━━┳━━━━━━┓\n| a | 1 |\n")
+    assert ra.strip_progress(out) == "variant a\n┏━━━━━━━━━━━┳━━━━━━┓\n| a | 1 |\n"
