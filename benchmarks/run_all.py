@@ -124,7 +124,9 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        "--set 'study.seeds=[1, 2, 3]'",
        f"-m suspid study configs/methods.yaml --fresh --set output.dir={WORK}/methods-quick "
        "--set study.seeds=[1] --set optimizer.budget=60 --set design.n_initial=30 --set ego.max_iter=30 "
-       "--set data.track.n_segments=12",
+       "--set data.track.n_segments=12 --set 'study.variants=[{name: ego, set: {}}, "
+       "{name: nelder-mead, set: {optimizer.plugin: nelder-mead}}, "
+       "{name: ego-likelihood, set: {objective.plugin: likelihood}}]' --set 'study.compare=[ego, nelder-mead]'",
        "six optimisers and three objectives on the Table 1 problem"),
     _b("independent", f"benchmarks/bench_independent.py --seeds 7 --out {WORK}/independent",
        f"benchmarks/bench_independent.py --seeds 7 --dates damaged --objectives overlap --segments 12 "
