@@ -102,7 +102,7 @@ BENCHMARKS: tuple[Benchmark, ...] = (
     _b("executors", "benchmarks/bench_executors.py --points 8", "benchmarks/bench_executors.py --quick --points 4",
        "design evaluation by serial, processes and dask; batch EGO"),
     _b("executors_whole_run", "benchmarks/bench_executors.py --whole-run",
-       "benchmarks/bench_executors.py --whole-run --segments 3 --m0 10 --m1 6",
+       "benchmarks/bench_executors.py --whole-run --segments 2 --m0 8 --m1 4",
        "a whole run per executor, asynchronous EGO"),
     _b("dask_scheduler_memory", "benchmarks/bench_executors.py --scheduler-memory --tasks 500 --tasks-before 30",
        "benchmarks/bench_executors.py --scheduler-memory --tasks 100 --tasks-before 10",
