@@ -191,8 +191,10 @@ def children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-PROGRESS = re.compile(r"━.* eta \d")
-"""A progress bar's line (rich): echoed while a benchmark runs, left out of its block."""
+PROGRESS = re.compile(r"━.* eta \d|^(variant \S+|executor \S+, \d+ task\(s\) at once|"
+                      r"(reference|measurement) date: simulating .*)$")
+"""A progress line (a rich progress bar, suspid's phase lines): echoed while a benchmark runs, left out of its
+block."""
 
 
 def strip_progress(output: str) -> str:

@@ -70,6 +70,7 @@ def test_every_benchmark_has_quick_sizes_and_the_summary_totals_the_wall_times(t
 
 def test_progress_bars_are_left_out_of_a_block_and_tables_kept():
     ra = _run_all()
-    out = ("variant a\nego ━━━━━━━━━━ 89/89 0:00:55 eta 0:00:00 J_max 0.87\n"
-           "┏━━━━━━━━━━━┳━━━━━━┓\n| a | 1 |\n")
-    assert ra.strip_progress(out) == "variant a\n┏━━━━━━━━━━━┳━━━━━━┓\n| a | 1 |\n"
+    out = ("variant a-seed1\nexecutor serial, 1 task(s) at once\n"
+           "ego ━━━━━━━━━━ 89/89 0:00:55 eta 0:00:00 J_max 0.87\n"
+           "┏━━━━━━━━━━━┳━━━━━━┓\n| variant | a |\n")
+    assert ra.strip_progress(out) == "┏━━━━━━━━━━━┳━━━━━━┓\n| variant | a |\n"
