@@ -1,4 +1,4 @@
-"""What a curve does to the spectra Y of the exudyn-train records (frequency solver, figures of docs/model.md).
+"""What a curve does to the spectra Y of the exudyn-train records (frequency solver; RESULTS.md has the figures).
 
 Case: 2 km of German low disturbance at 300 km/h, fs 100 Hz, one seed per run (``--seed``), nominal car:
 the same irregularities on straight track, in a constant arc (R 4000 m, cant 0.10 m: cant deficiency

@@ -1,4 +1,4 @@
-"""Speed of the exudyn-train simulator's two solvers, and (--physics) the figures of docs/model.md.
+"""Speed of the exudyn-train simulator's two solvers, and (--physics) what the model does at its nominal values.
 
 Case: 2 km segments of synthetic track (German low disturbance, dx 0.25 m)
 at 300 km/h, i.e. 24 s simulated per segment, 10 channels at fs = 100 Hz.
@@ -20,7 +20,8 @@ products).
     python benchmarks/bench_exudyn_train.py [--repeat 5] [--vectors 20] [--segments 50]
         [--vehicle tgv-articulated] [--frequency-only]
 
-``--physics`` prints instead the figures of ``docs/model.md`` for a vehicle
+``--physics`` prints instead the model's physics (RESULTS.md, "exudyn train
+model: modes, stability, ride"; ``docs/model.md`` describes the model) for a vehicle
 preset (``--vehicle``, default conventional-hs): modes at 300 km/h, linear
 critical speed against conicity and yaw damping, ride rms on German
 low-disturbance track at 300 km/h, the influence of a 30 % change of c_yaw on
@@ -62,7 +63,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=5, help="timed runs of the time solver")
     ap.add_argument("--vectors", type=int, default=20, help="parameter vectors for the frequency solver")
     ap.add_argument("--segments", type=int, default=50, help="segments per frequency-solver run")
-    ap.add_argument("--physics", action="store_true", help="print the physics figures of docs/model.md instead")
+    ap.add_argument("--physics", action="store_true",
+                    help="print the model's modes, stability, ride and solver agreement instead")
     ap.add_argument("--vehicle", default="conventional-hs", help="vehicle preset")
     ap.add_argument("--frequency-only", action="store_true", help="time the frequency solver only")
     ap.add_argument("--c-yaw-shift", action="store_true",
@@ -244,7 +246,7 @@ def pitch_paths(vehicle: str, freqs=(4.0, 8.0, 9.6, 10.5, 10.8, 11.1, 12.0, 14.4
 
 
 def physics(vehicle: str) -> None:
-    """The figures of docs/model.md for one vehicle preset (see the module docstring)."""
+    """The physics figures of one vehicle preset (see the module docstring)."""
     from suspid.workflows.simulate import format_modes, modes_report
     from suspid.method.spectra import compute_spectra
 

@@ -11,7 +11,10 @@ files; ``suspid run`` then runs the two-date protocol on measured data
 (``noise.reference``) with ``noise.floor`` none, auto and spec (the true
 density), on the same files.
 
-    python benchmarks/bench_floor.py [--seeds 7 8]
+    python benchmarks/bench_floor.py [--seeds 7 8] [--set data.track.n_segments=12 ...]
+
+``--set`` overrides the config for both dates and the runs (smaller sizes for
+a quick check).
 """
 
 from __future__ import annotations
@@ -35,10 +38,10 @@ from suspid.infra.seeds import rng as named_rng  # noqa: E402
 from suspid.workflows.problem import synthetic_track  # noqa: E402
 
 
-def write_dates(config_path: Path, seed: int, out: Path) -> tuple[dict, float]:
+def write_dates(config_path: Path, seed: int, out: Path, sets: list[str] = ()) -> tuple[dict, float]:
     """Both dates' files under ``out`` (``reference/``, ``measurement/``); returns w_ref and the one-sided
-    sensor noise density (m/s²)²/Hz."""
-    config = load_config(config_path, [f"seed={seed}"])
+    sensor noise density (m/s²)²/Hz. ``sets``: config overrides ``KEY=VALUE``."""
+    config = load_config(config_path, [f"seed={seed}", *sets])
     sim = build_simulator(config)
     opt = config.data.reference
     rng = named_rng(seed, "bench-floor")
@@ -59,7 +62,7 @@ def write_dates(config_path: Path, seed: int, out: Path) -> tuple[dict, float]:
     return w_ref, 2 * opt.sensor_noise_rms ** 2 / fs
 
 
-def run_case(config_path: Path, out: Path, seed: int, floor: dict, label: str) -> dict:
+def run_case(config_path: Path, out: Path, seed: int, floor: dict, label: str, sets: list[str] = ()) -> dict:
     cfg = yaml.safe_load(config_path.read_text())
     cfg["name"] = f"floor-{label}-{seed}"
     cfg["seed"] = seed
@@ -70,26 +73,29 @@ def run_case(config_path: Path, out: Path, seed: int, floor: dict, label: str) -
     cfg["output"] = {"dir": str(out / "runs" / cfg["name"])}
     path = out / f"{cfg['name']}.yaml"
     path.write_text(yaml.safe_dump(cfg, sort_keys=False))
-    return suspid.identify(path, fresh=True).result
+    keep = [s for s in sets if not s.startswith("data.")]  # the data section is the files written above
+    return suspid.identify(path, keep or None, fresh=True).result
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="*", default=[7])
     ap.add_argument("--config", type=Path, default=ROOT / "configs" / "quickstart.yaml")
+    ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override (repeatable)")
     args = ap.parse_args()
-    print(f"# bench_floor  {args.config.name}  load average {os.getloadavg()[0]:.2f}")
+    print(f"# bench_floor  {args.config.name} {' '.join(args.sets)}  load average {os.getloadavg()[0]:.2f}")
     print("| seed | noise.floor | worst error % (component) | errors % | s |")
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for seed in args.seeds:
             out = Path(tmp) / f"seed{seed}"
-            w_ref, density = write_dates(args.config, seed, out)
+            w_ref, density = write_dates(args.config, seed, out, args.sets)
             cases = {"none": {}, "auto": {"floor": "auto"},
                      "spec": {"floor": "spec", "sensor_noise_density": density}}
             for label, floor in cases.items():
                 t0 = time.perf_counter()
-                r = run_case(args.config, out, seed, floor, label)
+                r = run_case(args.config, out, seed, floor, label, args.sets)
                 err = {n: abs(100 * (r["w_opt"][n] - w_ref[n]) / (r["bounds"][n][1] - r["bounds"][n][0]))
                        for n in r["w_opt"] if n in w_ref}
                 worst = max(err, key=err.get)

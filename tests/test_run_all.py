@@ -47,3 +47,30 @@ def test_block_replaced_on_success_kept_on_failure_appended_when_new(tmp_path):
     before = text
     assert ra.update_results(results, benches[2:], quick=True, python=sys.executable) == []
     assert results.read_text() == before
+
+
+def test_every_benchmark_has_quick_sizes_and_the_summary_totals_the_wall_times(tmp_path):
+    ra = _run_all()
+    assert all(b.quick for b in ra.BENCHMARKS), [b.name for b in ra.BENCHMARKS if not b.quick]
+    assert len({b.name for b in ra.BENCHMARKS}) == len(ra.BENCHMARKS)
+    slow = tmp_path / "bench_slow.py"
+    slow.write_text("import time\ntime.sleep(0.3)\nprint('| x |')\n")
+    results = tmp_path / "RESULTS.md"
+    results.write_text("# Results\n")
+    timings = []
+    ra.update_results(results, [ra.Benchmark("slow", (str(slow),), (str(slow),), "sleeps")], quick=True,
+                      python=sys.executable, timings=timings)
+    (t,) = timings
+    assert (t.name, t.status) == ("slow", "ok") and 0.3 <= t.wall_s < 30 and 0 < t.cpu_s < t.wall_s
+    other = ra.Timing("other", 60.0, 50.0, "failed")
+    summary = ra.timing_summary(timings + [other], quick=True, load_before="1", load_after="2")
+    assert "quick sizes" in summary and "failed" in summary
+    assert summary.splitlines()[-1].split()[:3] == ["total", f"{t.wall_s + 60:.0f}", f"{t.cpu_s + 50:.0f}"]
+
+
+def test_progress_bars_are_left_out_of_a_block_and_tables_kept():
+    ra = _run_all()
+    out = ("variant a-seed1\nexecutor serial, 1 task(s) at once\n"
+           "ego ━━━━━━━━━━ 89/89 0:00:55 eta 0:00:00 J_max 0.87\n"
+           "┏━━━━━━━━━━━┳━━━━━━┓\n| variant | a |\n")
+    assert ra.strip_progress(out) == "┏━━━━━━━━━━━┳━━━━━━┓\n| variant | a |\n"

@@ -1,144 +1,52 @@
-"""The exudyn multibody model of the car: bodies, suspension, wheel-rail contact, sensors.
+"""The exudyn multibody model of the car: bodies, suspension, wheel-rail contact, track support, sensors.
 
-One :class:`TrainModel` owns one exudyn ``MainSystem``. It is built once and
-updated in place when parameters change (``SetObjectParameter``); only a
-change of geometry (positions of bodies and attachment points), of the
-sensors or of the time-solver features rebuilds it. Both solvers use this
-same system: the time solver integrates it with exudyn's generalised-alpha
-solver, the frequency solver takes exudyn's linearisation
-``ComputeLinearizedSystem`` (M, K, D) of it.
+One :class:`TrainModel` owns one exudyn ``MainSystem``, built once and updated
+in place when parameters change (``SetObjectParameter``): only a change of
+geometry, of the sensors or of the time-solver features rebuilds it. Both
+solvers use this one system, so they cannot drift apart: the time solver
+integrates it (generalised-alpha), the frequency solver takes its
+linearisation (``ComputeLinearizedSystem``: M, K, D).
 
-Bodies (``ObjectRigidBody`` on ``NodeRigidBodyRxyz``, coordinates
-x, y, z, roll, pitch, yaw relative to the reference position, small angles
-about x, y, z; nodes at the centres of mass): carbody, front and rear bogie
-frame, wheelsets 1-4 (1 leads); or, for an articulated layout
-(:class:`.layout.Layout`), carbodies 1 .. n on n + 1 bogies (Jacobs bogies
-between adjacent carbodies) and 2 (n + 1) wheelsets, with an articulation
-(springs and dampers k_art, c_art in x, y, z at the pivot, height h_art) and
-two longitudinal inter-car dampers c_ic between adjacent carbody ends. The
-counts below are those of one car. Degrees of freedom: all six motions of
-carbody, bogie frames and wheelsets (the carbody and bogie frames held
-longitudinally by the traction rods, the yaw dampers and the primary and
-secondary longitudinal springs; the wheelsets roll: their longitudinal motion
-and spin are held only by the longitudinal creep forces), 42 rigid-body
-coordinates, plus one internal coordinate per yaw damper (4), per secondary
-vertical damper (4) and the two rail masses under each wheelset (8). With
-rolling wheelsets the car's bodies and wheelsets can move together
-longitudinally, the wheelsets rolling without creep: a rigid-body mode, held
-here by a soft tie of each carbody to the train's mean motion
-(:data:`TIE_HZ`, :data:`TIE_DAMPING`; the rest of the train and its traction
-control). A wheelset's spin *angle* acts nowhere (only its rate enters the
-creepages): the linear analyses leave it out of the state
-(:func:`.modes.acting_positions`). This carbody longitudinal mode on the
-traction rods, coupled with the bogies' pitch and the wheelsets' rolling,
-sits at 8.6 Hz at 300 km/h for the default car (9.5 Hz for the lighter
-Manchester coach), next to a first carbody bending; with the
-contact option ``wheelset_rolling: false`` the wheelsets' longitudinal motion
-and spin are held by stiff springs to ground (natural frequency
-:data:`RESTRAINT_HZ`, :data:`RESTRAINED`; the linear analysis treats them as
-fixed), which puts that mode near 5 Hz.
+What is in it (``docs/model.md`` has the vehicle, its parameters and sources):
 
-Ground element: gravity (-m g on each body's vertical coordinate), the
-carbodies' longitudinal tie (rolling wheelsets) or the wheelsets' restraint
-springs (not rolling) are one ``ObjectGenericODE2`` with a sparse stiffness
-and damping: one
-exudyn item instead of 7 loads and 8 connectors (exudyn's cost per item and
-time step dominates a model this small).
+- rigid bodies (``ObjectRigidBody``, six coordinates each, nodes at the centres
+  of mass): carbody, bogie frames, wheelsets; an articulated layout
+  (:class:`.layout.Layout`) puts carbodies on Jacobs bogies joined by an
+  articulation and inter-car dampers;
+- suspension connectors between markers at the attachment points: primary and
+  secondary springs and dampers, traction rods, anti-roll bars, Maxwell yaw and
+  secondary vertical dampers (a linear ``ObjectGenericODE2`` each, with one
+  internal coordinate); lateral bump stops as a time-solver option;
+- per wheelset, one contact element (Hertz, linear Kalker creep with an
+  equivalent conicity, gravitational stiffness) and one track-support element
+  (a rail mass per wheel on pad and ballast), driven by the track's vertical
+  level, alignment and cross-level;
+- sensors: accelerations ``C q'' + C_disp q`` of body points, the lateral ones
+  fixed to their body (they read g x roll, ``gravity_roll``).
 
-Suspension (exudyn connectors between ``MarkerBodyPosition`` markers at the
-attachment points):
+Why it is built this way:
 
-- primary, per axlebox (8): ``CartesianSpringDamper`` x, y, z springs, a
-  longitudinal damper (bush hysteresis) and a vertical damper, between
-  wheelset and bogie frame at (+-a_ws, +-b_prim, r0);
-- secondary, per side (4): ``CartesianSpringDamper`` x, y, z springs, the
-  vertical damper and the lateral damper, between bogie and carbody at
-  (+-a_bogie, +-b_sec, h_sec);
-- traction rods, one per bogie (2): ``CartesianSpringDamper`` with a
-  longitudinal spring k_trac, bogie centre to carbody at height h_trac;
-- yaw dampers, one per side of each bogie (4): Maxwell elements (damper c_yaw
-  in series with the stiffness k_yaw_s of its bushes and oil column), a linear
-  ``ObjectGenericODE2`` on (bogie, carbody, internal coordinate) each, at
-  (+-a_bogie, +-b_yaw, h_yaw) (:func:`maxwell_yaw_damper`);
-- anti-roll bars, one per bogie (2): ``CoordinateSpringDamper`` on the relative
-  roll angle of carbody and bogie frame;
-- lateral bump stops (option of the time solver), one per bogie:
-  ``CartesianSpringDamper`` with a symbolic force law, zero inside the gap.
-
-Spring preloads are connector offsets, so the reference configuration under
-gravity is the static equilibrium (no static solve; :meth:`TrainModel.static_residual`
-checks it with exudyn's own right-hand side).
-
-Wheel-rail contact, per wheelset: an ``ObjectGenericODE2`` force element on
-the wheelset's coordinates and its odometer (below), with
-
-- Hertzian vertical contact per wheel, linearised (stiffness k_H, no damping),
-  between the wheel and the rail mass under it (track support element below):
-  the wheel's side here, vertical force 2 k_H (V - z) and roll moment
-  k_H l0 (C - 2 l0 roll);
-- linearised Kalker creep with equivalent conicity lambda (creepages from the
-  wheelset's lateral velocity, yaw angle, yaw rate and rolling-radius
-  difference 2 lambda (y - Y)): F_y = -2 f22 (dy/dt / v - yaw),
-  M_z = -2 f11 l0 (l0 dyaw/dt / v + lambda (y - Y) / r0), and (rolling
-  wheelsets) the longitudinal creepage common to both wheels,
-  F_x = -2 f11 (dx/dt - r0 dpitch/dt) / v with the moment -r0 F_x on the
-  spin, with Kalker's
-  f11, f22 for the static wheel load (:func:`.parameters.creep_coefficients`);
-- gravitational stiffness W lambda / l0 on (y - Y).
-
-Track support, per wheelset: the left and right rail masses (m_track each) on
-the pad and ballast (k_track, c_track each), coupled to the wheel by the
-Hertzian spring; one linear ``ObjectGenericODE2`` on (wheelset, rails)
-(:func:`track_support_matrices`); the track input -k_H (V ± C/2) acts on the
-rails (:meth:`TrainModel.input_matrix_track`). P2 resonance about 63 Hz
-(wheelset bounce) and 60 Hz (wheelset roll), damping ratio about 0.3; the
-wheel-on-rail modes near 490 Hz are damped too (damping ratio 0.2). The
-``track-flexibility`` effect replaces it (vertical only, its own frequency
-and damping).
-
-V, Y and C are the track's vertical level, alignment and cross-level under
-the wheelset (:data:`suspid.interfaces.IRREGULARITY_CHANNELS`; the gauge does
-not act in an equivalent-conicity contact: the rolling-radius differences of
-the two rails cancel). The element's stiffness and damping matrices hold the
-linear terms (damping f/v at the segment's speed: creep damping is speed
-dependent); the track enters as the force G r, with G the
-:meth:`TrainModel.input_matrix` (6 x 3). In the time solver a symbolic
-``forceUserFunction`` (exudyn.symbolic, evaluated in C++, no Python call)
-adds G r(s), with r looked up in the track table at the wheelset's odometer;
-with creep saturation or a variable speed it computes the creep forces
-itself, with the odometer's velocity as the speed.
-
-Odometers: one coordinate per wheelset (``NodeGenericODE2``, unit mass in the
-contact element) holding the wheelset's position in the track table, in
-samples. At constant speed they coast (initial velocity v/dx, no force:
-exact in generalised-alpha); with a speed record a velocity-level
-``CoordinateConstraint`` prescribes the leading one's velocity from a
-symbolic speed table and the others keep their distance to it.
-
-Tables in exudyn.symbolic: named ``Real`` leaves (one per distance sample and
-channel, shared by the four wheelsets) read by a balanced ``IfThenElse`` tree
-with linear interpolation: O(log n) operations per lookup, all in C++; a new
-segment only sets leaf values (no rebuild). Two exudyn 1.13 limits shape this:
-symbolic vectors of 8 or more entries crash when indexed (hence one contact
-element per wheelset, 7 coordinates) and a symbolic index into a table is
-not available (hence the trees).
-
-Sensors: lateral accelerometers are fixed to their body and measure g × roll
-of the body besides the lateral acceleration (``gravity_roll``, on by
-default; C_disp holds g in the body's roll column). Exudyn records the
-accelerations of the nodes that carry sensors
-(``SensorNode``, ``Coordinates_tt``); a sensor's acceleration is J q''_node
-with J read back from exudyn's kinematics (:meth:`TrainModel._sensor_jacobians`),
-the same J that gives the frequency solver's output matrix. Both solvers
-compute the sensors as C q'' + C_disp q on the free coordinates
-(:meth:`TrainModel.sensor_matrices`; C_disp is zero unless an effect reads
-displacements).
-
-Effects (``simulator.options.effects``, :mod:`.effects`) extend this system:
-extra nodes and linear elements (carbody bending mode, Maxwell yaw dampers,
-track masses), changed values (conicity), changed outputs (sensor tilt) and
-periodic wheel inputs (polygons). Their coordinates are free coordinates
-labelled (effect name, coordinate).
+- Spring preloads are connector offsets, so the reference configuration is the
+  static equilibrium without a static solve (:meth:`TrainModel.static_residual`
+  checks it with exudyn's own right-hand side).
+- The wheelsets roll (their longitudinal motion and spin held by creep only),
+  so the whole car has a free longitudinal rigid-body mode: a soft tie of each
+  carbody to the train's mean motion (:data:`TIE_HZ`, :data:`TIE_DAMPING`, the
+  rest of the train) removes it; with ``wheelset_rolling: false`` stiff springs
+  to ground (:data:`RESTRAINT_HZ`) hold the wheelsets instead. A wheelset's spin
+  angle acts nowhere and the linear analyses leave it out
+  (:func:`.modes.acting_positions`).
+- Gravity and the tie are one sparse ``ObjectGenericODE2``: exudyn's cost per
+  item and time step dominates a model this small.
+- In the time solver the track is read by symbolic functions evaluated in C++
+  (no Python call per step): tables of named leaves read through balanced
+  ``IfThenElse`` trees, because exudyn 1.13 has no symbolic table index and
+  crashes on indexing symbolic vectors of 8 or more entries (hence one contact
+  element of 7 coordinates per wheelset). One odometer coordinate per wheelset
+  holds its position in the table; a speed record prescribes the leading one's
+  velocity.
+- Effects (:mod:`.effects`) extend this system with nodes, linear elements,
+  changed values or outputs, labelled (effect name, coordinate).
 """
 
 from __future__ import annotations
