@@ -442,6 +442,10 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     reported intervals without the truth, mostly k_prim_z and c_sec_z, whose errors added up from
     several differences of the vehicle (``benchmarks/RESULTS.md``).
 
+    The no-change test (:mod:`suspid.workflows.no_change`, ``no_change``) then asks whether the measurement
+    date rejects w = w0; where it does not, the bound grows until every interval holds w0, and a component
+    w0 lies further from than ``max_half_width`` is not trustworthy (the data do not tell it from w0).
+
     A component no check flags is trustworthy only when the checks of :data:`REQUIRED_CHECKS` all ran,
     otherwise *not assessed* (:func:`suspid.workflows.trust.trust_states`); ``report["checks"]`` says which ran and why not.
 

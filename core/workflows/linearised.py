@@ -32,6 +32,10 @@ the spectra are linearised instead, once per date, and every check reads them:
   on the spectra of the calibrated model itself (one Jacobian per date at θ̂: a
   mount's stiffness changes the spectra far from linearly over a factor 2).
 
+The no-change test (:mod:`suspid.workflows.no_change`, one simulation at w0 on the measurement date) runs
+with the adequacy bands; where the data do not reject w0, the bound grows until every interval around the
+(corrected) estimate holds w0.
+
 The adequacy bands at w_opt read the 2q + 1 simulations of the intervals
 (:func:`suspid.workflows.analysis.gradient_noise`): no new simulation. A
 linearisation is valid where the spectra are nearly linear in w and θ over
