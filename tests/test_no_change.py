@@ -77,3 +77,24 @@ def test_a_damaged_date_rejects_w0_and_w0_never_rejects_itself(damaged):
     assert itself.delta_j == 0.0 and not itself.rejected
     off = opts.model_copy(update={"no_change": False})
     assert no_change_check(problem, ledger, u_ref, off, False, None)[0] is None
+
+
+def test_report_names_the_linearised_checks_and_reads_an_older_calibration():
+    from suspid.workflows.linearised import calibration_markdown, calibration_result
+    from suspid.workflows.report import checks_lines
+    from suspid.workflows.trust import checks_report
+
+    checks = checks_report({"self_check": "done", "adequacy": "done", "groups": "done", "nuisance": "done",
+                            "no_change": "done"})
+    lines = checks_lines({"model_error": {"method": "linearised", "checks": checks}})
+    assert "self-check on the spectra linearised at w0" in lines[0] and "no-change test at w0" in lines[0]
+    assert "reference-date self-check, adequacy" in checks_lines({"model_error": {"method": "full",
+                                                                                  "checks": checks}})[0]
+    cal = {"status": "done", "method": "m", "n_iterations": 1, "n_clusters": 4, "residual_rms_db": 0.1,
+           "source": "s", "max_sd_fraction": 0.1, "n_sigmas": 2.0,
+           "parameters": {"k_yaw_s": {"nominal": 1e7, "assumed_range": [5e6, 2e7], "value": 9e6,
+                                      "interval": [8e6, 1e7], "status": "calibrated"}}}
+    report = {"calibration": dict(cal)}
+    assert calibration_result(report) == cal and "calibration" not in report   # carried once, at the top level
+    old = {"model_error": {"calibration": cal}}                                  # a result.json written before
+    assert "| k_yaw_s |" in calibration_markdown(old) == calibration_markdown({"calibration": cal})
