@@ -236,7 +236,8 @@ def budget_table(cfgs: list[Path]) -> None:
             checks = int(me.get("budget", {}).get("total", 0))
         else:
             checks = sum(int(me.get(k, {}).get("n_simulations", 0)) for k in ("self_check", "nuisance")) \
-                + int(me.get("adequacy", {}).get("groups", {}).get("n_simulations", 0))
+                + int(me.get("adequacy", {}).get("groups", {}).get("n_simulations", 0)) \
+                + int(me.get("no_change", {}).get("n_simulations", 0))
         ident = int(res["n_simulator_calls"])
         ratios.append(checks / max(ident, 1))
         print(f"  {cfg.parent.name}/{cfg.stem}: {checks} / {ident} ({me.get('method', 'full')})")

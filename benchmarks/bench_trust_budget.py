@@ -59,7 +59,8 @@ def flags(problem, trust: dict, sd: np.ndarray, identifiable: np.ndarray, n_sigm
 
 
 CHECKS = {"self-check": "self-check", "data groups": "disagree", "model parameters": "rests on",
-          "too uncertain": "too uncertain", "adequacy bands": "inadequate"}
+          "too uncertain": "too uncertain", "adequacy bands": "inadequate",
+          "no change": "do not tell it from its value at the reference date"}
 """Each check's flag, from the start of its reason (the same words in both methods)."""
 
 
@@ -73,7 +74,8 @@ def check_costs(report: dict) -> dict[str, int]:
     if report.get("method") == "linearised":
         return {k: v for k, v in report["budget"].items() if isinstance(v, int) and k != "total"}
     out = {}
-    for name, part in (("self_check", report.get("self_check", {})), ("nuisance", report.get("nuisance", {}))):
+    for name, part in (("self_check", report.get("self_check", {})), ("nuisance", report.get("nuisance", {})),
+                       ("no_change", report.get("no_change", {}))):
         if part.get("status") == "done":
             out[name] = int(part["n_simulations"])
     groups = report.get("adequacy", {}).get("groups")

@@ -116,6 +116,10 @@ class ModelErrorOptions(Section):
         "at the reference date give, centre the interval there with their posterior spread, and bound the rest "
         "(the self-check's bias, half the groups' spread) in quadrature; false: keep w_opt and add every source as "
         "a worst case (the self-check and the ends of each model parameter's range then flag on their own)")
+    no_change: bool = Field(
+        default=True, description="test w = w0 on the measurement date (J(w_opt) - J(w0) against its bootstrap "
+        "spread, one simulation at w0); where the data do not reject w0, every interval is widened to hold it "
+        "(suspid.workflows.no_change)")
     calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)

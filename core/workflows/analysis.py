@@ -31,6 +31,7 @@ from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.nuisance import nuisance_shifts
 from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import calibration_result, linearised_model_error
+from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
 from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
@@ -390,9 +391,29 @@ def biased(bias: np.ndarray, se: np.ndarray, max_bias: float) -> np.ndarray:
     return (bias > 2 * np.asarray(se, dtype=float)) & (bias > max_bias)
 
 
+def no_change_check(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options: ModelErrorOptions,
+                    retry_failed: bool, executor: Executor | None) -> tuple[NoChange | None, dict[str, Any]]:
+    """The test of w = w0 on the measurement date (:mod:`suspid.workflows.no_change`): one simulation at w0 on
+    its segments (cached in the ledger). :returns: the test (None where it did not run) and its report."""
+    if not options.no_change:
+        return None, {"status": "disabled (identifiability.model_error.no_change: false)"}
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in problem.names], float))
+    key, _ = _y_sim_key(problem, u0)
+    n_sims = 0 if ledger.get_array(key + ":y") is not None else 1
+    try:
+        y0 = cached_y_sim(problem, ledger, u0, retry_failed, executor)
+    except SimulatorError as exc:
+        return None, {"status": f"not run: the simulation at w0 failed ({exc})", "n_simulations": n_sims}
+    ident = problem.config.identifiability
+    test = no_change_test(problem, cached_y_sim(problem, ledger, u_opt, retry_failed, executor), y0,
+                          ident.n_redraws, ident.n_sigmas, reference=ident.bootstrap_reference)
+    return test, test.to_dict(n_sims)
+
+
 def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, options: ModelErrorOptions,
                 retry_failed: bool = False, sd: np.ndarray | None = None,
-                executor: Executor | None = None, phases: Phases | None = None) -> dict[str, Any]:
+                executor: Executor | None = None, phases: Phases | None = None, *,
+                apply_no_change_test: bool = True) -> dict[str, Any]:
     """Trust under model error: the reference-date self-check and the adequacy test at w_opt.
 
     A component is **not trustworthy under model error** when
@@ -418,6 +439,10 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     reported intervals without the truth, mostly k_prim_z and c_sec_z, whose errors added up from
     several differences of the vehicle (``benchmarks/RESULTS.md``).
 
+    The no-change test (:mod:`suspid.workflows.no_change`, ``no_change``) then asks whether the measurement
+    date rejects w = w0; where it does not, the bound grows until every interval holds w0, and a component
+    w0 lies further from than ``max_half_width`` is not trustworthy (the data do not tell it from w0).
+
     A component no check flags is trustworthy only when the checks of :data:`REQUIRED_CHECKS` all ran,
     otherwise *not assessed* (:func:`suspid.workflows.trust.trust_states`); ``report["checks"]`` says which ran and why not.
 
@@ -442,6 +467,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         phases.start("model error (linearised)")
         return linearised_model_error(problem, ledger, u_opt, h, options, retry_failed, sd, executor, model_error)
     report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
+    phases.start("no-change test (1 simulation)")
+    test, report["no_change"] = no_change_check(problem, ledger, u_opt, options, retry_failed, executor)
     checks: dict[str, str] = {}
     bound = None
     sc_opt = options.self_check
@@ -560,5 +587,11 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                         f"rests on an assumed model parameter: with {name} = {value:g} (plausible {lo:g} to {hi:g}) "
                         f"it is identified {100 * check.shifts[rows[k], k]:+.1f} % of its interval away "
                         f"(threshold {100 * nu_opt.max_shift:.0f} %)")
+    if apply_no_change_test:   # (the linearised checks apply it to their own estimate and bound)
+        u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))
+        by_name = {n: r for n, r in zip(names, reasons)}
+        bound = apply_no_change(test, names, sd, bound, np.asarray(u_opt, float) - u0,
+                                problem.config.identifiability.n_sigmas, options.max_half_width, by_name)
+    checks["no_change"] = report["no_change"]["status"]
     report["checks"] = checks_report(checks)
-    return {**trust_states(names, reasons, checks), "bias_bound": bound, "report": report}
+    return {**trust_states(names, reasons, checks), "bias_bound": bound, "report": report, "no_change": test}

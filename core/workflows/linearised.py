@@ -32,6 +32,10 @@ the spectra are linearised instead, once per date, and every check reads them:
   on the spectra of the calibrated model itself (one Jacobian per date at θ̂: a
   mount's stiffness changes the spectra far from linearly over a factor 2).
 
+The no-change test (:mod:`suspid.workflows.no_change`, one simulation at w0 on the measurement date) runs
+with the adequacy bands; where the data do not reject w0, the bound grows until every interval around the
+(corrected) estimate holds w0.
+
 The adequacy bands at w_opt read the 2q + 1 simulations of the intervals
 (:func:`suspid.workflows.analysis.gradient_noise`): no new simulation. A
 linearisation is valid where the spectra are nearly linear in w and θ over
@@ -55,6 +59,7 @@ from suspid.interfaces import Executor, TrackSegment
 from suspid.method.calibration import UNIFORM_SD, calibrate_step, implicit_shifts, octave_clusters
 from suspid.method.identifiability import ModelErrorOptions, bias_aware_half_width
 from suspid.workflows.jacobian import spectra_jacobian
+from suspid.workflows.no_change import apply_no_change
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
@@ -63,7 +68,7 @@ from suspid.workflows.reference import local_search
 from suspid.workflows.trust import checks_report, trust_states
 from suspid.elements import declared_parameters
 
-__all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_markdown",
+__all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_of", "calibration_markdown",
            "equivalent_bias_bound", "DateJacobian"]
 
 ModelErrorFn = Callable[..., dict[str, Any]]
@@ -396,14 +401,17 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         "method": "full", "self_check": options.self_check.model_copy(update={"enabled": False}),
         "adequacy": options.adequacy.model_copy(update={"groups": False}),
         "nuisance": options.nuisance.model_copy(update={"parameters": {}})})
-    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor)
+    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False)
     report = trust["report"]
+    no_change = trust.get("no_change")
     report["method"] = "linearised"
     names, q = problem.names, problem.q
     reasons: dict[str, list[str]] = {n: list(r) for n, r in trust["reasons"].items()}
     sd_ = np.zeros(q) if sd is None else np.asarray(sd, float)
     theta = model_parameters(problem, options)
-    budget: dict[str, Any] = {"adequacy": 0}
+    budget: dict[str, Any] = {"adequacy": 0, "no_change": int(report.get("no_change", {}).get("n_simulations", 0))}
+    n_sigmas = problem.config.identifiability.n_sigmas
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))
     have_ref = bool(problem.reference) and bool(problem.reference_segments)
     x_opt = problem.from_unit(np.asarray(u_opt, float))
     w_opt = problem.w_of(x_opt)
@@ -421,8 +429,11 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         why = f"not run: the spectra's Jacobian failed ({exc})"
         report.update({"self_check": {"status": why}, "nuisance": {"status": why}, "calibration": {"status": why},
                        "budget": budget})
-        checks = {"adequacy": _base_status(report, "adequacy"), "self_check": why, "groups": why, "nuisance": why}
-        return _trust(names, reasons, checks, trust["bias_bound"], report)
+        checks = {"adequacy": _base_status(report, "adequacy"), "self_check": why, "groups": why, "nuisance": why,
+                  "no_change": report.get("no_change", {}).get("status", "not run")}
+        bound = apply_no_change(no_change, names, sd_, trust["bias_bound"], np.asarray(u_opt, float) - u0, n_sigmas,
+                                options.max_half_width, reasons)
+        return _trust(names, reasons, checks, bound, report)
     budget["jacobian_measurement_w_opt"] = jac_opt.n_simulations
     budget["methods"] = jac_opt.methods
 
@@ -586,7 +597,6 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"rests on a model parameter (linearised): with {name} = {value:g} (end of {what}) it is "
                     f"identified {100 * shifts[largest_row[k], k]:+.1f} % of its interval away (threshold "
                     f"{100 * options.nuisance.max_shift:.0f} %)")
-    n_sigmas = problem.config.identifiability.n_sigmas
     correction = None
     if correct:
         # the calibrated model's shift corrected (a bias with its sign); the self-check's mean shift and half the
@@ -604,6 +614,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                             zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
     else:
         bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
+    u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
+    bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
                                           "model_parameters_spread": float(100 * m)}
                                       for n, a, s, m in zip(names, bound_known, shift_known, sd_model)}
@@ -616,7 +628,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
               "groups": ("done" if groups is not None else
                          "not run: the adequacy test is disabled" if not ad.enabled else
                          "disabled (identifiability.model_error.adequacy.groups: false)"),
-              "nuisance": report.get("nuisance", {}).get("status", "done")}
+              "nuisance": report.get("nuisance", {}).get("status", "done"),
+              "no_change": report.get("no_change", {}).get("status", "not run")}
     return {**_trust(names, reasons, checks, bound, report), "correction": correction}
 
 
@@ -636,14 +649,22 @@ def _trust(names: list[str], reasons: dict[str, list[str]], checks: dict[str, st
 # ----------------------------------------------------------------------------------------------- reporting
 def calibration_result(report: dict[str, Any]) -> dict[str, Any] | None:
     """``result.json``'s ``"calibration"``: each model parameter with its value and interval (None when the
-    linearised checks did not run). ``report`` is the model-error report (``result["model_error"]``)."""
-    cal = (report or {}).get("calibration")
+    linearised checks did not run). ``report`` is the model-error report (``result["model_error"]``); the
+    calibration is *moved* out of it, so that result.json carries it once, at its top level (results written
+    before keep a copy under ``model_error``: :func:`calibration_of` reads both)."""
+    cal = (report or {}).pop("calibration", None)
     return None if cal is None else dict(cal)
+
+
+def calibration_of(result: dict[str, Any]) -> dict[str, Any] | None:
+    """The calibration of a result.json: its top-level ``"calibration"``, or (results written before it moved
+    there alone) ``model_error.calibration``."""
+    return result.get("calibration") or (result.get("model_error") or {}).get("calibration")
 
 
 def calibration_markdown(result: dict[str, Any]) -> str:
     """report.md's section on the calibrated model parameters (empty without a calibration)."""
-    cal = result.get("calibration")
+    cal = calibration_of(result)
     if not cal:
         return ""
     out = ["", "## Model parameters calibrated at the reference date", ""]

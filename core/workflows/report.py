@@ -18,7 +18,7 @@ from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
 from suspid.method.noise import modelled_spectra
 from suspid.optimize.loop import LoopOutcome
-from suspid.workflows.trust import CHECK_LABELS, trust_word  # trust_word: importers take it from here too
+from suspid.workflows.trust import check_labels, trust_word  # trust_word: importers take it from here too
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
 from suspid.workflows.tasks import SpectraTask, run_one
@@ -258,7 +258,7 @@ def checks_lines(result: dict[str, Any]) -> list[str]:
     checks = (result.get("model_error") or {}).get("checks")
     if not checks:
         return ["Model-error checks: not recorded in this result."]
-    labels = CHECK_LABELS
+    labels = check_labels((result.get("model_error") or {}).get("method"))
     ran = [labels.get(c, c) for c, v in checks.items() if v["ran"]]
     out = [f"Model-error checks that ran: {', '.join(ran) if ran else 'none'}."]
     out += [f"- {labels.get(c, c)}{' (needed for a yes)' if v['required'] else ''}: {v['status']}"
@@ -283,7 +283,8 @@ def model_error_section(result: dict[str, Any]) -> str:
     sc = me.get("self_check", {})
     if sc.get("status") == "done":
         out.append(f"Reference-date self-check ({sc['n_splits']} random halves: B fitted on {sc['segments_fit']} "
-                   f"segments, w identified on the other {sc['segments_identify']} by a local search from w0, "
+                   f"segments, w identified on the other {sc['segments_identify']} by a local search from w0"
+                   f"{' on the spectra linearised at w0' if sc.get('linearised') else ''}, "
                    f"where the truth is w0). A component whose mean shift lies beyond 2 standard errors of the splits' "
                    f"mean (a bias) and exceeds {me['max_bias_percent']:.0f} % of its interval is not trustworthy.\n")
         out.append(markdown_table(["parameter", "bias (% of interval)", "standard error (%)",
@@ -329,6 +330,15 @@ def model_error_section(result: dict[str, Any]) -> str:
                                 for row in nu["shifts_percent"]])]
     elif nu and "checks" not in me:
         out += ["", f"Nuisance parameters: {nu['status']}."]
+    nc = me.get("no_change")
+    if nc and nc.get("status") == "done":
+        out += ["", f"No-change test: J(w_opt) − J(w0) = {nc['delta_J']:.4g} on the measurement date, "
+                    f"{nc['z']:.1f} times its bootstrap standard deviation ({nc['sd_delta_J']:.3g}, "
+                    f"{nc['n_redraws']} replicates): " +
+                    (f"w0 is rejected (beyond {nc['n_sigmas']:g})." if nc["rejected"] else
+                     f"the data do not reject w0 (within {nc['n_sigmas']:g}), so every interval is widened to hold "
+                     f"w0's value; a component w0 lies further from than ± {me.get('max_half_width_percent', 8):.0f} "
+                     f"% is not reported as a finding.")]
     bound = me.get("bias_bound_percent")
     corr = me.get("correction")
     if bound and corr:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "checks_report", "trust_states", "trust_word"]
+__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "check_labels", "checks_report", "trust_states",
+           "trust_word"]
 
 REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 """The checks that must all have run for a component to be called trustworthy: the reference-date self-check
@@ -17,7 +18,19 @@ REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 vehicle's). The nuisance sweep is opt-in: it runs where the user declares uncertain model parameters."""
 
 CHECK_LABELS = {"self_check": "reference-date self-check", "adequacy": "adequacy at w_opt",
-                "groups": "data groups", "nuisance": "nuisance parameters"}
+                "groups": "data groups", "nuisance": "nuisance parameters", "no_change": "no-change test at w0"}
+
+LINEARISED_LABELS = CHECK_LABELS | {
+    "self_check": "reference-date self-check on the spectra linearised at w0",
+    "groups": "data groups on the spectra linearised at w_opt",
+    "nuisance": "model parameters calibrated at the reference date and propagated by linearisation"}
+"""The checks' names when ``identifiability.model_error.method`` is ``linearised`` (the default): no
+re-identification by simulation, the same checks on the spectra linearised once per date."""
+
+
+def check_labels(method: str | None) -> dict[str, str]:
+    """The checks' names for report.md and the terminal, by the model-error method of a result."""
+    return LINEARISED_LABELS if method == "linearised" else CHECK_LABELS
 
 
 def trust_word(trustworthy: bool | None) -> str:

@@ -1,0 +1,100 @@
+"""The test of "nothing changed" (w = w0) on the measurement date, and the intervals it widens.
+
+Known answers: the bias-aware interval reaching a given point (closed form at its limits), and on the numerical
+experiment a measurement date whose suspension differs from w0 by 20-30 % of its nominal values, where J at the
+truth is far above J at w0 (rejected), against an estimate at w0 itself (ΔJ = 0: never rejected).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from suspid.config import load_config
+from suspid.infra.ledger import Ledger
+from suspid.method.identifiability import bias_aware_half_width
+from suspid.workflows.analysis import cached_y_sim, no_change_check
+from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test, reach_bound
+from suspid.workflows.problem import build_problem
+
+W_REF = {"k_sec_z": 280.0e3, "c_sec_z": 14.0e3, "k_prim_z": 1.28e6, "c_sec_y": 21.0e3, "c_yaw": 210.0e3}
+"""The quickstart's damaged suspension (-20 to -30 % of nominal but k_prim_z +7 %)."""
+
+
+def test_reach_bound_makes_the_interval_hold_the_point():
+    sd = np.array([0.02, 0.02, 0.0, 0.03])
+    bound = np.array([0.01, 0.0, 0.02, 0.0])
+    distance = np.array([0.10, -0.01, 0.05, 0.0])
+    new = reach_bound(sd, bound, distance, 2.0)
+    half = bias_aware_half_width(sd, new, 2.0)
+    assert half[0] == pytest.approx(0.10, rel=1e-6) and new[0] > bound[0]      # widened just to the point
+    assert new[1] == bound[1] and new[3] == bound[3]   # already held (2 sigma = 4 % > 1 %; the estimate itself)
+    assert new[2] == pytest.approx(0.05)               # no sampling spread: the bound is the distance
+    assert np.all(half >= np.abs(distance) - 1e-9)
+
+
+def test_apply_no_change_only_where_w0_is_not_rejected():
+    names = ["a", "b"]
+    sd, bound, distance = np.array([0.01, 0.01]), np.array([0.0, 0.0]), np.array([0.12, 0.01])
+    rejected = NoChange(delta_j=1.0, sd=0.1, rejected=True, n_redraws=32, n_sigmas=2.0)
+    reasons: dict[str, list[str]] = {}
+    assert apply_no_change(rejected, names, sd, bound, distance, 2.0, 0.08, reasons) is bound and not reasons
+    kept = NoChange(delta_j=0.1, sd=0.1, rejected=False, n_redraws=32, n_sigmas=2.0)
+    new = apply_no_change(kept, names, sd, bound, distance, 2.0, 0.08, reasons)
+    assert bias_aware_half_width(sd, new, 2.0)[0] == pytest.approx(0.12, rel=1e-6)
+    assert list(reasons) == ["a"] and "do not tell it from its value at the reference date" in reasons["a"][0]
+
+
+@pytest.fixture(scope="module")
+def damaged(tmp_path_factory):
+    """The numerical experiment (16 segments, frequency solver) with the quickstart's damaged suspension."""
+    tmp = tmp_path_factory.mktemp("no_change")
+    config = load_config({
+        "name": "no-change", "seed": 7,
+        "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 100.0}},
+        "parameters": {n: {} for n in W_REF},
+        "data": {"source": "experiment", "w_ref": W_REF,
+                 "track": {"n_segments": 16, "length_m": 1000.0, "speed_kmh": 300.0}},
+        "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 200},
+        "identifiability": {"n_redraws": 16, "model_error": {"run": "always"}}})
+    ledger = Ledger(tmp / "ledger.sqlite")
+    return build_problem(config, ledger), ledger
+
+
+def test_a_damaged_date_rejects_w0_and_w0_never_rejects_itself(damaged):
+    problem, ledger = damaged
+    names = problem.names
+    u_ref = problem.to_unit(np.array([W_REF[n] for n in names]))
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in names]))
+    opts = problem.config.identifiability.model_error
+    test, report = no_change_check(problem, ledger, u_ref, opts, False, None)
+    assert report["status"] == "done" and report["n_simulations"] == 1     # the simulation at w0
+    assert test.rejected and test.delta_j > 0 and test.z > 2, report
+    again, report = no_change_check(problem, ledger, u_ref, opts, False, None)
+    assert report["n_simulations"] == 0 and again.delta_j == test.delta_j    # cached; the same draws
+    y0 = cached_y_sim(problem, ledger, u0)
+    itself = no_change_test(problem, y0, y0, 16, 2.0)
+    assert itself.delta_j == 0.0 and not itself.rejected
+    off = opts.model_copy(update={"no_change": False})
+    assert no_change_check(problem, ledger, u_ref, off, False, None)[0] is None
+
+
+def test_report_names_the_linearised_checks_and_reads_an_older_calibration():
+    from suspid.workflows.linearised import calibration_markdown, calibration_result
+    from suspid.workflows.report import checks_lines
+    from suspid.workflows.trust import checks_report
+
+    checks = checks_report({"self_check": "done", "adequacy": "done", "groups": "done", "nuisance": "done",
+                            "no_change": "done"})
+    lines = checks_lines({"model_error": {"method": "linearised", "checks": checks}})
+    assert "self-check on the spectra linearised at w0" in lines[0] and "no-change test at w0" in lines[0]
+    assert "reference-date self-check, adequacy" in checks_lines({"model_error": {"method": "full",
+                                                                                  "checks": checks}})[0]
+    cal = {"status": "done", "method": "m", "n_iterations": 1, "n_clusters": 4, "residual_rms_db": 0.1,
+           "source": "s", "max_sd_fraction": 0.1, "n_sigmas": 2.0,
+           "parameters": {"k_yaw_s": {"nominal": 1e7, "assumed_range": [5e6, 2e7], "value": 9e6,
+                                      "interval": [8e6, 1e7], "status": "calibrated"}}}
+    report = {"calibration": dict(cal)}
+    assert calibration_result(report) == cal and "calibration" not in report   # carried once, at the top level
+    old = {"model_error": {"calibration": cal}}                                  # a result.json written before
+    assert "| k_yaw_s |" in calibration_markdown(old) == calibration_markdown({"calibration": cal})
