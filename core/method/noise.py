@@ -526,6 +526,15 @@ def refit_gaussian(model: "NoiseModel", paths: np.ndarray, freqs: np.ndarray | N
     return refit
 
 
+def bootstrap_refit(model: "NoiseModel", paths: np.ndarray, speeds: Sequence[float], rng: np.random.Generator,
+                    freqs: np.ndarray | None = None, channels: Sequence[str] | None = None) -> "NoiseModel":
+    """One bootstrap replicate of the reference date's noise model: :func:`refit_gaussian` on the paths
+    ``(v0, n_channels, n_freqs)`` dB of v0 reference segments drawn with replacement (``speeds (v0,)`` m/s,
+    each segment's speed), so that an interval or a test carries B's own estimation error."""
+    i0 = rng.integers(0, len(speeds), len(speeds))
+    return refit_gaussian(model, paths[i0], freqs, channels, [speeds[i] for i in i0])
+
+
 def fit_noise_model(y_mes: np.ndarray, y_sim: np.ndarray, options: NoiseOptions | Mapping[str, Any] | None = None,
                     freqs: np.ndarray | None = None, channels: Sequence[str] | None = None,
                     speeds: Sequence[float] | None = None) -> NoiseModel:

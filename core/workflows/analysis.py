@@ -22,7 +22,7 @@ from suspid.interfaces import Executor, SpectraModel
 from suspid.method.adequacy import band_residuals, frequency_bands, information_share
 from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bias_aware_half_width
 from suspid.method.jacobian import fisher_identifiability, fisher_information
-from suspid.method.noise import refit_gaussian, reference_paths
+from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
@@ -152,8 +152,7 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     for k in range(n_redraws):
         model = problem.noise_model
         if ref:
-            i0 = ref_rng.integers(0, len(ref_speeds), len(ref_speeds))
-            model = refit_gaussian(model, paths[i0], problem.freqs, problem.channels, [ref_speeds[i] for i in i0])
+            model = bootstrap_refit(model, paths, ref_speeds, ref_rng, problem.freqs, problem.channels)
         b = model.sample(v, rng)
         i_mes = rng.integers(0, v, v)
         i_mod = i_mes if paired else rng.integers(0, v, v)

@@ -33,7 +33,7 @@ from scipy.optimize import brentq
 
 from suspid.infra.seeds import rng as named_rng
 from suspid.method.identifiability import bias_aware_half_width
-from suspid.method.noise import refit_gaussian, reference_paths
+from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem, segment_speeds
 
@@ -86,8 +86,7 @@ def no_change_test(problem: Problem, y_opt: np.ndarray, y0: np.ndarray, n_redraw
     for k in range(n_redraws):
         model = problem.noise_model
         if ref:
-            i0 = rng.integers(0, len(ref_speeds), len(ref_speeds))
-            model = refit_gaussian(model, paths[i0], problem.freqs, problem.channels, [ref_speeds[i] for i in i0])
+            model = bootstrap_refit(model, paths, ref_speeds, rng, problem.freqs, problem.channels)
         b = model.sample(v, rng)
         i = rng.integers(0, v, v)    # paired: a segment's measured and simulated spectra share its track
         y_mes = problem.y_mes[i]
