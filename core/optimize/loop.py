@@ -495,7 +495,7 @@ class EIProposer:
             points.append(exploit)
         else:
             u_new, log_ei = self._search(search, Ua, ys, ys_real, j_max, rng)
-            if stop.should_stop(log_ei, eps):
+            if stop.below(log_ei, eps):
                 rejected = (u_new, log_ei)
             else:
                 if self.stalled(u_new, log_ei, Ua, ys_real):
@@ -514,7 +514,7 @@ class EIProposer:
             search.fit(np.array(U_b), np.array(y_b))
             rng_j = np.random.default_rng([opts.seed, 1, state.n_points, len(points)])
             u_j, log_ei_j = self._search(search, np.array(U_b), np.array(y_b), ys_real, j_max, rng_j)
-            if stop.should_stop(log_ei_j, eps):
+            if stop.below(log_ei_j, eps):
                 rejected = (u_j, log_ei_j)
                 break
             points.append((u_j, log_ei_j))

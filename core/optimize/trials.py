@@ -145,13 +145,6 @@ class TrialBook:
         """Trials handed out whose value has not been told, in id order."""
         return [t for t in self.queue if not t.told]
 
-    @property
-    def room(self) -> int | None:
-        """Trials that may still be handed out within the budget (None: no budget)."""
-        if self.budget is None:
-            return None
-        return self.budget - sum(t.counted for t in self.trials)
-
     # -- telling -------------------------------------------------------------------
     def get(self, trial_id: int) -> Trial:
         """The waiting trial of that id.
