@@ -77,3 +77,16 @@ def interruptible() -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def small_config(tmp_path: Path, **extra) -> dict:
+    """A small identification config (2 parameters, 6 segments, m0 = 6, m1 = 2) writing to ``tmp_path / "run"``;
+    ``extra`` replaces top-level sections."""
+    cfg = {"name": "typed", "seed": 5,
+           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0}},
+           "parameters": {"k_sec_z": {}, "c_sec_z": {}},
+           "data": {"track": {"n_segments": 6, "length_m": 1000.0}, "w_ref": {"k_sec_z": 380.0e3}},
+           "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
+           "design": {"n_initial": 6}, "ego": {"max_iter": 2}, "identifiability": {"n_redraws": 6},
+           "output": {"dir": str(tmp_path / "run")}}
+    return cfg | extra

@@ -11,6 +11,8 @@ import pytest
 
 import suspid
 
+from conftest import small_config
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -34,14 +36,7 @@ def test_python_api_doc_examples_run(tmp_path, monkeypatch, capsys):
 
 
 def test_identify_returns_what_result_json_holds(tmp_path):
-    cfg = {"name": "typed", "seed": 5,
-           "simulator": {"plugin": "exudyn-train", "options": {"solver": "frequency", "fs_hz": 50.0}},
-           "parameters": {"k_sec_z": {}, "c_sec_z": {}},
-           "data": {"track": {"n_segments": 6, "length_m": 1000.0}, "w_ref": {"k_sec_z": 380.0e3}},
-           "spectra": {"f_min_hz": 0.5, "f_max_hz": 10.0, "n_freqs": 40},
-           "design": {"n_initial": 6}, "ego": {"max_iter": 2}, "identifiability": {"n_redraws": 6},
-           "output": {"dir": str(tmp_path / "run")}}
-    r = suspid.identify(cfg)
+    r = suspid.identify(small_config(tmp_path))
     saved = json.loads((tmp_path / "run" / "result.json").read_text())
     assert r.to_dict() == saved
     assert r.w_opt == saved["w_opt"] and r.errors_percent == saved["errors_percent"]
