@@ -164,9 +164,18 @@ def test_one_bogies_yaw_dampers_halved_are_localised_to_that_bogie(yaw_case):
 
     md = localisation_markdown(out)
     assert "Model linearised at its model parameters calibrated on the reference date" in md and "conicity" in md
-    # the value where the model is the vehicle: linearised at the model parameters' nominal values. Calibrated on
-    # this experiment's reference date, whose fixed smooth gains (1.5 dB rms) the calibration partly takes for a
-    # conicity and creep change, it reads 188 kN s/m (docs/elements.md)
+    # this experiment's reference date carries fixed smooth gains (1.5 dB rms, 0.7 octaves): estimated jointly
+    # with the model parameters (localisation.calibration_gain_octaves) they are not taken for a conicity and
+    # creep change, and the calibrated point reads the halved dampers (150 kN s/m) within 5 %
+    assert abs(row["value"] / 150e3 - 1) < 0.05
+    cal = out["linearised_at"]["parameters"]
+    assert abs(cal["kalker_scale"]["estimate"] - 1) < 0.1 and abs(cal["conicity"]["estimate"] / 0.15 - 1) < 0.1
+    # with a flat gain per channel only, the calibration takes the gains for a creep and conicity change and
+    # the value reads far off (188 kN s/m)
+    flat = element_analysis(problem, problem.config.localisation.model_copy(update={"calibration_gain_octaves": None}))
+    assert flat.calibration["parameters"]["kalker_scale"]["estimate"] < 0.85
+    assert localise_problem(problem, problem.config.localisation, analysis=flat)["rows"][0]["value"] > 1.1 * 150e3
+    # the value where the model is the vehicle: linearised at the model parameters' nominal values
     nominal_point = element_analysis(problem, problem.config.localisation.model_copy(update={"calibrate": False}))
     assert nominal_point.calibration["status"].startswith("off")
     row = localise_problem(problem, problem.config.localisation, analysis=nominal_point)["rows"][0]

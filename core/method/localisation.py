@@ -53,12 +53,14 @@ from typing import Any, Literal, Sequence
 
 import numpy as np
 from pydantic import Field
+from scipy.interpolate import BSpline
 
 from suspid.options import Section
 
 __all__ = ["LocalisationOptions", "Hypothesis", "HypothesisFit", "fisher_information", "separability",
            "clusters", "fit_hypotheses", "change_statistics", "fisher_information_unbiased",
-           "without_channel_gains", "sandwich_sd"]
+           "without_channel_gains", "sandwich_sd", "smooth_gain_basis", "without_smooth_gains",
+           "cluster_sd"]
 
 
 class LocalisationOptions(Section):
@@ -94,6 +96,15 @@ class LocalisationOptions(Section):
                             "the reference date (identifiability.model_error.calibration's parameters and steps: by "
                             "default the simulator's calibratable ones), where its resonances match the vehicle's: "
                             "false linearises at their nominal values")
+    model_form_octaves: float | None = Field(
+        default=1.0, gt=0.0, description="the interval also holds the refined fit's structured misfit: a "
+        "cluster-robust standard deviation with the cells of one channel within bands of this many octaves taken "
+        "as correlated (the larger of it and the segments' one is used); null: the segments' spread only")
+    calibration_gain_octaves: float | None = Field(
+        default=1.0, gt=0.0, description="a smooth gain per channel (cubic B-splines in log2(f), knots this many "
+        "octaves apart: sensor transfer functions, unmodelled flexibility) estimated jointly with the model "
+        "parameters on the reference date, so that the calibration does not take it for a model parameter; null: "
+        "a flat gain per channel only")
 
 
 def change_statistics(residual_mes: np.ndarray, residual_ref: np.ndarray, floor_db: float = 0.05
@@ -118,6 +129,33 @@ def without_channel_gains(x: np.ndarray, var: np.ndarray) -> np.ndarray:
     part a flat gain per channel (a nuisance parameter fitted with every hypothesis) cannot explain."""
     w = (1.0 / var).reshape(var.shape + (1,) * (x.ndim - 2))
     return x - np.sum(w * x, axis=1, keepdims=True) / np.sum(w, axis=1, keepdims=True)
+
+
+def smooth_gain_basis(freqs: np.ndarray, octaves: float) -> np.ndarray:
+    """``(n_freqs, m)``: cubic B-splines in log2(f) with knots every ``octaves`` octaves over the grid ``freqs``
+    (Hz), a basis of the smooth gains per channel (sensor transfer functions, unmodelled flexibility) that a
+    calibration on one date must not take for a model parameter; their sum is 1 (a flat gain is in it)."""
+    x = np.log2(np.asarray(freqs, dtype=float))
+    lo, hi = float(x.min()), float(x.max())
+    n_int = max(1, int(math.ceil((hi - lo) / octaves - 1e-9)))
+    inner = np.linspace(lo, hi, n_int + 1)
+    knots = np.concatenate([[lo] * 3, inner, [hi] * 3])
+    return BSpline.design_matrix(np.clip(x, lo, hi), knots, 3).toarray()
+
+
+def without_smooth_gains(x: np.ndarray, weights: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """``x (n_channels, n_freqs, ...)`` less its weighted least-squares fit by ``basis (n_freqs, m)`` on each
+    channel (weights ``(n_channels, n_freqs)``, 1/dB²): the part a smooth gain per channel cannot explain. By
+    the Frisch-Waugh-Lovell theorem a least squares on what is left gives the estimate a joint fit with the
+    gains would give."""
+    out = np.array(x, dtype=float, copy=True)
+    for k in range(x.shape[0]):
+        sw = np.sqrt(np.asarray(weights[k], dtype=float))
+        B = basis * sw[:, None]
+        y = x[k].reshape(x.shape[1], -1) * sw[:, None]
+        coef, *_ = np.linalg.lstsq(B, y, rcond=None)
+        out[k] = x[k] - (basis @ coef).reshape(x[k].shape)
+    return out
 
 
 def fisher_information(J: np.ndarray, var: np.ndarray) -> np.ndarray:
@@ -212,10 +250,10 @@ class HypothesisFit:
         """SI value of every element of the hypothesis."""
         return self.hypothesis.nominal * math.exp(self.theta)
 
-    def interval(self, n_sigmas: float = 2.0) -> tuple[float, float]:
-        """SI interval exp(θ ± n sd) times the nominal value."""
-        n = self.hypothesis.nominal
-        return n * math.exp(self.theta - n_sigmas * self.sd), n * math.exp(self.theta + n_sigmas * self.sd)
+    def interval(self, n_sigmas: float = 2.0, sd: float | None = None) -> tuple[float, float]:
+        """SI interval exp(θ ± n sd) times the nominal value (``sd``: another standard deviation of θ)."""
+        n, sd = self.hypothesis.nominal, self.sd if sd is None else sd
+        return n * math.exp(self.theta - n_sigmas * sd), n * math.exp(self.theta + n_sigmas * sd)
 
 
 def fit_column(column: np.ndarray, delta: np.ndarray, var: np.ndarray) -> tuple[float, float, float]:
@@ -243,6 +281,25 @@ def sandwich_sd(column: np.ndarray, var: np.ndarray, residuals: Sequence[np.ndar
         t = np.tensordot(r, a, axes=([1, 2], [0, 1]))
         total += float(np.var(t, ddof=1)) / len(t) if len(t) > 1 else 0.0
     return math.sqrt(total)
+
+
+def cluster_sd(column: np.ndarray, var: np.ndarray, residual: np.ndarray, clusters: np.ndarray) -> float:
+    """Standard deviation of the weighted least-squares θ of ``delta ≈ column θ`` that the fit's own residual
+    ``e (n_channels, n_freqs)`` dB implies when the cells of one cluster (a channel's octave band,
+    :func:`suspid.method.calibration.octave_clusters`) may be correlated in any way and clusters are
+    independent: the cluster-robust sandwich var θ = Σ_c (Σ_{cells of c} a e)², a = W c / (cᵀ W c).
+
+    The segments' spread (:func:`sandwich_sd`) sees the noise of the dates only; where the model responds to
+    the element differently from the vehicle (model-form error: a resonance it has and the vehicle lacks,
+    a damper's nonlinearity), the residual is a structured misfit, smooth over frequency, and the channels'
+    own estimates disagree beyond their noise: this sandwich carries that into the interval."""
+    w = column / var
+    a = w / float(np.sum(w * column))
+    score = (a * residual).reshape(-1)
+    labels = np.asarray(clusters).reshape(-1)
+    sums = np.zeros(int(labels.max()) + 1)
+    np.add.at(sums, labels, score)
+    return float(math.sqrt(np.sum(sums ** 2)))
 
 
 def evidence(chi2_null: float, chi2: float, n_cells: int, inflation: float = 1.0) -> tuple[float, float]:

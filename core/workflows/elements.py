@@ -35,9 +35,12 @@ from suspid.infra.files import write_json
 from suspid.infra.lock import open_run_dir
 from suspid.method.floor import estimate_floor
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
+from suspid.method.calibration import octave_clusters
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
+                                        cluster_sd,
                                         evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
-                                        sandwich_sd, separability, without_channel_gains)
+                                        sandwich_sd, separability, smooth_gain_basis, without_channel_gains,
+                                        without_smooth_gains)
 from suspid.workflows.jacobian import spectra_jacobian
 from suspid.workflows.linearised import calibrate, date_jacobian, model_parameters
 from suspid.workflows.problem import Problem, _task, build_problem
@@ -218,8 +221,8 @@ class _NoCache:
         pass
 
 
-def calibrated_point(problem: Problem, w0: dict[str, float], *, ledger=None, executor=None,
-                     log: Log = lambda s: None) -> tuple[dict[str, float], dict[str, Any]]:
+def calibrated_point(problem: Problem, w0: dict[str, float], *, gain_octaves: float | None = None, ledger=None,
+                     executor=None, log: Log = lambda s: None) -> tuple[dict[str, float], dict[str, Any]]:
     """``w0`` with the model parameters estimated on the reference date, and what was done.
 
     A change of an element is read through the model's sensitivity to it: where the model's resonances sit
@@ -242,7 +245,11 @@ def calibrated_point(problem: Problem, w0: dict[str, float], *, ledger=None, exe
     log(f"localisation: model parameters {', '.join(theta.names)} calibrated on the reference date")
     jac0 = date_jacobian(problem, ledger, problem.reference_segments, {**dict(problem.w0), **w0}, [], theta,
                          executor)
-    cal = calibrate(problem, ledger, theta, jac0, [], problem.config.identifiability.model_error, executor)
+    strip = None
+    if gain_octaves is not None:
+        basis = smooth_gain_basis(problem.freqs, gain_octaves)
+        strip = lambda x, weights: without_smooth_gains(x, weights, basis)  # noqa: E731
+    cal = calibrate(problem, ledger, theta, jac0, [], problem.config.identifiability.model_error, executor, strip)
     estimate = theta.w(np.array(cal["t_hat"]))
     return {**w0, **estimate}, {"status": "calibrated on the reference date",
                                 "parameters": {n: {"nominal": float(v), "estimate": estimate[n],
@@ -272,7 +279,8 @@ def element_analysis(problem: Problem, options: LocalisationOptions, *, ledger=N
     calibration: dict[str, Any] = {"status": "off (localisation.calibrate: false)"}
     y_sim0 = problem.reference["y_sim0"]
     if options.calibrate:
-        w0, calibration = calibrated_point(problem, w0, ledger=ledger, executor=executor, log=log)
+        w0, calibration = calibrated_point(problem, w0, gain_octaves=options.calibration_gain_octaves,
+                                           ledger=ledger, executor=executor, log=log)
         if "parameters" in calibration:
             log("model at the calibrated point on the reference date's segments")
             y_sim0, _ = _task(simulator, problem.reference_segments, problem.config.spectra)(w0)
@@ -489,11 +497,19 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
         chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / analysis.var))
         sd = sd_step
         sw = sandwich_sd(column, analysis.var, analysis.residuals)
+        misfit = analysis.delta - model - column * step
         if abs(step) < 1e-3:
             break
     ev, s2 = evidence(chi2_null, chi2, analysis.delta.size, (sw / sd) ** 2 if sd > 0 else 1.0)
-    return HypothesisFit(h, theta, sd * math.sqrt(s2), chi2, ev, {"chi2_null": chi2_null, "s2": s2,
-                                                                "method": "gauss-newton"})
+    details = {"chi2_null": chi2_null, "s2": s2, "method": "gauss-newton", "sd_statistical": sd * math.sqrt(s2)}
+    octaves = analysis.options.model_form_octaves
+    sd_out = sd * math.sqrt(s2)
+    if octaves is not None and analysis.options.gauss_newton_steps > 0:
+        # the structured misfit the refined fit leaves (model-form error) widens the interval, not the evidence
+        details["sd_model_form"] = cluster_sd(column, analysis.var, misfit,
+                                              octave_clusters(problem.freqs, misfit.shape[0], octaves))
+        sd_out = max(sd_out, details["sd_model_form"])
+    return HypothesisFit(h, theta, sd_out, chi2, ev, details)
 
 
 def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis: ElementAnalysis | None = None,
@@ -527,6 +543,7 @@ def _row(f: HypothesisFit, analysis: ElementAnalysis) -> dict[str, Any]:
     members = [analysis.groups[i] for i in f.hypothesis.members]
     return {"group": f.hypothesis.name, "kind": f.hypothesis.kind, "value": f.value,
             "nominal": f.hypothesis.nominal, "interval": list(f.interval()), "evidence": f.evidence,
+            "interval_statistical": list(f.interval(sd=f.details.get("sd_statistical", f.sd))),
             "members": members, "separable": len(members) == 1, "note": f.hypothesis.note,
             "not_separated": not_separated(members) if "not separable" in f.hypothesis.note else "",
             "method": f.details.get("method")}

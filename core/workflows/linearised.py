@@ -210,8 +210,13 @@ def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarra
 
 # ----------------------------------------------------------------------------------------------- calibration
 def calibrate(problem: Problem, ledger: Ledger, theta: ModelParameters, jac0: DateJacobian, u_names: list[str],
-              options: ModelErrorOptions, executor: Executor | None) -> dict[str, Any]:
+              options: ModelErrorOptions, executor: Executor | None,
+              without_gains: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> dict[str, Any]:
     """θ estimated at the reference date (:mod:`suspid.method.calibration`), Gauss-Newton from the nominal θ.
+
+    ``without_gains(x, weights)``: the part of ``x (n_channels, n_freqs, ...)`` that a gain per channel more than
+    the flat one cannot explain (applied to the residual and the Jacobian: that gain estimated jointly with θ);
+    none: the flat offsets only.
 
     :returns: JSON-able details, with ``"t_hat"`` ``(p,)``, ``"covariance_t"`` ``(p, p)`` and ``"pinned"`` ``(p,)``
         (lists) for the checks, and ``"n_simulations"`` the further Jacobians' simulations.
@@ -228,15 +233,17 @@ def calibrate(problem: Problem, ledger: Ledger, theta: ModelParameters, jac0: Da
     prior = np.full(p, 1.0 / UNIFORM_SD ** 2)        # uniform over the assumed range, as a Gaussian of its spread
     t = np.zeros(p)
     y_sim, dt = jac0.y, jac0.dt
-    residual = y_mes0.mean(axis=0) - y_sim.mean(axis=0)
+    strip = without_gains or (lambda x, w: x)
+    residual = strip(y_mes0.mean(axis=0) - y_sim.mean(axis=0), weights)
+    dt_mean = strip(dt.mean(axis=0), weights)
     # the overdispersion κ: how much the discrepancy inflates the data-only covariance over the white one
-    first = calibrate_step(residual, dt.mean(axis=0), weights, clusters, t, np.zeros(p))
+    first = calibrate_step(residual, dt_mean, weights, clusters, t, np.zeros(p))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.diag(first.covariance) / first.naive_sd ** 2
     kappa = float(max(1.0, np.nanmean(ratio[np.isfinite(ratio)]) if np.isfinite(ratio).any() else 1.0))
     n_sims, history = 0, []
     for it in range(opt.max_iterations):
-        step = calibrate_step(residual, dt.mean(axis=0), weights, clusters, t, prior, kappa)
+        step = calibrate_step(residual, dt_mean, weights, clusters, t, prior, kappa)
         new_t = np.clip(t + step.step, t_lo, t_hi)
         history.append({"t": t.tolist(), "step": step.step.tolist(),
                         "sd": np.sqrt(np.clip(np.diag(step.covariance), 0, None)).tolist(),
@@ -249,7 +256,8 @@ def calibrate(problem: Problem, ledger: Ledger, theta: ModelParameters, jac0: Da
                             executor)
         n_sims += 0 if jac.cached else jac.n_simulations
         y_sim, dt = jac.y, jac.dt
-        residual = y_mes0.mean(axis=0) - y_sim.mean(axis=0)
+        residual = strip(y_mes0.mean(axis=0) - y_sim.mean(axis=0), weights)
+        dt_mean = strip(dt.mean(axis=0), weights)
     final = step
     cov = final.covariance
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
