@@ -104,6 +104,11 @@ def test_rows_from_a_result_kind_level_and_a_localisation_with_group_names():
     assert g1.nominal == 250e3 and g1.change_percent == pytest.approx(-52.0) and g1.verdict == "warning"
     assert g1.label.startswith("bogie 1, left: ")
     assert verdict_rows(_result(), PARAMETERS, limits, localisation={"rows": loc}) == rows   # a mapping with rows
+    assert "rests on the sampling interval" in g1.rule
+    # a localisation row whose interval holds the fit's model-form misfit (suspid.workflows.elements) says so
+    misfit = [{**loc[1], "interval_statistical": [118e3, 122e3]}]
+    m, = verdict_rows(_result(), PARAMETERS, limits, localisation={"rows": misfit})[3:]
+    assert m.verdict == "warning" and "misfit the localisation's fit leaves" in m.rule and "sampling" not in m.rule
     # typed serialisation: a row goes through result.json and back unchanged
     block = {"verdict": {"rows": [r.to_dict() for r in rows]}}
     assert rows_of(json.loads(json.dumps(block))) == rows

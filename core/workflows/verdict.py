@@ -130,6 +130,11 @@ def _levels_between(lo: float, hi: float, warning: tuple | None, alarm: tuple | 
     return out
 
 
+SAMPLING = "; trust under model error not assessed: the verdict rests on the sampling interval"
+MISFIT = ("; the interval holds the segments' spread and the misfit the localisation's fit leaves (model-form "
+          "error the channels show)")
+
+
 def judge(*, identifiable: bool, trust: str, change: float | None, interval: tuple[float, float] | None,
           warning: tuple | None, alarm: tuple | None, reasons: Sequence[str] = ()) -> tuple[str, str]:
     """``(verdict, rule)`` by the rules of the module docstring.
@@ -158,7 +163,7 @@ def judge(*, identifiable: bool, trust: str, change: float | None, interval: tup
               for s, lv in (("warning", warning), ("alarm", alarm)) if lv is not None]
     rule = f"the whole interval {lo:+.1f} to {hi:+.1f} % is {state} ({'; '.join(levels)})"
     if trust != "yes":
-        rule += "; trust under model error not assessed: the verdict rests on the sampling interval"
+        rule += SAMPLING
     return state, rule
 
 
@@ -278,6 +283,8 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], lim
                    [_group_name(a) for a in item.get("alternatives") or []])
         if item.get("not_separated"):   # a cluster of elements the sensors only see together (suspid.elements)
             row = replace(row, label=f"{row.label} ({item['not_separated']})")
+        if item.get("interval_statistical") is not None:   # the interval holds the fit's model-form misfit too
+            row = replace(row, rule=row.rule.replace(SAMPLING, MISFIT))
         rows.append(row)
     return rows
 
