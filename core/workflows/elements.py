@@ -232,11 +232,13 @@ def calibrated_point(problem: Problem, w0: dict[str, float], *, gain_octaves: fl
     their nominal values, so the model parameters that are assumptions (the simulator's
     :meth:`~suspid.interfaces.Simulator.calibratable` ones, or ``identifiability.model_error.calibration
     .parameters``, over their assumed ranges) can be estimated there, as the model-error checks do
-    (:func:`suspid.workflows.linearised.calibrate`: Gauss-Newton with a flat gain per channel profiled out).
+    (:func:`suspid.workflows.linearised.calibrate`: Gauss-Newton with a gain per channel profiled out).
     The linearisation point is its point estimate, pinned down or not: the model nearest the reference date.
-    A smooth gain error the same on both dates (sensor transfer functions, unmodelled flexibility) is partly
-    taken for a model parameter there: ``localisation.calibrate: false`` then linearises at the nominal values.
-    ``ledger`` caches the Jacobians (none: nothing is cached).
+    A smooth gain the same on both dates (sensor transfer functions, unmodelled flexibility) cancels in the
+    observed change but would be taken for a creep or conicity change here: with ``gain_octaves`` a smooth
+    gain per channel (:func:`~suspid.method.localisation.smooth_gain_basis`, knots that many octaves apart) is
+    estimated jointly with the model parameters; None: a flat gain only. ``ledger`` caches the Jacobians
+    (none: nothing is cached).
     """
     theta = model_parameters(problem, problem.config.identifiability.model_error)
     if not theta.names:
@@ -466,7 +468,10 @@ def localisation_wanted(config: Config, result: dict[str, Any], simulator) -> bo
 
 def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, executor=None) -> HypothesisFit:
     """Gauss-Newton on simulations: the model's change of the mean spectra over the Jacobian's segments with the
-    hypothesis' elements at nominal × e^θ, against the observed change."""
+    hypothesis' elements at nominal × e^θ, against the observed change. Its sd is the larger of the segments'
+    one and, with ``model_form_octaves``, the cluster-robust one of the misfit the fit leaves
+    (:func:`~suspid.method.localisation.cluster_sd`: the channels' disagreement where the model responds to the
+    element otherwise than the vehicle); ``details["sd_statistical"]`` keeps the segments' one."""
     h = fit.hypothesis
     members = [analysis.groups[i] for i in h.members]
     w0 = analysis.w0
@@ -518,9 +523,10 @@ def localise_problem(problem: Problem, options: LocalisationOptions, *, analysis
     """The localisation entry of a result: ``{"named": bool, "rows": [...], "hypotheses": [...]}``.
 
     ``rows``: the named group (none when the best evidence is below ``min_evidence``) as
-    ``{group, kind, value, nominal, interval, evidence, alternatives, members, separable, note}``: ``value`` and
-    ``interval`` in SI units (2 sd), ``alternatives`` the hypotheses within ``near`` of its evidence
-    (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
+    ``{group, kind, value, nominal, interval, interval_statistical, evidence, alternatives, members, separable,
+    note}``: ``value`` and ``interval`` in SI units (2 sd, the model-form misfit included:
+    :func:`_refine`), ``interval_statistical`` the segments' spread alone, ``alternatives`` the hypotheses within
+    ``near`` of its evidence (``{group, value, evidence}``). ``hypotheses``: every hypothesis, best first.
     """
     analysis = analysis or element_analysis(problem, options, ledger=ledger, executor=executor, log=log)
     moved = [k for k in (moved or []) if k in analysis.kinds]
@@ -596,7 +602,7 @@ def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = 
         change = 100.0 * (r["value"] / r["nominal"] - 1.0)
         lo, hi = r["interval"]
         lines.append(f"- **{r['group']}**: {r['value']:.4g} {u} ({change:+.0f} % of nominal {r['nominal']:.4g}; "
-                     f"statistical interval {lo:.4g} to {hi:.4g}), evidence {r['evidence']:.1f}"
+                     f"interval {lo:.4g} to {hi:.4g}), evidence {r['evidence']:.1f}"
                      + (f". {r['note']}." if r["note"] else "."))
         if r["alternatives"]:
             lines.append("  Fit nearly as well: " + ", ".join(
@@ -605,7 +611,8 @@ def localisation_markdown(entry: dict[str, Any], units: dict[str, str] | None = 
     if cal.get("parameters"):
         lines += ["", "Model linearised at its model parameters calibrated on the reference date: " + ", ".join(
             f"{n} {p['estimate']:.4g} (nominal {p['nominal']:.4g})" for n, p in cal["parameters"].items()) + "."]
-    lines += ["", "Intervals: 2 standard deviations of the segments' statistics; they do not include model-form "
-              "error (how differently model and vehicle respond to an element's change): read the value as about, the "
-              "group as the finding (docs/elements.md)."]
+    lines += ["", "Intervals: 2 standard deviations, the larger of the segments' spread and the misfit the fit "
+              "leaves (model-form error: channels whose model responds to the element otherwise than the vehicle "
+              "disagree). On independent train models they did not always hold the truth: read the value as about, "
+              "the group as the finding (docs/elements.md)."]
     return "\n".join(lines) + "\n"
