@@ -57,6 +57,10 @@ def test_unknown_and_overlapping_groups_are_one_line_errors():
         api.validate(base | {"parameters": {"c_yaw[front]": {}}})
     with pytest.raises(ConfigError, match="localisation.kinds"):
         api.validate(base | {"parameters": {"c_yaw": {}}, "localisation": {"kinds": ["m_car"]}})
+    for key in ("calibration_gain_octaves", "model_form_octaves"):       # octaves > 0, or null
+        with pytest.raises(ConfigError, match=f"localisation.{key}"):
+            api.validate(base | {"parameters": {"c_yaw": {}}, "localisation": {key: 0}})
+        assert api.validate(base | {"parameters": {"c_yaw": {}}, "localisation": {key: None}})
     assert api.validate(base | {"parameters": {"c_yaw[bogie1]": {}, "c_yaw[bogie2]": {}},
                                 "data": base["data"] | {"w_ref": {"c_yaw[bogie1]": 150e3}}})
 
