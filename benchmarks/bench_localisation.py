@@ -183,6 +183,7 @@ def score(generator: str, case: str, out: dict, width: float | None, verdicts: l
             "change_percent": 100.0 * (row["value"] / row["nominal"] - 1.0),
             "right_decrease": right_decrease,
             "interval": (lo, hi), "evidence": row["evidence"], "alternatives": [a["group"] for a in row["alternatives"]],
+            "dropped": row.get("dropped_channels", []),
             "together": row["separable"] or len(row["members"]) > 1,
             "verdict": mine, "expected_verdict": want, "verdict_ok": row["group"] == group and mine == want}
 
@@ -219,9 +220,12 @@ def main(argv: list[str] | None = None) -> int:
                     "gain per channel only)")
     ap.add_argument("--model-form-octaves", default="1.0", help="localisation.model_form_octaves ('none': the "
                     "segments' spread only)")
+    ap.add_argument("--all-channels", action="store_true", help="localisation.consistent_channels: false (the "
+                    "named group's value from every channel)")
     a = ap.parse_args(argv)
     octaves = {"calibration_gain_octaves": None if a.gain_octaves == "none" else float(a.gain_octaves),
-               "model_form_octaves": None if a.model_form_octaves == "none" else float(a.model_form_octaves)}
+               "model_form_octaves": None if a.model_form_octaves == "none" else float(a.model_form_octaves),
+               "consistent_channels": not a.all_channels}
     if a.linear and a.generator != "independent2":
         ap.error("--linear is for --generator independent2")
     generate = GENERATORS[a.generator]["generate"]
@@ -253,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{s['right_decrease']!s:<5}) value_ok {s['value_ok']!s:<5} "
                   + (f"value {s['value']:.4g} ({s['change_percent']:+.0f} %) [{s['interval'][0]:.4g}, "
                      f"{s['interval'][1]:.4g}] error {s['error_percent']:+.1f} % evidence {s['evidence']:.0f} "
-                     f"alternatives {s['alternatives']} " if "value" in s else "")
+                     f"alternatives {s['alternatives']} dropped {s['dropped']} " if "value" in s else "")
                   + f"verdict {s['verdict']} (expected {s['expected_verdict']}: {'ok' if s['verdict_ok'] else 'WRONG'})"
                   + f" ({wall:.0f} s)", flush=True)
     degraded_rows = [r for r in rows if r["case"] != "null"]

@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from suspid.method.calibration import octave_clusters
-from suspid.method.localisation import cluster_sd, fit_column, smooth_gain_basis, without_smooth_gains
+from suspid.method.localisation import (cluster_sd, consistent_channels, fit_column, smooth_gain_basis,
+                                        without_smooth_gains)
 
 FREQS = np.geomspace(0.5, 16.0, 120)        # 5 octaves
 
@@ -65,3 +66,15 @@ def test_cluster_sd_is_the_channels_disagreement_when_each_channel_is_one_cluste
     # octave bands within channels are finer clusters
     clusters = octave_clusters(np.geomspace(0.5, 16.0, n), K, 1.0)
     assert clusters.max() + 1 == K * 6 and cluster_sd(column, var, e, clusters) > 0
+
+
+def test_consistent_channels_drops_the_discordant_channels_one_at_a_time():
+    sd = np.array([0.03, 0.02, 0.03, 0.02, 0.05, np.inf, 0.04])
+    agree = np.array([-0.70, -0.68, -0.66, -0.69, -0.72, 3.0, -0.67])       # the 6th channel sees nothing
+    assert consistent_channels(agree, sd).all()
+    two_off = agree.copy()
+    two_off[[1, 3]] = [-0.10, -0.25]              # two channels whose model responds otherwise than the vehicle
+    keep = consistent_channels(two_off, sd)
+    assert keep.tolist() == [True, False, True, False, True, True, True]
+    # never fewer than three seen channels: with no majority nothing more is dropped
+    assert consistent_channels(np.array([-0.7, -0.1, -0.4]), np.array([0.01, 0.01, 0.01])).all()

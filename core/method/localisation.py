@@ -54,13 +54,14 @@ from typing import Any, Literal, Sequence
 import numpy as np
 from pydantic import Field
 from scipy.interpolate import BSpline
+from scipy.stats import chi2 as chi2_dist
 
 from suspid.options import Section
 
 __all__ = ["LocalisationOptions", "Hypothesis", "HypothesisFit", "fisher_information", "separability",
            "clusters", "fit_hypotheses", "change_statistics", "fisher_information_unbiased",
            "without_channel_gains", "sandwich_sd", "smooth_gain_basis", "without_smooth_gains",
-           "cluster_sd"]
+           "cluster_sd", "consistent_channels"]
 
 
 class LocalisationOptions(Section):
@@ -100,6 +101,10 @@ class LocalisationOptions(Section):
         default=1.0, gt=0.0, description="the interval also holds the refined fit's structured misfit: a "
         "cluster-robust standard deviation with the cells of one channel within bands of this many octaves taken "
         "as correlated (the larger of it and the segments' one is used); null: the segments' spread only")
+    consistent_channels: bool = Field(
+        default=True, description="the named group's value and interval from the channels whose own estimates "
+        "agree (the most discordant dropped one at a time while their heterogeneity exceeds its 0.1 % χ² level); "
+        "the evidence stays that of every channel")
     calibration_gain_octaves: float | None = Field(
         default=1.0, gt=0.0, description="a smooth gain per channel (cubic B-splines in log2(f), knots this many "
         "octaves apart: sensor transfer functions, unmodelled flexibility) estimated jointly with the model "
@@ -300,6 +305,29 @@ def cluster_sd(column: np.ndarray, var: np.ndarray, residual: np.ndarray, cluste
     sums = np.zeros(int(labels.max()) + 1)
     np.add.at(sums, labels, score)
     return float(math.sqrt(np.sum(sums ** 2)))
+
+
+def consistent_channels(theta: np.ndarray, sd: np.ndarray, level: float = 0.999) -> np.ndarray:
+    """``(n_channels,)`` bool: the channels whose own estimates θ_k ± sd_k agree, the most discordant dropped one
+    at a time while the heterogeneity Q = Σ ((θ_k − θ̄) / sd_k)² (θ̄ their inverse-variance mean) exceeds the
+    χ² quantile ``level`` of its m − 1 degrees of freedom, and at least three channels are left. Channels that do
+    not see the change (sd infinite) are kept: they weigh nothing.
+
+    Where one channel's model responds to an element otherwise than the vehicle does (a resonance the vehicle
+    lacks), its θ_k disagrees with the others' beyond their noise, and pooling it pulls the value toward its own."""
+    theta, sd = np.asarray(theta, float), np.asarray(sd, float)
+    keep = np.ones(theta.size, bool)
+    seen = np.isfinite(sd) & (sd > 0) & np.isfinite(theta)
+    while True:
+        idx = np.flatnonzero(keep & seen)
+        if idx.size <= 3:
+            return keep
+        w = 1.0 / sd[idx] ** 2
+        mean = float(np.sum(w * theta[idx]) / np.sum(w))
+        z = (theta[idx] - mean) / sd[idx]
+        if float(np.sum(z ** 2)) <= chi2_dist.ppf(level, idx.size - 1):
+            return keep
+        keep[idx[int(np.argmax(np.abs(z)))]] = False
 
 
 def evidence(chi2_null: float, chi2: float, n_cells: int, inflation: float = 1.0) -> tuple[float, float]:

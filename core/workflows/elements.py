@@ -37,7 +37,7 @@ from suspid.method.floor import estimate_floor
 from suspid.interfaces import IRREGULARITY_CHANNELS, ElementSimulator, TrackSegment
 from suspid.method.calibration import octave_clusters
 from suspid.method.localisation import (Hypothesis, HypothesisFit, LocalisationOptions, change_statistics, clusters,
-                                        cluster_sd,
+                                        cluster_sd, consistent_channels,
                                         evidence, fisher_information_unbiased, fit_column, fit_hypotheses,
                                         sandwich_sd, separability, smooth_gain_basis, without_channel_gains,
                                         without_smooth_gains)
@@ -466,13 +466,17 @@ def localisation_wanted(config: Config, result: dict[str, Any], simulator) -> bo
     return bool(moved_kinds(result, simulator))
 
 
-def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, executor=None) -> HypothesisFit:
+def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, executor=None,
+            keep: np.ndarray | None = None) -> HypothesisFit:
     """Gauss-Newton on simulations: the model's change of the mean spectra over the Jacobian's segments with the
     hypothesis' elements at nominal × e^θ, against the observed change. Its sd is the larger of the segments'
     one and, with ``model_form_octaves``, the cluster-robust one of the misfit the fit leaves
     (:func:`~suspid.method.localisation.cluster_sd`: the channels' disagreement where the model responds to the
-    element otherwise than the vehicle); ``details["sd_statistical"]`` keeps the segments' one."""
+    element otherwise than the vehicle); ``details["sd_statistical"]`` keeps the segments' one, and
+    ``details["channels"]`` each channel's own estimate ``(θ_k, sd_k)`` at the last step. ``keep``
+    ``(n_channels,)`` bool: fit on those channels only."""
     h = fit.hypothesis
+    var = analysis.var if keep is None else np.where(keep[:, None], analysis.var, np.inf)
     members = [analysis.groups[i] for i in h.members]
     w0 = analysis.w0
     floor = analysis.floor or (lambda y: y)
@@ -496,22 +500,27 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
             model = without_channel_gains(model, analysis.var)
             column = without_channel_gains(column, analysis.var)
         model, column = analysis.project(model), analysis.project(column)
-        step, sd_step, _ = fit_column(column, analysis.delta - model, analysis.var)
+        step, sd_step, _ = fit_column(column, analysis.delta - model, var)
         step = float(np.clip(step, -0.5, 0.5))
+        own = [fit_column(column[k], analysis.delta[k] - model[k], analysis.var[k]) for k in range(len(column))]
+        channels = [(theta + t_k, s_k * math.sqrt(max(1.0, c_k / max(1, column.shape[1] - 1))))
+                    for t_k, s_k, c_k in own]
         theta += step
-        chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / analysis.var))
+        chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / var))
         sd = sd_step
-        sw = sandwich_sd(column, analysis.var, analysis.residuals)
+        sw = sandwich_sd(column, var, analysis.residuals)
         misfit = analysis.delta - model - column * step
         if abs(step) < 1e-3:
             break
     ev, s2 = evidence(chi2_null, chi2, analysis.delta.size, (sw / sd) ** 2 if sd > 0 else 1.0)
     details = {"chi2_null": chi2_null, "s2": s2, "method": "gauss-newton", "sd_statistical": sd * math.sqrt(s2)}
+    if analysis.options.gauss_newton_steps > 0:
+        details["channels"] = channels
     octaves = analysis.options.model_form_octaves
     sd_out = sd * math.sqrt(s2)
     if octaves is not None and analysis.options.gauss_newton_steps > 0:
         # the structured misfit the refined fit leaves (model-form error) widens the interval, not the evidence
-        details["sd_model_form"] = cluster_sd(column, analysis.var, misfit,
+        details["sd_model_form"] = cluster_sd(column, var, misfit,
                                               octave_clusters(problem.freqs, misfit.shape[0], octaves))
         sd_out = max(sd_out, details["sd_model_form"])
     return HypothesisFit(h, theta, sd_out, chi2, ev, details)
@@ -579,7 +588,19 @@ def _localise_one(problem: Problem, options: LocalisationOptions, analysis: Elem
     named = best.evidence >= options.min_evidence and (options.direction == "any" or best.theta < 0)
     if not named:
         return [], fits
+    if options.consistent_channels and "channels" in best.details:
+        theta_k, sd_k = np.array(best.details["channels"]).T
+        keep = consistent_channels(theta_k, sd_k)
+        if not keep.all():
+            dropped = [problem.channels[k] for k in np.flatnonzero(~keep)]
+            log(f"localisation: {best.hypothesis.name} from the channels that agree (without {', '.join(dropped)})")
+            again = _refine(best, analysis, problem, executor=executor, keep=keep)
+            best = replace(again, evidence=best.evidence,
+                           details={**again.details, "dropped_channels": dropped, "evidence_all": best.evidence,
+                                    "value_all_channels": best.value})
     r = _row(best, analysis)
+    if "dropped_channels" in best.details:
+        r["dropped_channels"] = best.details["dropped_channels"]
     r["alternatives"] = [{"group": f.hypothesis.name, "value": f.value, "evidence": f.evidence}
                          for f in fits[1:] if f.evidence >= best.evidence - options.near]
     return [r], fits
