@@ -240,3 +240,26 @@ def test_localisation_runs_after_an_identification_when_a_kind_with_elements_mov
     off = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": False})})
     on = cfg.model_copy(update={"localisation": cfg.localisation.model_copy(update={"enabled": True})})
     assert not localisation_wanted(off, moved, sim) and localisation_wanted(on, still, sim)
+
+
+def test_a_channel_whose_change_disagrees_is_left_out_of_the_value(yaw_case):
+    """One channel's observed change scaled to a third (what a channel whose model responds to the dampers more
+    than the vehicle does gives): its own estimate disagrees with the others', it is dropped, and the value is
+    read from the channels that agree (truth 150 kN s/m)."""
+    from dataclasses import replace
+
+    problem, analysis = yaw_case
+    h = next(h for h in analysis.hypotheses if h.name == "c_yaw[bogie1]")
+    column = analysis.J[..., h.members].sum(axis=-1)
+    info = np.sum(column ** 2 / analysis.var, axis=1)
+    k = int(np.argsort(info)[-2])                     # the second most informative channel
+    delta = analysis.delta.copy()
+    delta[k] *= 0.3                                   # this channel sees a third of the change
+    bent = replace(analysis, delta=delta)
+    out = localise_problem(problem, problem.config.localisation, analysis=bent)
+    row, = out["rows"]
+    assert row["group"] == "c_yaw[bogie1]" and row["dropped_channels"] == [problem.channels[k]]
+    assert abs(row["value"] / 150e3 - 1) < 0.05
+    every = localise_problem(problem, problem.config.localisation.model_copy(update={"consistent_channels": False}),
+                             analysis=bent)["rows"][0]
+    assert "dropped_channels" not in every and every["value"] > row["value"]    # pooled: pulled toward no change

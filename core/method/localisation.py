@@ -308,8 +308,8 @@ def cluster_sd(column: np.ndarray, var: np.ndarray, residual: np.ndarray, cluste
 
 
 def consistent_channels(theta: np.ndarray, sd: np.ndarray, level: float = 0.999) -> np.ndarray:
-    """``(n_channels,)`` bool: the channels whose own estimates θ_k ± sd_k agree, the most discordant dropped one
-    at a time while the heterogeneity Q = Σ ((θ_k − θ̄) / sd_k)² (θ̄ their inverse-variance mean) exceeds the
+    """``(n_channels,)`` bool: the channels whose own estimates θ_k ± sd_k agree, the most discordant (farthest
+    from the mean of the others, in their joint standard deviations) dropped one at a time while the heterogeneity Q = Σ ((θ_k − θ̄) / sd_k)² (θ̄ their inverse-variance mean) exceeds the
     χ² quantile ``level`` of its m − 1 degrees of freedom, and at least three channels are left. Channels that do
     not see the change (sd infinite) are kept: they weigh nothing.
 
@@ -324,9 +324,12 @@ def consistent_channels(theta: np.ndarray, sd: np.ndarray, level: float = 0.999)
             return keep
         w = 1.0 / sd[idx] ** 2
         mean = float(np.sum(w * theta[idx]) / np.sum(w))
-        z = (theta[idx] - mean) / sd[idx]
-        if float(np.sum(z ** 2)) <= chi2_dist.ppf(level, idx.size - 1):
+        if float(np.sum(w * (theta[idx] - mean) ** 2)) <= chi2_dist.ppf(level, idx.size - 1):
             return keep
+        # the channel farthest from the others' mean (leave-one-out: a dominant channel does not hide itself)
+        w_rest = np.sum(w) - w
+        mean_rest = (np.sum(w * theta[idx]) - w * theta[idx]) / w_rest
+        z = (theta[idx] - mean_rest) / np.sqrt(sd[idx] ** 2 + 1.0 / w_rest)
         keep[idx[int(np.argmax(np.abs(z)))]] = False
 
 
