@@ -27,7 +27,13 @@ The reference (ratio 1) is the acceptance bar: >= 90 % right first, every
 null silent, every verdict right.
 
     PYTHONPATH=tests python benchmarks/bench_localisation.py [--generator independent2] [--seeds 1 2 3]
-        [--segments 40] [--out DIR] [--floor auto] [--no-calibrate]
+        [--segments 40] [--out DIR] [--floor auto] [--no-calibrate] [--gain-octaves none|OCTAVES]
+        [--model-form-octaves none|OCTAVES] [--all-channels]
+
+The last three switch this session's parts of the method off or change them, for the ablations of
+``benchmarks/RESULTS.md``: the smooth gain estimated with the calibration, the interval's model-form part, the
+value from the channels that agree. "Covered" counts the truth inside the reported interval (and inside the
+segments' interval alone): whether the intervals are as wide as the errors they must hold.
 """
 
 from __future__ import annotations
