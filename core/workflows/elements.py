@@ -512,7 +512,8 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
         misfit = analysis.delta - model - column * step
         if abs(step) < 1e-3:
             break
-    ev, s2 = evidence(chi2_null, chi2, analysis.delta.size, (sw / sd) ** 2 if sd > 0 else 1.0)
+    n_cells = int(np.isfinite(var).sum())                  # the cells of the channels fitted
+    ev, s2 = evidence(chi2_null, chi2, n_cells, (sw / sd) ** 2 if sd > 0 else 1.0)
     details = {"chi2_null": chi2_null, "s2": s2, "method": "gauss-newton", "sd_statistical": sd * math.sqrt(s2)}
     if analysis.options.gauss_newton_steps > 0:
         details["channels"] = channels
