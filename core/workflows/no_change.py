@@ -61,7 +61,7 @@ class NoChange:
 
     @property
     def z(self) -> float:
-        return float(self.delta_j / self.sd) if self.sd > 0 else float("inf")
+        return float(self.delta_j / self.sd) if self.sd > 0 else (0.0 if self.delta_j <= 0 else float("inf"))
 
     def to_dict(self, n_simulations: int) -> dict[str, Any]:
         return {"status": "done", "delta_J": self.delta_j, "sd_delta_J": self.sd, "z": self.z,
