@@ -98,3 +98,25 @@ def test_report_names_the_linearised_checks_and_reads_an_older_calibration():
     assert calibration_result(report) == cal and "calibration" not in report   # carried once, at the top level
     old = {"model_error": {"calibration": cal}}                                  # a result.json written before
     assert "| k_yaw_s |" in calibration_markdown(old) == calibration_markdown({"calibration": cal})
+
+
+def test_the_corrected_null_is_where_w_opt_lies_when_nothing_changed(damaged):
+    """Where the checks correct w_opt (a model-form bias of known sign), nothing changed means w_opt at w0 less the
+    correction, not at w0: the test against that point. Known answers on the numerical experiment: w_opt halfway
+    to the damaged suspension, rejected against w0; with the correction that maps it onto w0 exactly, its null is
+    w_opt itself (ΔJ = 0, not rejected); with half that correction still rejected."""
+    from suspid.workflows.linearised import _no_change_corrected
+
+    problem, ledger = damaged
+    names = problem.names
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in names]))
+    u_opt = u0 + 0.5 * (problem.to_unit(np.array([W_REF[n] for n in names])) - u0)
+    opts = problem.config.identifiability.model_error
+    plain, report = no_change_check(problem, ledger, u_opt, opts, False, None)
+    assert plain.rejected
+    report = {"no_change": report}
+    exact = _no_change_corrected(problem, ledger, u_opt, u0, u0 - u_opt, False, None, report, plain)
+    assert exact.delta_j == 0.0 and exact.z == 0.0 and not exact.rejected
+    assert report["no_change"]["against_w0"]["rejected"] and report["no_change"]["n_simulations"] == 1  # cached
+    half = _no_change_corrected(problem, ledger, u_opt, u0, 0.5 * (u0 - u_opt), False, None, report, plain)
+    assert half.rejected and report["no_change"]["n_simulations"] == 2     # w0 and the new null simulated
