@@ -66,6 +66,35 @@ def test_equivalent_bias_bound_limits():
     np.testing.assert_allclose(bias_aware_half_width(sd, b, 2.0), [2 * np.hypot(0.02, 0.04), 2 * 0.03], rtol=1e-6)
 
 
+def test_a_significant_self_check_bias_is_corrected_and_the_interval_keeps_its_level():
+    """Known answer (Monte Carlo): w_opt = w + b + σ Z with a model-form bias b = 6 % of the interval that the
+    self-check measures as b̂ = b + se Z'. Corrected by b̂, the error σ Z − se Z' is N(0, σ² + se²) and the
+    interval, of half-width 2 √(σ² + se²), holds w at P(|Z| ≤ 2) = 95.4 %; bounding the bias by |b̂| instead
+    gives intervals more than 1.5 times as wide. A mean shift within 2 standard errors is not corrected: it bounds the bias."""
+    rng = np.random.default_rng(11)
+    n, b = 1000, 0.06
+    sd, se = np.full(n, 0.02), np.full(n, 0.01)     # n draws, as n components of one call
+    error = b + sd * rng.normal(size=n)             # w_opt − w
+    sc_bias = b + se * rng.normal(size=n)
+    zeros = np.zeros(n)
+    half = {}
+    for correct in (True, False):
+        corr, bound, fix = L.corrected_bound(sd, zeros, sc_bias, se, zeros, zeros, zeros, 2.0,
+                                             correct_self_check=correct)
+        half[correct] = bias_aware_half_width(sd, bound, 2.0)
+        if correct:
+            held, fixed = np.abs(error + corr) <= half[True], fix
+    assert np.all(fixed == sc_bias)                  # 6 % against a standard error of 1 %: always corrected
+    assert 0.93 <= held.mean() <= 0.975, held.mean()     # 95.4 % ± 0.7 % (1000 draws)
+    np.testing.assert_allclose(half[True], 2 * np.hypot(sd, se), rtol=1e-6)
+    assert np.mean(half[False]) > 1.5 * np.mean(half[True])
+    # within its noise: no correction, |b̂| bounds the bias
+    one = np.zeros(1)
+    corr, bound, fix = L.corrected_bound(np.array([0.02]), one, np.array([0.015]), np.array([0.01]), one, one, one,
+                                         2.0)
+    assert fix[0] == 0.0 and corr[0] == 0.0 and bound[0] == pytest.approx(0.015)
+
+
 def _experiment(tmp_path, reference_vehicle: dict, model_error_db: float | None = None,
                 calibration: dict | None = None):
     data_reference = {"simulator_options": {"vehicle": reference_vehicle}}

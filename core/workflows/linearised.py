@@ -70,7 +70,7 @@ from suspid.workflows.trust import checks_report, trust_states
 from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_of", "calibration_markdown",
-           "equivalent_bias_bound", "DateJacobian"]
+           "equivalent_bias_bound", "corrected_bound", "DateJacobian"]
 
 ModelErrorFn = Callable[..., dict[str, Any]]
 
@@ -207,6 +207,29 @@ def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarra
         f = lambda b: bias_aware_half_width(np.array([s]), np.array([b]), n_sigmas)[0] - chi  # noqa: E731,B023
         out[k] = 0.0 if f(0.0) >= 0 else brentq(f, 0.0, chi + n_sigmas * s + 1.0)
     return out
+
+
+def corrected_bound(sd: np.ndarray, shift_known: np.ndarray, sc_bias: np.ndarray, sc_se: np.ndarray,
+                    groups_half: np.ndarray, last_step: np.ndarray, sd_model: np.ndarray, n_sigmas: float,
+                    correct_self_check: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The linearised checks' correction of w_opt and the bias bound of what they leave (all ``(q,)``, fractions
+    of the admissible interval).
+
+    Corrected, with their signs: the calibrated model's shift ``shift_known``, and the self-check's mean shift
+    ``sc_bias`` where it is a bias (beyond 2 standard errors ``sc_se``): measured on the calibrated model where
+    the truth is w0, whose standard error is a random error of the correction and adds to the model parameters'
+    spread ``sd_model`` in quadrature. Bounded, signs unknown: a self-check shift within its noise and half the
+    data groups' spread (independent: in quadrature), plus the size of the correction's last linearised step.
+
+    :returns: ``(correction, bound, sc_fix)``: the estimate is w_opt + correction; ``bound`` goes to
+        :func:`~suspid.method.identifiability.bias_aware_half_width` with ``sd``; ``sc_fix`` the self-check bias
+        corrected (0 where it was not).
+    """
+    sc_bias, sc_se = np.asarray(sc_bias, float), np.asarray(sc_se, float)
+    sc_fix = np.where(np.abs(sc_bias) > 2 * sc_se, sc_bias, 0.0) if correct_self_check else np.zeros_like(sc_bias)
+    bound = equivalent_bias_bound(sd, np.hypot(sc_bias - sc_fix, groups_half) + np.abs(last_step),
+                                  np.hypot(sd_model, np.where(sc_fix != 0, sc_se, 0.0)), n_sigmas)
+    return np.asarray(shift_known, float) - sc_fix, bound, sc_fix
 
 
 # ----------------------------------------------------------------------------------------------- calibration
@@ -611,14 +634,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         # model parameters' posterior spread adds to the sampling one. The self-check's shift is not corrected:
         # it is measured on half-dates (B fitted on half the reference segments, w identified on the other half),
         # and with the overlap objective it does not carry over to the whole dates (benchmarks/RESULTS.md)
-        if sc_opt.correct:
-            # the self-check's mean shift where it is a bias (beyond 2 standard errors): measured on the calibrated
-            # model where the truth is known, it is corrected with its sign, and its standard error (a random error
-            # of the correction) adds to the spread; a shift within its noise stays a bound of unknown sign
-            sc_fix = np.where(np.abs(sc_bias) > 2 * sc_se, sc_bias, 0.0)
-        correction = shift_known - sc_fix
-        bound = equivalent_bias_bound(sd_, np.hypot(sc_bias - sc_fix, groups_half) + np.abs(last_step),
-                                      np.hypot(sd_model, np.where(sc_fix != 0, sc_se, 0.0)), n_sigmas)
+        correction, bound, sc_fix = corrected_bound(sd_, shift_known, sc_bias, sc_se, groups_half, last_step, sd_model,
+                                                    n_sigmas, sc_opt.correct)
         report["correction"] = {
             "method": "w_opt + the shift the model parameters calibrated at the reference date give"
                       + (" − the self-check's significant bias" if sc_opt.correct else ""),
