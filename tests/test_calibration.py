@@ -157,6 +157,7 @@ def test_known_creep_scale_under_the_default_measurement_process(tmp_path):
                 not e["assumed_range"][0] < e["estimate"] < e["assumed_range"][1], e
 
 
+@pytest.mark.slow
 def test_self_check_on_the_calibrated_model_has_no_bias_without_model_form_error(tmp_path):
     """The reference date's vehicle differs from the model only in its model parameters (2.5 MN/m mounts of the
     secondary vertical dampers, 70 % of Kalker's creep; nominal 5 MN/m and 100 %), so the model calibrated there has no model-form error left and the self-check,
