@@ -226,21 +226,22 @@ def main(argv: list[str] | None = None) -> None:
     budget_table(cfgs)
 
 
+def finished(cfgs: list[Path]) -> list[tuple[Path, dict]]:
+    """The runs of ``cfgs`` that have a result.json, with it."""
+    paths = [(cfg, cfg.parent / "runs" / cfg.stem / "result.json") for cfg in cfgs]
+    return [(cfg, json.loads(path.read_text())) for cfg, path in paths if path.exists()]
+
+
 def width_table(cfgs: list[Path]) -> None:
     """Where the identifiable components' interval widths come from, per objective (means over runs, % of the
     admissible interval): the sampling half-width (n σ), the self-check's mean shift (|b|) and what of it stays a
     bound (not corrected), half the data groups' spread, the model parameters' posterior spread, the reported
     bias-aware half-width; and how many are reported."""
     rows: dict[str, list[list[float]]] = {}
-    for cfg in cfgs:
-        path = cfg.parent / "runs" / cfg.stem / "result.json"
-        if not path.exists():
-            continue
-        res = json.loads(path.read_text())
+    for cfg, res in finished(cfgs):
         me = res.get("model_error", {})
         if me.get("method") != "linearised" or "correction" not in me:
             continue
-        n_sig = res["interval_method"]["n_sigmas"]
         fixed = me["correction"].get("self_check_percent", {})
         for n in res["parameters"]:
             if not res["identifiable"][n]:
@@ -268,11 +269,7 @@ def budget_table(cfgs: list[Path]) -> None:
     """The simulator calls of each run's model-error checks against its identification's (the design and EGO)."""
     print("\nsimulator calls: model-error checks / identification (method)")
     ratios = []
-    for cfg in cfgs:
-        path = cfg.parent / "runs" / cfg.stem / "result.json"
-        if not path.exists():
-            continue
-        res = json.loads(path.read_text())
+    for cfg, res in finished(cfgs):
         me = res.get("model_error", {})
         if me.get("method") == "linearised":
             checks = int(me.get("budget", {}).get("total", 0))
