@@ -33,7 +33,8 @@ the spectra are linearised instead, once per date, and every check reads them:
   on the spectra of the calibrated model itself (one Jacobian per date at θ̂: a
   mount's stiffness changes the spectra far from linearly over a factor 2).
 
-The no-change test (:mod:`suspid.workflows.no_change`, one simulation at w0 on the measurement date) runs
+The no-change test (:mod:`suspid.workflows.no_change`, one simulation on the measurement date at w0 less the
+correction: where w_opt lies when nothing changed) runs
 with the adequacy bands; where the data do not reject w0, the bound grows until every interval around the
 (corrected) estimate holds w0.
 
@@ -424,16 +425,15 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     base_opts = options.model_copy(update={
         "method": "full", "self_check": options.self_check.model_copy(update={"enabled": False}),
         "adequacy": options.adequacy.model_copy(update={"groups": False}),
-        "nuisance": options.nuisance.model_copy(update={"parameters": {}})})
+        "nuisance": options.nuisance.model_copy(update={"parameters": {}}), "no_change": False})
     trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False)
     report = trust["report"]
-    no_change = trust.get("no_change")
     report["method"] = "linearised"
     names, q = problem.names, problem.q
     reasons: dict[str, list[str]] = {n: list(r) for n, r in trust["reasons"].items()}
     sd_ = np.zeros(q) if sd is None else np.asarray(sd, float)
     theta = model_parameters(problem, options)
-    budget: dict[str, Any] = {"adequacy": 0, "no_change": int(report.get("no_change", {}).get("n_simulations", 0))}
+    budget: dict[str, Any] = {"adequacy": 0}
     n_sigmas = problem.config.identifiability.n_sigmas
     u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))
     have_ref = bool(problem.reference) and bool(problem.reference_segments)
@@ -451,6 +451,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         raise
     except SuspidError as exc:   # e.g. an unstable vehicle at a finite-difference step: no linearised check
         why = f"not run: the spectra's Jacobian failed ({exc})"
+        no_change, report["no_change"] = _no_change(problem, ledger, u_opt, u0, None, options, retry_failed, executor)
+        budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
         report.update({"self_check": {"status": why}, "nuisance": {"status": why}, "calibration": {"status": why},
                        "budget": budget})
         checks = {"adequacy": _base_status(report, "adequacy"), "self_check": why, "groups": why, "nuisance": why,
@@ -647,10 +649,9 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     else:
         bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
     u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
-    if no_change is not None and correction is not None and np.any(correction != 0):
-        no_change = _no_change_corrected(problem, ledger, u_opt, u0, correction, retry_failed, executor, report,
-                                         no_change)
-        budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
+    no_change, report["no_change"] = _no_change(problem, ledger, u_opt, u0, correction, options, retry_failed,
+                                                executor)
+    budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
     bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
                                           "model_parameters_spread": float(100 * m)}
@@ -669,32 +670,47 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     return {**_trust(names, reasons, checks, bound, report), "correction": correction}
 
 
-def _no_change_corrected(problem: Problem, ledger: Ledger, u_opt: np.ndarray, u0: np.ndarray, correction: np.ndarray,
-                         retry_failed: bool, executor: Executor | None, report: dict[str, Any],
-                         plain_test: NoChange) -> NoChange:
-    """The no-change test against where w_opt lies when nothing changed: w0 minus the checks' ``correction``
-    ``(q,)`` (normalised): the corrected estimate is w_opt + correction, so with w = w0 the model's maximiser sits
-    at w0 − correction, not at w0 (the likelihood's model-form bias made J(w_opt) exceed J(w0) at w_ref = w0).
-    One simulation there, on the measurement date's segments (cached in the ledger); where it fails, the plain
-    test against w0 stands. The plain test's figures stay in the report (``against_w0``)."""
-    from suspid.workflows.analysis import cached_y_sim, _y_sim_key
+def _no_change(problem: Problem, ledger: Ledger, u_opt: np.ndarray, u0: np.ndarray, correction: np.ndarray | None,
+               options: ModelErrorOptions, retry_failed: bool, executor: Executor | None
+               ) -> tuple[NoChange | None, dict[str, Any]]:
+    """The no-change test (:mod:`suspid.workflows.no_change`) against where w_opt lies when nothing changed: w0
+    less the checks' ``correction`` ``(q,)`` (normalised; w0 itself without one). The reported estimate is
+    w_opt + correction, so with w = w0 the model's maximiser sits at w0 − correction, not at w0 (the likelihood's
+    model-form bias made J(w_opt) exceed J(w0) at w_ref = w0). One simulation there, on the measurement date's
+    segments (cached in the ledger). Where w0's spectra are in the ledger already, the test against w0 itself is
+    reported too (``against_w0``, no simulation).
 
-    ident = problem.config.identifiability
-    u_null = np.clip(u0 - correction, 0, 1)
+    :returns: the test (None where it did not run) and its report.
+    """
+    from suspid.workflows.analysis import _y_sim_key, cached_y_sim
+
+    if not options.no_change:
+        return None, {"status": "disabled (identifiability.model_error.no_change: false)"}
+    shift = np.zeros(problem.q) if correction is None else np.asarray(correction, float)
+    u_null = np.clip(u0 - shift, 0, 1)
     n_sims = 0 if ledger.get_array(_y_sim_key(problem, u_null)[0] + ":y") is not None else 1
+    where = "w0 − the correction" if shift.any() else "w0"
     try:
         y_null = cached_y_sim(problem, ledger, u_null, retry_failed, executor)
-    except SimulatorError:
-        return plain_test
-    y_opt = cached_y_sim(problem, ledger, np.asarray(u_opt, float), retry_failed, executor)
-    test = no_change_test(problem, y_opt, y_null, ident.n_redraws, ident.n_sigmas, reference=ident.bootstrap_reference)
-    test.null = "w0 − the correction"
-    plain = report.get("no_change", {})
-    report["no_change"] = test.to_dict(int(plain.get("n_simulations", 0)) + n_sims) | {
-        "null": "w0 moved by the bias the checks correct (w0 − correction)",
-        "null_shift_percent": {n: float(-100 * c) for n, c in zip(problem.names, correction)},
-        "against_w0": {k: plain[k] for k in ("delta_J", "sd_delta_J", "z", "rejected") if k in plain}}
-    return test
+        y_opt = cached_y_sim(problem, ledger, np.asarray(u_opt, float), retry_failed, executor)
+    except SimulatorError as exc:
+        return None, {"status": f"not run: the simulation at {where} failed ({exc})", "n_simulations": n_sims}
+    ident = problem.config.identifiability
+
+    def test_against(y: np.ndarray) -> NoChange:
+        return no_change_test(problem, y_opt, y, ident.n_redraws, ident.n_sigmas, reference=ident.bootstrap_reference)
+
+    test = test_against(y_null)
+    test.null = where
+    out = test.to_dict(n_sims)
+    if shift.any():
+        out |= {"null": "w0 moved by the bias the checks correct (w0 − correction)",
+                "null_shift_percent": {n: float(-100 * c) for n, c in zip(problem.names, shift)}}
+        y0 = ledger.get_array(_y_sim_key(problem, u0)[0] + ":y")
+        if y0 is not None:
+            plain = test_against(y0).to_dict(0)
+            out["against_w0"] = {k: plain[k] for k in ("delta_J", "sd_delta_J", "z", "rejected")}
+    return test, out
 
 
 def _base_status(report: dict[str, Any], check: str) -> str:
