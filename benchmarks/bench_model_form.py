@@ -13,7 +13,10 @@ interval contains the truth; then the acceptance summary:
 - every component reported identifiable AND trustworthy within 5 % of its interval;
 - its interval containing the truth in >= 90 % of cases;
 - the flagged components;
-- with w_ref = w0, no trustworthy component moving by more than 3 %.
+- with w_ref = w0, no trustworthy component moving by more than 3 %;
+
+then where the identifiable components' interval widths come from (sampling, self-check, data groups,
+model parameters), and the model-error checks' simulator calls against the identification's.
 
 Usage (from the repository root)::
 
@@ -219,18 +222,54 @@ def main(argv: list[str] | None = None) -> None:
                                                              f"{np.mean([r['half_width'] for r in rep]):.1f})"
                                                              if rep else ""))
         print(f"  {obj}: " + ", ".join(cells))
+    width_table(cfgs)
     budget_table(cfgs)
+
+
+def finished(cfgs: list[Path]) -> list[tuple[Path, dict]]:
+    """The runs of ``cfgs`` that have a result.json, with it."""
+    paths = [(cfg, cfg.parent / "runs" / cfg.stem / "result.json") for cfg in cfgs]
+    return [(cfg, json.loads(path.read_text())) for cfg, path in paths if path.exists()]
+
+
+def width_table(cfgs: list[Path]) -> None:
+    """Where the identifiable components' interval widths come from, per objective (means over runs, % of the
+    admissible interval): the sampling half-width (n σ), the self-check's mean shift (|b|) and what of it stays a
+    bound (not corrected), half the data groups' spread, the model parameters' posterior spread, the reported
+    bias-aware half-width; and how many are reported."""
+    rows: dict[str, list[list[float]]] = {}
+    for cfg, res in finished(cfgs):
+        me = res.get("model_error", {})
+        if me.get("method") != "linearised" or "correction" not in me:
+            continue
+        fixed = me["correction"].get("self_check_percent", {})
+        for n in res["parameters"]:
+            if not res["identifiable"][n]:
+                continue
+            lo, hi = res["bounds"][n]
+            samp = 50 * (res["interval_sampling"][n][1] - res["interval_sampling"][n][0]) / (hi - lo)
+            sc = me.get("self_check", {}).get("bias_percent", {}).get(n, 0.0)
+            rows.setdefault(cfg.stem, []).append([
+                samp, abs(sc), abs(sc + fixed.get(n, 0.0)),
+                me.get("adequacy", {}).get("groups", {}).get("spread_percent", {}).get(n, 0.0) / 2,
+                me.get("nuisance", {}).get("spread_percent", {}).get(n, 0.0),
+                me["half_width_percent"][n], 100.0 * (res["trustworthy"].get(n) is True)])
+    if not rows:
+        return
+    print("\nwhere the width comes from (identifiable components, means in % of the admissible interval): sampling "
+          "half-width | self-check |shift| | of it left a bound | half the groups' spread | model parameters' spread "
+          "| bias-aware half-width | % reported")
+    for obj, r in rows.items():
+        a = np.array(r)
+        print(f"  {obj} ({len(a)} components): " + " | ".join(f"{v:.1f}" for v in a[:, :6].mean(axis=0))
+              + f" | {a[:, 6].mean():.0f} %")
 
 
 def budget_table(cfgs: list[Path]) -> None:
     """The simulator calls of each run's model-error checks against its identification's (the design and EGO)."""
     print("\nsimulator calls: model-error checks / identification (method)")
     ratios = []
-    for cfg in cfgs:
-        path = cfg.parent / "runs" / cfg.stem / "result.json"
-        if not path.exists():
-            continue
-        res = json.loads(path.read_text())
+    for cfg, res in finished(cfgs):
         me = res.get("model_error", {})
         if me.get("method") == "linearised":
             checks = int(me.get("budget", {}).get("total", 0))

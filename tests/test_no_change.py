@@ -98,3 +98,28 @@ def test_report_names_the_linearised_checks_and_reads_an_older_calibration():
     assert calibration_result(report) == cal and "calibration" not in report   # carried once, at the top level
     old = {"model_error": {"calibration": cal}}                                  # a result.json written before
     assert "| k_yaw_s |" in calibration_markdown(old) == calibration_markdown({"calibration": cal})
+
+
+def test_the_corrected_null_is_where_w_opt_lies_when_nothing_changed(damaged):
+    """Where the checks correct w_opt (a model-form bias of known sign), nothing changed means w_opt at w0 less the
+    correction, not at w0: the test against that point. Known answers on the numerical experiment: w_opt halfway
+    to the damaged suspension, rejected against w0; with the correction that maps it onto w0 exactly, its null is
+    w_opt itself (ΔJ = 0, not rejected); with half that correction still rejected; without one, the plain test."""
+    from suspid.workflows.linearised import _no_change
+
+    problem, ledger = damaged
+    names = problem.names
+    u0 = problem.to_unit(np.array([problem.w0[n] for n in names]))
+    u_opt = u0 + 0.5 * (problem.to_unit(np.array([W_REF[n] for n in names])) - u0)
+    opts = problem.config.identifiability.model_error
+    plain, _ = no_change_check(problem, ledger, u_opt, opts, False, None)       # simulates w0 and w_opt
+    assert plain.rejected
+    exact, report = _no_change(problem, ledger, u_opt, u0, u0 - u_opt, opts, False, None)
+    assert exact.delta_j == 0.0 and exact.z == 0.0 and not exact.rejected
+    assert report["n_simulations"] == 0 and report["against_w0"]["z"] == pytest.approx(plain.z)   # both cached
+    half, report = _no_change(problem, ledger, u_opt, u0, 0.5 * (u0 - u_opt), opts, False, None)
+    assert half.rejected and report["n_simulations"] == 1                          # the new null simulated
+    none, report = _no_change(problem, ledger, u_opt, u0, None, opts, False, None)
+    assert none.delta_j == plain.delta_j and "against_w0" not in report
+    off = opts.model_copy(update={"no_change": False})
+    assert _no_change(problem, ledger, u_opt, u0, None, off, False, None)[0] is None

@@ -58,6 +58,10 @@ class SelfCheckOptions(Section):
     n_splits: int = Field(default=8, ge=1, le=64, description="random halves: B fitted on one, w identified on the other")
     max_evaluations: int = Field(default=0, ge=0, description="simulations per split (Nelder-Mead); 0: 30 q")
     initial_step: float = Field(default=0.1, gt=0, le=0.5, description="initial simplex size in [0, 1]^q")
+    correct: bool = Field(
+        default=True, description="linearised method with model_error.correct: a mean shift beyond 2 standard errors "
+        "is a bias of known sign, measured on the calibrated model where the truth is w0: w_opt is corrected by it "
+        "and its standard error widens the interval; false: its size bounds the bias (sign unknown)")
 
 
 class AdequacyOptions(Section):

@@ -49,6 +49,7 @@ class NoChange:
     :ivar rejected: ΔJ > n_sigmas · sd.
     :ivar n_redraws: bootstrap replicates.
     :ivar n_sigmas: the level, in standard deviations.
+    :ivar null: the point J(w_opt) is compared with, in words (w0, or w0 less the bias the checks correct).
     """
 
     delta_j: float
@@ -56,10 +57,11 @@ class NoChange:
     rejected: bool
     n_redraws: int
     n_sigmas: float
+    null: str = "w0"
 
     @property
     def z(self) -> float:
-        return float(self.delta_j / self.sd) if self.sd > 0 else float("inf")
+        return float(self.delta_j / self.sd) if self.sd > 0 else (0.0 if self.delta_j <= 0 else float("inf"))
 
     def to_dict(self, n_simulations: int) -> dict[str, Any]:
         return {"status": "done", "delta_J": self.delta_j, "sd_delta_J": self.sd, "z": self.z,
@@ -129,7 +131,7 @@ def apply_no_change(test: NoChange | None, names: list[str], sd: np.ndarray, bou
     for k, n in enumerate(names):
         if abs(distance[k]) > max_half_width:
             reasons.setdefault(n, []).append(
-                f"the data do not tell it from its value at the reference date: J(w0) is {test.z:.1f} bootstrap "
+                f"the data do not tell it from its value at the reference date: J({test.null}) is {test.z:.1f} bootstrap "
                 f"standard deviations below J(w_opt) on the measurement date (w0 rejected beyond "
                 f"{test.n_sigmas:g}), and w0 lies {100 * abs(distance[k]):.1f} % of the interval away")
     return new

@@ -332,7 +332,8 @@ def model_error_section(result: dict[str, Any]) -> str:
         out += ["", f"Nuisance parameters: {nu['status']}."]
     nc = me.get("no_change")
     if nc and nc.get("status") == "done":
-        out += ["", f"No-change test: J(w_opt) − J(w0) = {nc['delta_J']:.4g} on the measurement date, "
+        null = "w0 − the correction, where w_opt lies when nothing changed" if nc.get("null") else "w0"
+        out += ["", f"No-change test: J(w_opt) − J({null}) = {nc['delta_J']:.4g} on the measurement date, "
                     f"{nc['z']:.1f} times its bootstrap standard deviation ({nc['sd_delta_J']:.3g}, "
                     f"{nc['n_redraws']} replicates): " +
                     (f"w0 is rejected (beyond {nc['n_sigmas']:g})." if nc["rejected"] else
