@@ -235,9 +235,10 @@ class EGO(TrialLoop):
 
     def tell(self, X: np.ndarray, values: Sequence[float | None], eval_seconds: Sequence[float | None] | None = None
              ) -> list[IterationRecord]:
-        """:meth:`tell_trials` for callers that hold the points :meth:`ask` returned, not the trials.
+        """:meth:`tell_trials` for callers that hold the points :meth:`ask` returned, not the trials
+        (deprecated: tell trials by id; kept for the array form of the optimiser contract).
 
-        :param X: ``(n_points, q)`` SI points, each one of those :meth:`ask` returned.
+        :param X: ``(n_points, q)`` SI points, each exactly one of those :meth:`ask` returned.
         :param values: ``(n_points,)`` J there; None, NaN or ±inf for a failed evaluation.
         :raises SuspidError: a point that is not waiting for a value, or a value that is not a number.
         """
@@ -247,7 +248,7 @@ class EGO(TrialLoop):
         if X.shape[0] != len(values) or (X.size and X.shape[1] != self.state_.q):
             raise SuspidError(f"tell: {X.shape[0]} points of shape {X.shape} for {len(values)} values; "
                               f"expected (n_points, {self.state_.q}) and n_points values")
-        ids = self.book_.match(X) if X.size else []
+        ids = self.book_.ids_of(X) if X.size else []
         return self.tell_trials(ids, values, eval_seconds)
 
     def ask_beside(self, pending: np.ndarray | None = None) -> list[Trial]:
