@@ -182,8 +182,9 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Norm
 
     :param loop: the loop's state at its end (:class:`~suspid.optimize.loop.LoopOutcome`, any optimiser):
         its best point, and the paper's loop before a refinement.
-    :param surrogate: the surrogate fitted on the loop's points (:meth:`~suspid.optimize.loop.LoopOutcome.fitted_surrogate`;
-        the verdict reads its model on the unit cube), None without one.
+    :param surrogate: the surrogate fitted on the loop's points
+        (:meth:`~suspid.optimize.loop.LoopOutcome.fitted_surrogate`; the verdict reads its model on the
+        unit cube), None without one.
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
     :param phases: shows each phase while it runs (:mod:`suspid.workflows.phases`; default: nowhere).

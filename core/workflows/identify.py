@@ -150,8 +150,8 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     model = getattr(optimizer, "spectra_model", None)
     model = model if isinstance(model, ProblemSpectraModel) else None   # identifiability from the Fisher information
     with make_progress(progress) as bars, single_blas_thread():   # minutes on measured data: shown phase by phase
-        analysis = analyse(problem, ledger, ego, surrogate, config, failed, retry_failed, executor, ProgressPhases(bars),
-                           spectra_model=model)
+        analysis = analyse(problem, ledger, ego, surrogate, config, failed, retry_failed, executor,
+                           ProgressPhases(bars), spectra_model=model)
     out = IdentificationResult.of(
         analysis, run_id=run_id,
         n_initial=int(ego.n_initial), n_iterations=int(ego.n_iterations),
