@@ -21,14 +21,11 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 import math
-from typing import TYPE_CHECKING, Any, Callable, ClassVar, Iterator, Mapping, Sequence
+from typing import Any, Callable, ClassVar, Iterator, Mapping, Sequence
 
 import numpy as np
 
 from suspid.optimize.trials import Trial, TrialBook, TrialLoop
-
-if TYPE_CHECKING:
-    from suspid.optimize.loop import LoopOutcome
 
 IRREGULARITY_CHANNELS = ("vertical", "lateral", "cross_level", "gauge")
 """Rows of :attr:`TrackSegment.irregularities`, all in metres (EN 13848 quantities).
@@ -601,10 +598,11 @@ class Optimizer(TrialLoop, ABC):
     def result(self) -> OptimizerResult:
         """The :class:`OptimizerResult` (after at least one value was told)."""
 
-    def loop_state(self) -> "LoopOutcome":
-        """The loop's state at its end, which the analysis reads with the surrogate fitted on its points
-        (:class:`suspid.optimize.loop.LoopOutcome`): by default every point told (:meth:`result`) and the
-        trials; an optimiser with a model of its own (``ego``) gives its own, with that model."""
+    def loop_state(self) -> Any:
+        """The loop's state at its end, a :class:`suspid.optimize.loop.LoopOutcome` (which imports this
+        module): what the analysis reads, with the surrogate fitted on its points. By default every point
+        told (:meth:`result`) and the trials; an optimiser with a model of its own (``ego``) gives its own,
+        with that model."""
         from suspid.optimize.design import check_bounds
         from suspid.optimize.loop import LoopOutcome
         res = self.result()

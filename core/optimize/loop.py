@@ -38,7 +38,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from scipy.stats import yeojohnson
@@ -46,10 +46,8 @@ from scipy.stats import yeojohnson
 from suspid.interfaces import Surrogate
 from suspid.optimize.acquisition import ei_from_log, log_expected_improvement, maximize_ei, maximize_mean
 from suspid.optimize.options import EGOOptions
+from suspid.optimize.normalize import Normalized
 from suspid.optimize.trials import EIBelowTolerance, MaxIterations, Trial
-
-if TYPE_CHECKING:
-    from suspid.optimize.normalize import Normalized
 
 __all__ = ["IterationRecord", "LoopOutcome", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
            "EIBelowTolerance", "warp_values"]
@@ -175,11 +173,10 @@ class LoopOutcome:
         """Number of points evaluated after the initial design (EGO and refinement)."""
         return self.n_evaluations - self.n_initial
 
-    def fitted_surrogate(self, surrogate: Surrogate | None) -> "Normalized | None":
+    def fitted_surrogate(self, surrogate: Surrogate | None) -> Normalized | None:
         """The surrogate of J on the loop's points, behind its unit-cube input transform: ``surrogate``
         (an unfitted instance) fitted here on the points with a value (None with fewer than 2)."""
         from suspid.infra.threads import single_blas_thread
-        from suspid.optimize.normalize import Normalized
         if surrogate is None or self.n_evaluations < 2:
             return None
         with single_blas_thread():
@@ -212,9 +209,8 @@ class EGOResult(LoopOutcome):
 
     surrogate: Surrogate | None = None
 
-    def fitted_surrogate(self, surrogate: Surrogate | None = None) -> "Normalized | None":
+    def fitted_surrogate(self, surrogate: Surrogate | None = None) -> Normalized | None:
         """The loop's own surrogate behind its unit-cube input transform (``surrogate`` is not used)."""
-        from suspid.optimize.normalize import Normalized
         return Normalized(self.surrogate, self.bounds) if self.surrogate is not None else None
 
 
