@@ -312,8 +312,9 @@ class Objective(ABC):
 class Surrogate(ABC):
     """A metamodel of a scalar function, used by EGO (paper §3.2).
 
-    Inputs ``X`` are ``(n_points, q)``; EGO passes points of the unit cube
-    ``[0, 1]^q``. Outputs ``y`` are ``(n_points,)``.
+    Inputs ``X`` are ``(n_points, q)`` points of the unit cube ``[0, 1]^q``; a caller with SI points
+    uses it behind its input transform (:class:`suspid.optimize.normalize.Normalized`). Outputs
+    ``y`` are ``(n_points,)``.
     """
 
     name: ClassVar[str]
@@ -453,7 +454,8 @@ class OptimizerResult:
     :ivar stop_reason: why it stopped (``"budget"``, or the optimiser's own rule, e.g. ``"ei_below_tol"``).
     :ivar n_initial: points of an initial design among the first of ``X`` (0 without one).
     :ivar details: the optimiser's own result object, when it has one (the ``ego`` plugin:
-        its :class:`suspid.optimize.ego.EGOResult`, with the fitted surrogate and the iteration records).
+        its :class:`suspid.optimize.ego.EGOResult`, with the fitted surrogate and the iteration records,
+        which is also its :meth:`Optimizer.loop_state`).
     """
 
     x_opt: np.ndarray
@@ -494,7 +496,7 @@ class Optimizer(TrialLoop, ABC):
             opt.tell_trials([t.id for t in trials], values)    # J by trial id; None or NaN where it failed
         res = opt.result()                                     # an OptimizerResult
 
-    The driver (:func:`suspid.workflows.driver.drive`) speaks only the trial interface. A plugin
+    The one loop (:func:`suspid.optimize.driver.run_trials`) speaks only the trial interface. A plugin
     may implement just the array interface (``ask(n) -> X (k, q)``, ``tell(X, values)``): the base
     class hands its points out as trials and tells it, once every trial of an ask has a value, the
     points in the order it asked them. The built-in optimisers implement the trials natively.
@@ -558,7 +560,7 @@ class Optimizer(TrialLoop, ABC):
 
         An optimiser that answers True takes ``ask_trials(1, beside=True)``: one more trial beside
         the trials being evaluated, or none when it has none to add before one of them is told; and
-        it takes trials told one at a time, oldest first (:func:`suspid.workflows.driver.drive`).
+        it takes trials told one at a time, oldest first (:func:`suspid.optimize.driver.run_trials`).
         Default False: ask, evaluate together, tell.
         """
         return False
@@ -595,6 +597,18 @@ class Optimizer(TrialLoop, ABC):
     @abstractmethod
     def result(self) -> OptimizerResult:
         """The :class:`OptimizerResult` (after at least one value was told)."""
+
+    def loop_state(self) -> Any:
+        """The loop's state at its end, a :class:`suspid.optimize.loop.LoopOutcome` (which imports this
+        module): what the analysis reads, with the surrogate fitted on its points. By default every point
+        told (:meth:`result`) and the trials; an optimiser with a model of its own (``ego``) gives its own,
+        with that model."""
+        from suspid.optimize.design import check_bounds
+        from suspid.optimize.loop import LoopOutcome
+        res = self.result()
+        book = self.__dict__.get("book_")
+        return LoopOutcome.of_points(res.x_opt, res.y_opt, res.X, res.y, res.n_initial, res.stop_reason,
+                                     check_bounds(self.bounds), book.trials if book is not None else [])
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -285,52 +285,72 @@ OPTIMIZER_BOX = np.array([[-2.0, 3.0], [10.0, 20.0]])
 """``(2, 2)`` the box of :func:`check_optimizer`, SI-like bounds that are not the unit square."""
 
 
-def _run_optimizer(cls: type, options: dict[str, Any], budget: int, seed: int,
-                   fail_every: int, asynchronous: bool = False) -> tuple[list[np.ndarray], Any]:
-    """Drive one optimiser through its trials (as :func:`suspid.workflows.driver.drive` does) on a concave
-    quadratic (maximiser (1, 16)) whose every ``fail_every``-th evaluation fails; returns the points in the
-    order told and the result. ``asynchronous``: with two trials in flight, on the driver's schedule."""
-    from suspid.optimize.design import DesignOptions  # the conformance kit only
+class _CheckedLoop:
+    """The optimiser under test as the one loop sees it, every ask checked against the contract."""
 
-    opt = cls(OPTIMIZER_BOX, budget=budget, seed=seed, design=DesignOptions(n_initial=6, seed=seed), **options)
-    told: list[np.ndarray] = []
-    flights: list[Any] = []  # asynchronous: trials asked, not told, oldest first
+    def __init__(self, opt: Any, budget: int, asynchronous: bool) -> None:
+        self.opt, self.budget, self.is_async = opt, budget, asynchronous
+        self.waiting: set[int] = set()   # trials asked, not told
+        self.n_told = 0
+        self.n_asks = 0
 
-    def asked(trials: list[Any], least: int) -> list[Any]:
+    @property
+    def done(self) -> bool:
+        return self.opt.done
+
+    def asynchronous(self, n_workers: int) -> bool:
+        return self.is_async
+
+    def ask_trials(self, n: int = 1, beside: bool = False) -> list[Any]:
+        self.n_asks += 1
+        assert self.n_asks <= 10 * self.budget, f"not done after {10 * self.budget} ask/tell rounds"
+        trials = self.opt.ask_trials(n=n, beside=beside)
         X = np.array([t.x for t in trials], dtype=float).reshape(-1, 2)
+        least = 0 if beside else 1
         assert len(trials) >= least, f"ask_trials() must hand out at least {least} trials here, got {len(trials)}"
         assert len({t.id for t in trials}) == len(trials), "ask_trials() handed out two trials with one id"
         assert np.all(X >= OPTIMIZER_BOX[:, 0] - 1e-9) and np.all(X <= OPTIMIZER_BOX[:, 1] + 1e-9), \
             f"ask_trials() handed out points outside the bounds: {X.tolist()}"
-        assert len(told) + len(flights) + len(X) <= budget, \
-            f"asked {len(told) + len(flights) + len(X)} points for a budget of {budget}"
+        if beside:
+            assert len(trials) <= 1, f"ask_trials(1, beside=True) must hand out at most one trial, got {len(trials)}"
+            assert not {t.id for t in trials} & self.waiting, "ask_trials(1, beside=True) handed out a trial in flight"
+        self.waiting |= {t.id for t in trials}
+        assert self.n_told + len(self.waiting) <= self.budget, \
+            f"asked {self.n_told + len(self.waiting)} points for a budget of {self.budget}"
         return trials
 
-    def tell(trials: list[Any]) -> None:
-        opt.tell_trials([t.id for t in trials], [
-            None if (len(told) + i + 1) % fail_every == 0 else
-            float(-((t.x[0] - 1.0) / 5.0) ** 2 - ((t.x[1] - 16.0) / 10.0) ** 2) for i, t in enumerate(trials)])
-        told.extend(np.array(t.x, dtype=float) for t in trials)
+    def tell_trials(self, ids: Any, values: Any, eval_seconds: Any = None) -> None:
+        self.opt.tell_trials(ids, values)
+        self.waiting -= set(ids)
+        self.n_told += len(ids)
 
-    for _ in range(10 * budget):
-        if not flights:
-            if opt.done:
-                break
-            trials = asked(opt.ask_trials(n=2), 1)
-            if not asynchronous or len(trials) > 1:
-                tell(trials)
-                continue
-            flights.append(trials[0])
-        while len(flights) < 2:
-            trials = asked(opt.ask_trials(n=1, beside=True), 0)
-            assert len(trials) <= 1, f"ask_trials(1, beside=True) must hand out at most one trial, got {len(trials)}"
-            if not trials:
-                break
-            assert trials[0].id not in {f.id for f in flights}, "ask_trials(1, beside=True) handed out a trial in flight"
-            flights.append(trials[0])
-        tell([flights.pop(0)])
-    else:
-        raise AssertionError(f"not done after {10 * budget} ask/tell rounds")
+
+def _run_optimizer(cls: type, options: dict[str, Any], budget: int, seed: int,
+                   fail_every: int, asynchronous: bool = False) -> tuple[list[np.ndarray], Any]:
+    """Drive one optimiser through its trials on the one loop (:func:`suspid.optimize.driver.run_trials`, two
+    workers) on a concave quadratic (maximiser (1, 16)) whose every ``fail_every``-th evaluation fails; returns
+    the points in the order told and the result. ``asynchronous``: with two trials in flight, on the loop's
+    schedule."""
+    from suspid.optimize.design import DesignOptions  # the conformance kit only
+    from suspid.optimize.driver import Evaluator, Flight, Outcome, run_trials
+
+    opt = cls(OPTIMIZER_BOX, budget=budget, seed=seed, design=DesignOptions(n_initial=6, seed=seed), **options)
+    told: list[np.ndarray] = []
+
+    class Quadratic(Evaluator):
+        n_workers = 2
+
+        def evaluate(self, trials: list[Any]) -> list[Outcome]:
+            out = [Outcome(None if (len(told) + i + 1) % fail_every == 0 else
+                           float(-((t.x[0] - 1.0) / 5.0) ** 2 - ((t.x[1] - 16.0) / 10.0) ** 2))
+                   for i, t in enumerate(trials)]
+            told.extend(np.array(t.x, dtype=float) for t in trials)   # trials are told in the order evaluated
+            return out
+
+        def start(self, trial: Any) -> Flight:
+            return Flight(trial, outcome=self.evaluate([trial])[0])
+
+    run_trials(_CheckedLoop(opt, budget, asynchronous), Quadratic())
     return told, opt.result()
 
 

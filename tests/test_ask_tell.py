@@ -112,6 +112,8 @@ def test_known_values_partial_tells_and_wrong_points():
     assert [r.index for r in records] == [0]  # index 1 still missing: records wait
     with pytest.raises(SuspidError, match="not one that ask"):
         opt.tell([[1.0, 1.0]], [0.0])
+    with pytest.raises(SuspidError, match="not one that ask"):   # no tolerance: a point is the one ask returned
+        opt.tell([np.nextafter(X[0], np.inf)], [0.0])
     with pytest.raises(SuspidError, match="expected a number"):
         opt.tell(X[:1], ["abc"])
     opt.tell(X[2:], [neg_branin(X[2])])

@@ -100,14 +100,14 @@ class BudgetedOptimizer(Optimizer):
         return np.array([t.x for t in self.ask_trials(n)]).reshape(-1, self.q_)
 
     def tell(self, X: np.ndarray, values: Sequence[float | None]) -> None:
+        """J at the points the last :meth:`ask` returned, in that order (deprecated: tell trials by id)."""
         self._start()
         X = np.atleast_2d(np.asarray(X, dtype=float))
-        waiting = self.book_.waiting
-        if X.shape != (len(waiting), self.q_) or len(values) != len(X) or not np.allclose(
-                to_unit(X, self.bounds_), np.array([t.u for t in waiting]).reshape(-1, self.q_), rtol=0.0, atol=1e-9):
+        waiting = [t.id for t in self.book_.waiting]
+        if X.shape != (len(waiting), self.q_) or len(values) != len(X) or _ids_of(self.book_, X) != waiting:
             raise SuspidError(f"{self.name}: tell expects the {len(waiting)} points ask returned, "
                               f"in the same order, and one value each; got {X.shape[0]} points, {len(values)} values")
-        self.tell_trials([t.id for t in waiting], list(values))
+        self.tell_trials(waiting, list(values))
 
     def result(self) -> OptimizerResult:
         self._start()
@@ -149,3 +149,11 @@ class BudgetedOptimizer(Optimizer):
 
     def _learn(self, U: np.ndarray, J: np.ndarray) -> None:
         """Take the values of the points just told (default: nothing to learn)."""
+
+
+def _ids_of(book: TrialBook, X: np.ndarray) -> list[int] | None:
+    """The trials of ``book`` handed out exactly at ``X (k, q)`` SI, None when a point is not one."""
+    try:
+        return book.ids_of(X)
+    except SuspidError:
+        return None

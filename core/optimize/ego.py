@@ -13,9 +13,9 @@ machine (:class:`suspid.optimize.trials.TrialLoop`), so that an outside process
 ``ask()`` and ``tell(X, values)`` are the same with arrays of SI points, for a caller
 that holds points rather than trials.
 
-:func:`run_ego` and :func:`maximize` are thin loops over the same object
-that call ``func(w (q,)) -> float`` (or ``func_batch(X (k, q)) -> k values``
-for a batch). Everything happens in the unit cube ``[0, 1]^q``; ``ask``
+:func:`run_ego` and :func:`maximize` run the same object through the one loop
+(:func:`suspid.optimize.driver.run_trials`), which calls ``func(w (q,)) -> float``
+(or ``func_batch(X (k, q)) -> k values`` for a batch). Everything happens in the unit cube ``[0, 1]^q``; ``ask``
 returns and ``tell`` takes points of the parameter box ``bounds (q, 2)``
 (SI units). A caller who prefers unit coordinates passes ``bounds = [[0, 1]] * q``.
 
@@ -65,7 +65,6 @@ Public API: :class:`EGO`, :func:`run_ego`, :func:`maximize`,
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Callable, Sequence
 
@@ -76,6 +75,7 @@ from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Surrogate
 from suspid.optimize.acquisition import (ei_from_log, expected_improvement, log_ei_and_grad,
                                          log_expected_improvement)
+from suspid.optimize.driver import FunctionEvaluator, run_trials
 from suspid.optimize.design import DesignOptions, check_bounds, from_unit, make_design, min_distance, to_unit
 from suspid.optimize.loop import EGOResult, EIProposer, IterationRecord, LoopState
 from suspid.optimize.trials import Budget, EIBelowTolerance, MaxIterations, StopState, Trial, TrialBook, TrialLoop
@@ -235,9 +235,10 @@ class EGO(TrialLoop):
 
     def tell(self, X: np.ndarray, values: Sequence[float | None], eval_seconds: Sequence[float | None] | None = None
              ) -> list[IterationRecord]:
-        """:meth:`tell_trials` for callers that hold the points :meth:`ask` returned, not the trials.
+        """:meth:`tell_trials` for callers that hold the points :meth:`ask` returned, not the trials
+        (deprecated: tell trials by id; kept for the array form of the optimiser contract).
 
-        :param X: ``(n_points, q)`` SI points, each one of those :meth:`ask` returned.
+        :param X: ``(n_points, q)`` SI points, each exactly one of those :meth:`ask` returned.
         :param values: ``(n_points,)`` J there; None, NaN or ±inf for a failed evaluation.
         :raises SuspidError: a point that is not waiting for a value, or a value that is not a number.
         """
@@ -247,7 +248,7 @@ class EGO(TrialLoop):
         if X.shape[0] != len(values) or (X.size and X.shape[1] != self.state_.q):
             raise SuspidError(f"tell: {X.shape[0]} points of shape {X.shape} for {len(values)} values; "
                               f"expected (n_points, {self.state_.q}) and n_points values")
-        ids = self.book_.match(X) if X.size else []
+        ids = self.book_.ids_of(X) if X.size else []
         return self.tell_trials(ids, values, eval_seconds)
 
     def ask_beside(self, pending: np.ndarray | None = None) -> list[Trial]:
@@ -461,18 +462,6 @@ class EGO(TrialLoop):
 
 # -- the loops of the pipeline and of the notebook ---------------------------------------
 
-def _evaluate(func: Callable[[np.ndarray], float], x: np.ndarray) -> tuple[float, float]:
-    t0 = time.perf_counter()
-    value = func(x.copy())
-    try:
-        J = float(value)
-    except (TypeError, ValueError):
-        raise SuspidError(f"the objective returned {value!r} at w={x.tolist()}; expected a number") from None
-    if not math.isfinite(J):
-        raise SuspidError(f"the objective returned {J} at w={x.tolist()}; EGO needs finite values")
-    return J, time.perf_counter() - t0
-
-
 def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | None = None,
             design: DesignOptions | None = None, surrogate: Surrogate | None = None,
             X_init: np.ndarray | None = None, y_init: np.ndarray | None = None,
@@ -504,26 +493,7 @@ def run_ego(func: Callable[[np.ndarray], float], bounds, *, ego: EGOOptions | No
     with single_blas_thread():
         opt = EGO(bounds, ego=ego, design=design, surrogate=surrogate, X_init=X_init, y_init=y_init,
                   callback=callback)
-        while not opt.done:
-            batched = opt.phase == "ego" and opt.options_.batch > 1
-            trials = opt.ask_trials()
-            if not batched:  # one point at a time: a callback can stop after any of them
-                for t in trials:
-                    J, dt = _evaluate(func, t.x)
-                    opt.tell_trials([t.id], [J], [dt])
-                    if opt.done:
-                        break
-                continue
-            X = np.array([t.x for t in trials])
-            t0 = time.perf_counter()
-            if func_batch is not None:
-                values = [float(v) for v in func_batch(X)]
-                if len(values) != len(X) or not all(math.isfinite(v) for v in values):
-                    raise SuspidError(f"func_batch returned {values!r} for {len(X)} points")
-            else:
-                values = [_evaluate(func, x)[0] for x in X]
-            dt = (time.perf_counter() - t0) / len(X)
-            opt.tell_trials([t.id for t in trials], values, [dt] * len(X))
+        run_trials(opt, FunctionEvaluator(func, func_batch, batch=(ego or EGOOptions()).batch))
         return opt.result()
 
 

@@ -46,6 +46,7 @@ from scipy.stats import yeojohnson
 from suspid.interfaces import Surrogate
 from suspid.optimize.acquisition import ei_from_log, log_expected_improvement, maximize_ei, maximize_mean
 from suspid.optimize.options import EGOOptions
+from suspid.optimize.normalize import Normalized
 from suspid.optimize.trials import EIBelowTolerance, MaxIterations, Trial
 
 __all__ = ["IterationRecord", "LoopOutcome", "EGOResult", "LoopState", "Proposal", "EIProposer", "MaxIterations",
@@ -116,29 +117,27 @@ class IterationRecord:
 
 @dataclass
 class LoopOutcome:
-    """What a finished optimisation loop leaves for the analysis, whatever the optimiser: the points
-    with a value, the best one, the surrogate fitted on them and the trials.
+    """The state of an optimisation loop when it ended, whatever the optimiser: the points with a
+    value, the best one, why it stopped and the trials. The analysis reads it with the surrogate
+    fitted on its points (:meth:`fitted_surrogate`).
 
-    The EGO loop returns it as :class:`EGOResult` (its surrogate is the loop's own); for another
-    optimiser :meth:`of_points` fits the configured surrogate on its points.
+    Every optimiser gives it (:meth:`suspid.interfaces.Optimizer.loop_state`): the EGO loop as
+    :class:`EGOResult`, which also holds the loop's own surrogate; another optimiser from its
+    points (:meth:`of_points`).
 
     :ivar x_opt: ``(q,)`` w_opt, the best evaluated point, SI units.
     :ivar y_opt: J(w_opt).
-    :ivar X: ``(n_points, q)`` every point in order (initial design first), SI units.
+    :ivar X: ``(n_points, q)`` every point with a value, in order (initial design first), SI units.
     :ivar y: ``(n_points,)`` J at those points.
     :ivar X_unit: ``(n_points, q)`` the same points in ``[0, 1]^q``.
     :ivar n_initial: m0, the number of initial points.
-    :ivar stop_reason: why the paper's loop stopped: ``"ei_below_tol"``,
-        ``"max_iter"``, ``"callback"`` (a callback returned True), ``"stopped"``
-        (:meth:`suspid.optimize.ego.EGO.stop`), or ``"running"`` for a snapshot
-        of an unfinished run.
+    :ivar stop_reason: why the loop stopped: ``"ei_below_tol"``, ``"max_iter"``, ``"budget"``,
+        ``"callback"`` (a callback returned True), ``"stopped"`` (:meth:`suspid.optimize.ego.EGO.stop`),
+        an optimiser's own reason, or ``"running"`` for a snapshot of an unfinished run.
     :ivar refine_stop_reason: why the refinement stopped (``"radius_below_min"``,
         ``"max_iter"``, ``"callback"``, ``"stopped"``), None without one.
     :ivar n_refine: points evaluated by the refinement (included in ``n_iterations``).
-    :ivar history: every :class:`IterationRecord`, in order.
-    :ivar surrogate: the surrogate fitted on all points (with
-        ``refit_final=False``: its last fit in the paper's loop, without the
-        last point and the refinement's points); None if it was never fitted.
+    :ivar history: every :class:`IterationRecord`, in order (empty without the EGO loop).
     :ivar bounds: ``(q, 2)`` the parameter box.
     :ivar design_min_distance: smallest pairwise distance of the initial
         points in ``[0, 1]^q``.
@@ -156,7 +155,6 @@ class LoopOutcome:
     n_initial: int
     stop_reason: str
     history: list[IterationRecord]
-    surrogate: Surrogate | None
     bounds: np.ndarray
     design_min_distance: float
     n_function_calls: int
@@ -175,33 +173,45 @@ class LoopOutcome:
         """Number of points evaluated after the initial design (EGO and refinement)."""
         return self.n_evaluations - self.n_initial
 
-    @classmethod
-    def of_points(cls, x_opt: np.ndarray, y_opt: float, X: np.ndarray, y: np.ndarray, U: np.ndarray,
-                  n_initial: int, stop_reason: str, surrogate: Surrogate | None, bounds: np.ndarray,
-                  trials: list[Trial] | None = None) -> "LoopOutcome":
-        """The outcome of an optimiser without a model of its own, from every point it was told.
-
-        :param X: ``(n, q)`` SI points told, in order; :param y: ``(n,)`` their J, NaN where failed;
-            :param U: ``(n, q)`` the same points in ``[0, 1]^q``.
-        :param surrogate: a surrogate instance, fitted here on the points with a value (at least 2;
-            otherwise the outcome has none).
-        """
+    def fitted_surrogate(self, surrogate: Surrogate | None) -> Normalized | None:
+        """The surrogate of J on the loop's points, behind its unit-cube input transform: ``surrogate``
+        (an unfitted instance) fitted here on the points with a value (None with fewer than 2)."""
         from suspid.infra.threads import single_blas_thread
-        from suspid.optimize.design import min_distance
+        if surrogate is None or self.n_evaluations < 2:
+            return None
+        with single_blas_thread():
+            return Normalized(surrogate, self.bounds).fit(self.X, self.y)
+
+    @classmethod
+    def of_points(cls, x_opt: np.ndarray, y_opt: float, X: np.ndarray, y: np.ndarray, n_initial: int,
+                  stop_reason: str, bounds: np.ndarray, trials: list[Trial] | None = None) -> "LoopOutcome":
+        """The state of an optimiser without a model of its own, from every point it was told.
+
+        :param X: ``(n, q)`` SI points told, in order; :param y: ``(n,)`` their J, NaN where failed.
+        """
+        from suspid.optimize.design import min_distance, to_unit
         ok = np.isfinite(y)
-        fitted = None
-        if ok.sum() >= 2 and surrogate is not None:
-            with single_blas_thread():
-                fitted = surrogate.fit(U[ok], y[ok])
-        return cls(x_opt=np.asarray(x_opt, float), y_opt=float(y_opt), X=X[ok], y=y[ok], X_unit=U[ok],
-                   n_initial=int(min(n_initial, ok.sum())), stop_reason=stop_reason, history=[], surrogate=fitted,
-                   bounds=bounds, design_min_distance=min_distance(U[ok][:n_initial]),
+        U = to_unit(X[ok], bounds)
+        return cls(x_opt=np.asarray(x_opt, float), y_opt=float(y_opt), X=X[ok], y=y[ok], X_unit=U,
+                   n_initial=int(min(n_initial, ok.sum())), stop_reason=stop_reason, history=[],
+                   bounds=bounds, design_min_distance=min_distance(U[:n_initial]),
                    n_function_calls=int(len(y)), X_failed=X[~ok], trials=list(trials or []))
 
 
 @dataclass
 class EGOResult(LoopOutcome):
-    """Outcome of an EGO run (:class:`LoopOutcome`, with the EGO loop's own surrogate and records)."""
+    """Outcome of an EGO run (:class:`LoopOutcome`, with the EGO loop's own surrogate and records).
+
+    :ivar surrogate: the surrogate fitted on all points, on ``[0, 1]^q`` (with
+        ``refit_final=False``: its last fit in the paper's loop, without the
+        last point and the refinement's points); None if it was never fitted.
+    """
+
+    surrogate: Surrogate | None = None
+
+    def fitted_surrogate(self, surrogate: Surrogate | None = None) -> Normalized | None:
+        """The loop's own surrogate behind its unit-cube input transform (``surrogate`` is not used)."""
+        return Normalized(self.surrogate, self.bounds) if self.surrogate is not None else None
 
 
 @dataclass

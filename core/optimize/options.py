@@ -99,7 +99,7 @@ class EGOOptions(BaseModel):
     :ivar asynchronous: with ``batch = 1``, keep one point in flight per worker of the executor:
         ``"auto"`` (default) when the executor runs more than one task at once, ``true`` likewise
         (an error with ``batch`` > 1), ``false`` never (one simulation at a time, the paper's loop).
-        See :mod:`suspid.workflows.driver` for the schedule, which keeps the run
+        See :mod:`suspid.optimize.driver` for the schedule, which keeps the run
         reproducible.
     :ivar refine: the local refinement after the loop (:class:`RefineOptions`, off by default).
     """

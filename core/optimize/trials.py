@@ -183,21 +183,20 @@ class TrialBook:
         """Forget the trials still waiting (the loop stopped)."""
         self.queue = []
 
-    def match(self, X: np.ndarray) -> list[int]:
-        """The ids of the waiting trials at the SI points ``X (k, q)`` (the array interface of ``tell``,
-        kept for callers that hold points, not trials).
+    def ids_of(self, X: np.ndarray) -> list[int]:
+        """The ids of the waiting trials handed out at the SI points ``X (k, q)``: each row must be
+        exactly (bit for bit) the ``x`` of a waiting trial, as ``ask`` returned it. No tolerance, no
+        search near a point: the array form of ``tell`` (deprecated: tell trials by id) only names
+        the trials by the points it was given.
 
         :raises SuspidError: a point that is not one a waiting trial was handed out at.
         """
-        from suspid.optimize.design import to_unit
         ids: list[int] = []
-        for u in to_unit(np.atleast_2d(X), self.bounds):
-            hit = next((t for t in self.queue if not t.told and t.id not in ids
-                        and np.max(np.abs(t.u - u)) <= 1e-9), None)
+        for x in np.atleast_2d(np.asarray(X, dtype=float)):
+            hit = next((t for t in self.queue if not t.told and t.id not in ids and np.array_equal(t.x, x)), None)
             if hit is None:
-                from suspid.optimize.design import from_unit
-                raise SuspidError(f"tell: the point {from_unit(u, self.bounds).tolist()} is not one that ask() "
-                                  f"returned and that still waits for a value")
+                raise SuspidError(f"tell: the point {x.tolist()} is not one that ask() returned and that still "
+                                  f"waits for a value")
             ids.append(hit.id)
         return ids
 

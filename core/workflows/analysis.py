@@ -24,6 +24,7 @@ from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bi
 from suspid.method.jacobian import fisher_identifiability, fisher_information
 from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.optimize.loop import LoopOutcome
+from suspid.optimize.normalize import Normalized
 from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -172,15 +173,18 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     return np.atleast_2d(np.cov(grads, rowvar=False)), curvature, float(np.std(j_opt, ddof=1))
 
 
-def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, config: Config,
+def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Normalized | None, config: Config,
             failed: list[dict[str, Any]] | None = None, retry_failed: bool = False,
             executor: Executor | None = None, phases: Phases | None = None,
             spectra_model: SpectraModel | None = None) -> Analysis:
     """w_opt, errors against w_ref, identifiability, intervals, trust and sensitivity (the first keys of
     ``result.json``: :meth:`Analysis.to_json`).
 
-    :param loop: the finished loop (:class:`~suspid.optimize.loop.LoopOutcome`, any optimiser): its best
-        point and the surrogate fitted on its points.
+    :param loop: the loop's state at its end (:class:`~suspid.optimize.loop.LoopOutcome`, any optimiser):
+        its best point, and the paper's loop before a refinement.
+    :param surrogate: the surrogate fitted on the loop's points
+        (:meth:`~suspid.optimize.loop.LoopOutcome.fitted_surrogate`; the verdict reads its model on the
+        unit cube), None without one.
     :param failed: the points whose simulation failed during the design and EGO (listed in the result).
     :param executor: runs the simulations (entered; in this process without one).
     :param phases: shows each phase while it runs (:mod:`suspid.workflows.phases`; default: nowhere).
@@ -201,7 +205,7 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, config: Config,
                                                  reference=opts.bootstrap_reference)
     rng = named_rng(config.seed, "identifiability")
     phases.start("identifiability")
-    verdict = assess(names, u_opt, sigma_g, loop.surrogate, opts, rng, curvature)
+    verdict = assess(names, u_opt, sigma_g, surrogate.cube if surrogate is not None else None, opts, rng, curvature)
     fisher = None
     if spectra_model is not None:
         try:

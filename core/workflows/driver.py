@@ -1,41 +1,22 @@
-"""The one driver of an optimiser: trials out, evaluations through the executor, values back by trial id.
+"""An identification's optimiser on the one loop: the train's evaluation and the run ledger plugged in.
 
-:func:`drive` runs any :class:`~suspid.interfaces.Optimizer` to its end on the run's
-executor. Serial, batch and asynchronous execution are the same loop with different
-concurrency:
+:func:`drive` runs any :class:`~suspid.interfaces.Optimizer` to its end through
+:func:`suspid.optimize.driver.run_trials` (the one loop: serial, batch and asynchronous
+execution, its fixed asynchronous schedule) with a :class:`TrainEvaluator`: J of the run's
+problem on its executor (:func:`suspid.workflows.evaluation.evaluate_many`; asynchronously,
+one task per trial in flight, ``ego.asynchronous`` with ``ego.batch = 1`` and several
+workers, where the optimiser proposes one more trial beside those running: the kriging
+believer of :meth:`suspid.optimize.ego.EGO.ask_beside`).
 
-- **together** (the default, and every design or batch): ask as many trials as the
-  executor has workers, evaluate them together
-  (:func:`suspid.workflows.evaluation.evaluate_many`), tell them; with one worker this is
-  the paper's serial loop;
-- **asynchronous** (an optimiser whose :meth:`~suspid.interfaces.Optimizer.asynchronous`
-  answers True: ``ego.asynchronous`` with ``ego.batch = 1`` and several workers): keep one
-  trial in flight per worker. With ``ego.batch = 1`` the paper's loop waits for each
-  simulation before it proposes the next point, so n - 1 of n workers idle; here, whenever
-  a slot frees, the optimiser proposes one more trial beside those still running
-  (``ask_trials(1, beside=True)``: the kriging believer of
-  :meth:`suspid.optimize.ego.EGO.ask_beside`).
-
-Reacting to whichever simulation finishes first would make the run depend on timing: the
-same config would give another w_opt on a busier machine, and a resumed run could not
-retrace its steps. So the asynchronous schedule is fixed:
-
-1. with nothing in flight, ask without ``beside`` (the paper's step and its stopping rule,
-   the design, a refinement step); several trials are evaluated together;
-2. fill: while fewer than n trials are in flight, ask one beside them; stop filling when the
-   optimiser has none to add now;
-3. wait for the **oldest** trial in flight (the others go on running, and each evaluation is
-   committed to the ledger the moment it arrives), tell it, go to 2 (to 1 when nothing is
-   left in flight).
-
-The asks and tells are then a function of the config and of n alone, not of which worker
-is faster, and a killed run resumed from the ledger replays them, reading every finished
+The asynchronous schedule is fixed (the module docstring of :mod:`suspid.optimize.driver`),
+so the asks and tells are a function of the config and of n alone, not of which worker is
+faster, and a killed run resumed from the ledger replays them, reading every finished
 evaluation instead of simulating it. n is the executor's
 :attr:`~suspid.interfaces.Executor.n_workers` when the optimiser starts; a run resumed with
 another n goes its own (equally valid) way from the first trial whose pending set differs.
 
 The ledger: the evaluation (w, J, Ψ, time, status) is committed once, by its content key,
-when it finishes; the driver alone then writes one ``trials`` row per trial once it is told
+when it finishes; once a trial is told, the evaluator writes one ``trials`` row for it
 (its id, evaluation key, phase, status and what the proposal knew: EI, J_max, ...), in id
 order. w and J are not written again: :meth:`suspid.infra.ledger.Ledger.trials` joins them.
 """
@@ -43,7 +24,6 @@ order. w and J are not written again: :meth:`suspid.infra.ledger.Ledger.trials` 
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -51,26 +31,14 @@ import numpy as np
 
 from suspid.errors import SimulatorError
 from suspid.infra.ledger import Evaluation, Ledger
-from suspid.interfaces import Executor, Optimizer, OptimizerResult, TaskHandle
+from suspid.interfaces import Executor, Optimizer, OptimizerResult
+from suspid.optimize.driver import Evaluator, Flight, Outcome, run_trials
 from suspid.optimize.trials import Trial
 from suspid.workflows.evaluation import evaluate_many, evaluation_key_of, evaluation_task, from_ledger, record_outcome
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.problem import Problem
 
-__all__ = ["drive", "InFlight"]
-
-
-@dataclass
-class InFlight:
-    """A trial asked and not told yet: its simulation running (``handle``) or finished (``finished``)."""
-
-    trial: Trial
-    key: str
-    w: dict[str, float]
-    handle: TaskHandle | None = None
-    started: float = 0.0
-    finished: bool = False
-    ev: Evaluation | None = None
+__all__ = ["drive", "TrainEvaluator"]
 
 
 @dataclass
@@ -89,9 +57,75 @@ def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> d
     return {"phase": phase, "w": w, "error": found.error if found is not None else "unknown"}
 
 
+class TrainEvaluator(Evaluator):
+    """J of the run's problem on its executor, every evaluation committed to the ledger when it finishes
+    (read from it when it is there), and one ``trials`` row per trial once it is told: what the one loop
+    (:func:`suspid.optimize.driver.run_trials`) plugs in for an identification.
+
+    An outcome's ``data`` is ``(key, Evaluation | None)``; a trial's ``w`` (and ``psi`` when it has a value)
+    are set when it is evaluated.
+    """
+
+    def __init__(self, problem: Problem, ledger: Ledger, executor: Executor, bars, label: str,
+                 retry_failed: bool = False) -> None:
+        self.problem, self.ledger, self.executor, self.bars = problem, ledger, executor, bars
+        self.n_workers = executor.n_workers
+        self.label = label   # the phase of a failed point after the design
+        self.retry_failed = retry_failed
+        self.tally = _Tally()
+        self.bar = None
+        self._task = None
+
+    def _outcome(self, trial: Trial, key: str, w: dict[str, float], ev: Evaluation | None) -> Outcome:
+        trial.w = w
+        if ev is not None:
+            trial.psi = ev.psi
+        return Outcome(ev.J if ev is not None else None, ev.wall_time_s if ev is not None else None, (key, ev))
+
+    def evaluate(self, trials: list[Trial]) -> list[Outcome]:
+        X = np.array([t.x for t in trials])
+        evs = evaluate_many(self.problem, self.ledger, X, self.executor,
+                            lambda i, ev, reused: self.bars.update(self.bar, advance=1), retry_failed=self.retry_failed)
+        return [self._outcome(t, *evaluation_key_of(self.problem, t.x), ev) for t, ev in zip(trials, evs)]
+
+    def start(self, trial: Trial) -> Flight:
+        key, w, found = from_ledger(self.problem, self.ledger, trial.x, self.retry_failed)
+        if found:
+            return Flight(trial, outcome=self._outcome(trial, key, w, found.ev))
+        if self._task is None:
+            self._task = evaluation_task(self.problem)
+        return Flight(trial, handle=(key, w, self.executor.submit(self._task, w)), started=time.perf_counter())
+
+    def wait(self, flights) -> None:
+        """Wait until a simulation in flight finishes; commit every finished one to the ledger."""
+        running = {id(f.handle[2]): f for f in flights}
+        for handle, result in self.executor.wait_first([f.handle[2] for f in running.values()]):
+            f = running[id(handle)]
+            key, w, _ = f.handle
+            ev = record_outcome(self.problem, self.ledger, key, w, result, time.perf_counter() - f.started)
+            f.outcome = self._outcome(f.trial, key, w, ev)
+
+    def told(self, trials: list[Trial], outcomes: list[Outcome]) -> None:
+        """The failed points, J_max and one ledger ``trials`` row per trial (after the tell: the optimiser
+        may have added to a trial's details), in id order."""
+        tally = self.tally
+        phase = "design" if tally.n == 0 and len(trials) > 1 else self.label
+        for t, o in zip(trials, outcomes):
+            if o.J is None:
+                tally.failed.append(failure(self.problem, self.ledger, phase, t.x))
+            else:
+                tally.j_max = max(tally.j_max, o.J)
+        tally.n += len(trials)
+        for t, o in zip(trials, outcomes):
+            self.ledger.put_trial(t.id, {"key": o.data[0], **t.summary()})
+        self.bars.update(self.bar, completed=tally.n,
+                         status=f"J_max {tally.j_max:.4g}" if np.isfinite(tally.j_max) else "failed points")
+
+
 def drive(optimizer: Optimizer, problem: Problem, ledger: Ledger, executor: Executor, bars, *,
           retry_failed: bool = False) -> tuple[OptimizerResult, list[dict[str, Any]]]:
-    """Run ``optimizer`` through its trials to its end (see the module docstring).
+    """Run ``optimizer`` through its trials to its end: the one loop
+    (:func:`suspid.optimize.driver.run_trials`) with the train's evaluation (:class:`TrainEvaluator`).
 
     :param bars: a rich progress display (one bar for the optimiser).
     :param retry_failed: simulate again the points whose simulation failed before.
@@ -100,88 +134,11 @@ def drive(optimizer: Optimizer, problem: Problem, ledger: Ledger, executor: Exec
     """
     if getattr(optimizer, "uses_jacobian", False):
         optimizer.spectra_model = ProblemSpectraModel(problem, ledger, executor)
-    label = optimizer.name  # the phase of a failed point after the design
-    bar = bars.add_task(label, total=optimizer.budget, status="")
-    tally = _Tally()
-
-    def tell(trials: list[Trial], evs: list[Evaluation | None]) -> None:
-        phase = "design" if tally.n == 0 and len(trials) > 1 else label
-        keys = []
-        for t, ev in zip(trials, evs):
-            key, t.w = evaluation_key_of(problem, t.x)
-            keys.append(key)
-            if ev is None:
-                tally.failed.append(failure(problem, ledger, phase, t.x))
-            else:
-                tally.j_max = max(tally.j_max, ev.J)
-                t.psi = ev.psi
-        tally.n += len(trials)
-        optimizer.tell_trials([t.id for t in trials], [ev.J if ev is not None else None for ev in evs],
-                              [ev.wall_time_s if ev is not None else None for ev in evs])
-        for t, key in zip(trials, keys):   # after the tell: the optimiser may add to a trial's details
-            ledger.put_trial(t.id, {"key": key, **t.summary()})
-        bars.update(bar, completed=tally.n,
-                    status=f"J_max {tally.j_max:.4g}" if np.isfinite(tally.j_max) else "failed points")
-
-    def together(trials: list[Trial]) -> None:
-        X = np.array([t.x for t in trials])
-        tell(trials, evaluate_many(problem, ledger, X, executor, lambda i, ev, reused: bars.update(bar, advance=1),
-                                   retry_failed=retry_failed))
-
-    n_workers = executor.n_workers
-    if optimizer.asynchronous(n_workers):
-        _asynchronously(optimizer, problem, ledger, executor, n_workers, tell, together, retry_failed)
-    else:
-        while not optimizer.done:
-            trials = optimizer.ask_trials(n=n_workers)
-            if not trials:
-                break
-            together(trials)
-    bars.update(bar, total=max(tally.n, 1), completed=max(tally.n, 1))
+    evaluator = TrainEvaluator(problem, ledger, executor, bars, optimizer.name, retry_failed)
+    evaluator.bar = bars.add_task(optimizer.name, total=optimizer.budget, status="")
+    run_trials(optimizer, evaluator)
+    tally = evaluator.tally
+    bars.update(evaluator.bar, total=max(tally.n, 1), completed=max(tally.n, 1))
     if not np.isfinite(tally.j_max):
         raise SimulatorError(f"none of the {tally.n} points could be simulated; see the failures in {ledger.path}")
     return optimizer.result(), tally.failed
-
-
-def _asynchronously(optimizer: Optimizer, problem: Problem, ledger: Ledger, executor: Executor, n_workers: int,
-                    tell, together, retry_failed: bool) -> None:
-    """The asynchronous schedule of the module docstring, ``n_workers`` trials in flight."""
-    task = evaluation_task(problem)
-    flights: deque[InFlight] = deque()
-
-    def start(t: Trial) -> None:
-        key, w, found = from_ledger(problem, ledger, t.x, retry_failed)
-        if found:
-            flights.append(InFlight(t, key, w, finished=True, ev=found.ev))
-        else:
-            flights.append(InFlight(t, key, w, handle=executor.submit(task, w), started=time.perf_counter()))
-
-    while True:
-        if not flights:
-            if optimizer.done:
-                return
-            trials = optimizer.ask_trials(n=n_workers)
-            if not trials:
-                return
-            if len(trials) > 1:
-                together(trials)
-                continue
-            start(trials[0])
-        while len(flights) < n_workers:
-            trials = optimizer.ask_trials(n=1, beside=True)
-            if not trials:
-                break
-            start(trials[0])
-        while not flights[0].finished:
-            _collect(executor, flights, problem, ledger)
-        oldest = flights.popleft()
-        tell([oldest.trial], [oldest.ev])
-
-
-def _collect(executor: Executor, flights: deque[InFlight], problem: Problem, ledger: Ledger) -> None:
-    """Wait until a simulation in flight finishes; commit every finished one to the ledger."""
-    running = {id(f.handle): f for f in flights if not f.finished}
-    for handle, outcome in executor.wait_first([f.handle for f in running.values()]):
-        f = running[id(handle)]
-        f.ev = record_outcome(problem, ledger, f.key, f.w, outcome, time.perf_counter() - f.started)
-        f.finished = True

@@ -5,8 +5,9 @@
 2. the optimiser the config names (``optimizer:``, default ``ego``: the paper's
    maximin design of m0 points, then EGO on the Kriging metamodel, eq. 9) driven
    through its trials by :func:`suspid.workflows.driver.drive`, every J through the run's executor;
-3. for optimisers without a metamodel of their own, the configured surrogate
-   fitted on every evaluated point (the analysis reads it);
+3. the loop's state at its end (:meth:`suspid.interfaces.Optimizer.loop_state`) and the
+   surrogate fitted on its points (the EGO loop's own; for optimisers without a metamodel,
+   the configured surrogate fitted on every evaluated point), which the analysis reads;
 4. identifiability, intervals (:mod:`suspid.workflows.analysis`),
    ``result.json`` and ``report.md`` (:mod:`suspid.workflows.report`).
 
@@ -36,8 +37,7 @@ from suspid.infra.ledger import Ledger
 from suspid.infra.seeds import seed_for
 from suspid.infra.lock import open_run_dir
 from suspid.infra.threads import single_blas_thread
-from suspid.interfaces import Executor, OptimizerResult
-from suspid.optimize.loop import LoopOutcome
+from suspid.interfaces import Executor
 from suspid.workflows.analysis import analyse, cached_y_sim
 from suspid.workflows.driver import drive
 from suspid.workflows.gradient import ProblemSpectraModel
@@ -143,14 +143,15 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     # The Kriging fits and the EI search work on small matrices: OpenBLAS threads only contend (suspid.infra.threads)
     with make_progress(progress) as bars, single_blas_thread():
         opt_result, failed = drive(optimizer, problem, ledger, executor, bars, retry_failed=retry_failed)
-    ego = loop_outcome(opt_result, optimizer, surrogate_for(config), problem)
+    ego = optimizer.loop_state()   # the loop's state at its end, and the surrogate fitted on its points
+    surrogate = ego.fitted_surrogate(surrogate_for(config))
     ei_history = [float(r.EI) if r.EI is not None else float("nan") for r in ego.history if r.phase != "initial"]
 
     model = getattr(optimizer, "spectra_model", None)
     model = model if isinstance(model, ProblemSpectraModel) else None   # identifiability from the Fisher information
     with make_progress(progress) as bars, single_blas_thread():   # minutes on measured data: shown phase by phase
-        analysis = analyse(problem, ledger, ego, config, failed, retry_failed, executor, ProgressPhases(bars),
-                           spectra_model=model)
+        analysis = analyse(problem, ledger, ego, surrogate, config, failed, retry_failed, executor,
+                           ProgressPhases(bars), spectra_model=model)
     out = IdentificationResult.of(
         analysis, run_id=run_id,
         n_initial=int(ego.n_initial), n_iterations=int(ego.n_iterations),
@@ -186,18 +187,6 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         text = report.read_text(encoding="utf-8") if report.exists() else ""
         write_text(report, text.rstrip("\n") + "\n\n" + localisation_markdown(out.localisation, out.units))
     return out
-
-
-def loop_outcome(res: OptimizerResult, optimizer, surrogate, problem: Problem) -> LoopOutcome:
-    """What the analysis reads of the finished loop: the EGO loop's own outcome (its surrogate), or for
-    another optimiser its points with the configured ``surrogate`` fitted on them (identifiability,
-    Sobol indices and intervals read it), with the optimiser's trials."""
-    if isinstance(res.details, LoopOutcome):
-        return res.details
-    trials = getattr(getattr(optimizer, "book_", None), "trials", None) or \
-        getattr(getattr(optimizer, "_trial_book", None), "trials", None) or []
-    return LoopOutcome.of_points(res.x_opt, res.y_opt, res.X, res.y, problem.to_unit(res.X), res.n_initial,
-                                 res.stop_reason, surrogate, problem.bounds, trials)
 
 
 def _localise(config: Config, problem: Problem, result: dict[str, Any], executor, log) -> dict[str, Any] | None:

@@ -25,7 +25,7 @@ import numpy as np
 from suspid.infra.threads import single_blas_thread
 from suspid.interfaces import Optimizer, OptimizerResult
 from suspid.optimize.design import check_bounds, from_unit, make_design
-from suspid.optimize.ego import EGO
+from suspid.optimize.ego import EGO, EGOResult
 from suspid.optimize.options import EGOOptions, make_surrogate
 from suspid.optimize.trials import Trial
 
@@ -95,6 +95,12 @@ class EGOOptimizer(Optimizer):
         return OptimizerResult(x_opt=res.x_opt, y_opt=res.y_opt, X=np.array([t.x for t in told]).reshape(
             -1, self.bounds_.shape[0]), y=np.array([np.nan if t.J is None else t.J for t in told], dtype=float),
             stop_reason=res.stop_reason, n_initial=res.n_initial, details=res)
+
+    def loop_state(self) -> EGOResult:
+        """The EGO loop's own state at its end (:class:`~suspid.optimize.loop.EGOResult`), with its surrogate."""
+        self._start()
+        with single_blas_thread():  # the final refit
+            return self.ego_.result()
 
     def asynchronous(self, n_workers: int) -> bool:
         """``ego.asynchronous``: ``auto`` or ``true``, ``ego.batch`` 1 and more than one worker."""
