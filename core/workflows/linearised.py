@@ -50,14 +50,13 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
-from scipy.optimize import brentq
 
 from suspid.errors import ClusterError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor, TrackSegment
 from suspid.method.calibration import UNIFORM_SD, calibrate_step, implicit_shifts, octave_clusters
-from suspid.method.identifiability import ModelErrorOptions, bias_aware_half_width
+from suspid.method.identifiability import ModelErrorOptions
 from suspid.workflows.jacobian import spectra_jacobian
 from suspid.workflows.no_change import apply_no_change
 from suspid.method.noise import fit_noise_model
@@ -65,7 +64,8 @@ from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
-from suspid.workflows.trust import checks_report, trust_states
+from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, equivalent_bias_bound,  # noqa: F401
+                                    model_spread, trust_states)
 from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_of", "calibration_markdown",
@@ -182,30 +182,6 @@ def date_jacobian(problem: Problem, ledger: Ledger, segments: list[TrackSegment]
     methods = {n: ("analytic", "forward", "central")[int(m)] for n, m in zip(names, meta[1:])}
     return DateJacobian(np.asarray(y), jac[..., :q] * scale_u, jac[..., q:] * theta.width, int(meta[0]), methods,
                         cached)
-
-
-def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarray, n_sigmas: float) -> np.ndarray:
-    """The bias bound B that gives :func:`~suspid.method.identifiability.bias_aware_half_width` the interval of
-    an estimate with sampling spread ``sd``, a bias of at most ``|shift|`` and a further *random* spread
-    ``sd_model`` from the model parameters (all ``(q,)``, fractions of the admissible interval).
-
-    The uncertain θ move w_opt by G Δt, a random quantity independent of the sampling: its spread adds in
-    quadrature, σ_eff² = σ² + σ_model², and the interval of level P(|Z| ≤ n) is the bias-aware one of σ_eff
-    and |shift|. The analysis widens intervals by a bound B on top of σ, so B solves χ(σ, B) = χ(σ_eff, |shift|)
-    (χ increases with B).
-    """
-    sd = np.asarray(sd, float)
-    shift = np.abs(np.asarray(shift, float))
-    sd_model = np.nan_to_num(np.asarray(sd_model, float), nan=0.0)
-    target = bias_aware_half_width(np.sqrt(sd ** 2 + sd_model ** 2), shift, n_sigmas)
-    out = np.empty_like(target)
-    for k, (s, chi) in enumerate(zip(sd, target)):
-        if s <= 0:
-            out[k] = chi
-            continue
-        f = lambda b: bias_aware_half_width(np.array([s]), np.array([b]), n_sigmas)[0] - chi  # noqa: E731,B023
-        out[k] = 0.0 if f(0.0) >= 0 else brentq(f, 0.0, chi + n_sigmas * s + 1.0)
-    return out
 
 
 # ----------------------------------------------------------------------------------------------- calibration
@@ -401,7 +377,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         "method": "full", "self_check": options.self_check.model_copy(update={"enabled": False}),
         "adequacy": options.adequacy.model_copy(update={"groups": False}),
         "nuisance": options.nuisance.model_copy(update={"parameters": {}})})
-    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False)
+    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False,
+                 model_parameters_check=False)
     report = trust["report"]
     no_change = trust.get("no_change")
     report["method"] = "linearised"
@@ -569,7 +546,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                 budget["jacobians_at_calibrated"] += 0 if at_1.cached else at_1.n_simulations
                 last_step = search_point(problem, at_1, ref_hat.y, u1, step, n_eval)
                 shift_known = u1 + last_step - np.asarray(u_opt, float) - base
-        sd_model = np.sqrt(np.clip(np.diag(Gz @ cov @ Gz.T), 0, None))
+        sd_model = model_spread(Gz, cov)
         report["nuisance"] = {
             "status": "done", "linearised": True, "n_simulations": 0, "max_shift_percent": 100 * options.nuisance.max_shift,
             "parameters": {n: {"range": [float(theta.theta_of(np.eye(p)[j] * lo_t[j])[j]),
@@ -598,14 +575,14 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"identified {100 * shifts[largest_row[k], k]:+.1f} % of its interval away (threshold "
                     f"{100 * options.nuisance.max_shift:.0f} %)")
     correction = None
+    sources = BiasSources(sc_bias, groups_half, shift_known, sd_model, last_step)   # (suspid.workflows.trust)
     if correct:
         # the calibrated model's shift corrected (a bias with its sign); the self-check's mean shift and half the
         # groups' spread bound what remains, two independent sources of unknown sign combined in quadrature; the
         # model parameters' posterior spread adds to the sampling one. The self-check's shift is not corrected:
         # it is measured on half-dates (B fitted on half the reference segments, w identified on the other half),
         # and with the overlap objective it does not carry over to the whole dates (benchmarks/RESULTS.md)
-        correction = shift_known
-        bound = equivalent_bias_bound(sd_, np.hypot(sc_bias, groups_half) + np.abs(last_step), sd_model, n_sigmas)
+        bound, correction = combine_sources(sd_, sources, correct, n_sigmas)
         report["correction"] = {
             "method": "w_opt + the shift the model parameters calibrated at the reference date give",
             "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
@@ -613,7 +590,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "w_corrected": {n: float(v) for n, v in
                             zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
     else:
-        bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
+        bound, _ = combine_sources(sd_, sources, correct, n_sigmas)
     u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
     bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
