@@ -16,6 +16,9 @@ Usage (from the repository root)::
 
     python benchmarks/bench_trust_budget.py OUT_DIR [--generators independent independent2] [--seeds 7]
         [--w-refs w0 quickstart] [--objectives overlap likelihood] [--segments 24]
+
+Each comparison is kept beside its run (``compare_methods.json``): running again completes a cut grid, and the
+last table (both generators) holds every comparison finished so far.
 """
 
 from __future__ import annotations
@@ -39,10 +42,18 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--objectives", nargs="+", default=["overlap", "likelihood"])
     ap.add_argument("--segments", default="24")
     a = ap.parse_args(argv)
-    for generator in a.generators:
-        print(f"\n# generator {generator}", flush=True)
-        MF.main([str(a.out / generator), "--generator", generator, "--seeds", *a.seeds, "--w-refs", *a.w_refs,
-                 "--objectives", *a.objectives, "--segments", a.segments, "--jobs", "1", "--compare-methods"])
+    cfgs = []
+    for objective in a.objectives:     # run by run, the generators alternating: a cut grid still holds both
+        for w_ref in a.w_refs:
+            for seed in a.seeds:
+                for generator in a.generators:
+                    print(f"\n# generator {generator}, seed {seed}, {w_ref}, {objective}", flush=True)
+                    MF.main([str(a.out / generator), "--generator", generator, "--seeds", seed, "--w-refs", w_ref,
+                             "--objectives", objective, "--segments", a.segments, "--jobs", "1",
+                             "--compare-methods"])
+                    cfgs.append(a.out / generator / f"seed{seed}-{w_ref}" / f"{objective}.yaml")
+    print("\n# both generators", flush=True)
+    MF.compare_table([c for c in cfgs if (c.parent / "runs" / c.stem / "compare_methods.json").exists()])
 
 
 if __name__ == "__main__":
