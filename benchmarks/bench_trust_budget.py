@@ -53,7 +53,14 @@ def main(argv: list[str] | None = None) -> None:
                              "--compare-methods"])
                     cfgs.append(a.out / generator / f"seed{seed}-{w_ref}" / f"{objective}.yaml")
     print("\n# both generators", flush=True)
-    MF.compare_table([c for c in cfgs if (c.parent / "runs" / c.stem / "compare_methods.json").exists()])
+    done = [c for c in cfgs if (c.parent / "runs" / c.stem / "compare_methods.json").exists()]
+    MF.compare_table(done)
+    print("\nself-check bias, % of the interval: linearised as run (reference spectra extrapolated to the calibrated "
+          "model) / linearised on the calibrated model simulated / full (MF.self_check_why)")
+    for cfg in done:
+        why = MF.self_check_why(cfg)
+        print(f"  {cfg.parent.parent.name}:{cfg.parent.name}/{cfg.stem}: "
+              + ", ".join(f"{n} {a:+.1f} / {b:+.1f} / {c:+.1f}" for n, (a, b, c) in why.items()), flush=True)
 
 
 if __name__ == "__main__":
