@@ -76,3 +76,17 @@ def test_the_combined_interval_holds_its_level_when_the_sources_are_what_they_cl
     # ... and not wastefully wide: at the bound's end the level is met, not exceeded by much
     err = sc[0] + (dt @ G.T)[:, 0] + sd[0] * rng.standard_normal(n)
     assert np.mean(np.abs(err) <= half) == pytest.approx(LEVEL_2SIGMA, abs=0.005)
+
+
+def test_the_ends_give_the_slope_and_the_searches_scatter():
+    from suspid.workflows.nuisance import sensitivity_of_ends
+
+    lo, hi = np.array([-0.5, -0.2]), np.array([0.5, 0.6])
+    # component 0: linear in both parameters (slopes 0.1 and -0.05); component 1: both ends of the first move
+    # the same way by 0.02 (a search's scatter), the second linear
+    s_lo = np.array([[-0.05, 0.02], [0.01, 0.0]])
+    s_hi = np.array([[0.05, 0.02], [-0.03, 0.0]])
+    G, noise = sensitivity_of_ends(lo, hi, s_lo, s_hi)
+    assert np.allclose(G[0], [0.1, -0.05]) and noise[0] == pytest.approx(0.0, abs=1e-12)
+    assert np.allclose(G[1], [0.0, 0.0])
+    assert noise[1] == pytest.approx(np.sqrt((0.02 ** 2 + 0.02 ** 2) / 2), rel=1e-9)   # two degrees of freedom

@@ -641,6 +641,7 @@ def _model_parameters(problem: Problem, ledger: Ledger, u_opt: np.ndarray, optio
                                           for k, n in enumerate(names)},
         "shift_percent": {n: float(100 * v) for n, v in zip(names, mp.shift)},
         "spread_percent": {n: float(100 * v) for n, v in zip(names, mp.spread)},
+        "search_noise_percent": {n: float(100 * v) for n, v in zip(names, mp.search_noise)},
         "w_opt_calibrated": {n: float(v) for n, v in zip(names, problem.from_unit(np.clip(u_opt + mp.shift, 0, 1)))}}
     if options.correct and cal.done:   # corrected: the posterior's spread widens the interval instead
         return "done"

@@ -26,9 +26,9 @@ checks'). This module measures, by simulation, what θ does to w_opt:
 Shifts are measured at each end of each θ's range (its calibrated interval where
 the reference date pins it down, its assumed range otherwise) and at the
 calibrated θ̂ (the middle of the ranges without a calibration). The ends give
-the sensitivity G = du_opt/dt (secants), hence the spread √diag(G Σ_t Gᵀ) that
+the sensitivity G = du_opt/dt (:func:`sensitivity_of_ends`), hence the spread √diag(G Σ_t Gᵀ) that
 what remains uncertain of θ gives w_opt (Σ_t the calibration's posterior, with
-its correlations); the shift at θ̂ is a known bias, corrected. Both go to the
+its correlations), and the searches' own scatter, which adds to it; the shift at θ̂ is a known bias, corrected. Both go to the
 combination rule the linearised checks use (:func:`suspid.workflows.trust.combine_sources`).
 The searches cost about ``(2 p + 2) · 20 q`` simulations of the measurement date and one of the reference
 date per value of θ.
@@ -55,7 +55,8 @@ from suspid.workflows.tasks import SpectraTask, run_one
 from suspid.workflows.trust import model_spread
 from suspid.elements import declared_parameters
 
-__all__ = ["Calibration", "ModelParameterCheck", "calibrate_at_reference", "model_parameter_check", "reidentify"]
+__all__ = ["Calibration", "ModelParameterCheck", "calibrate_at_reference", "model_parameter_check", "reidentify",
+           "sensitivity_of_ends"]
 
 
 @dataclass
@@ -161,6 +162,7 @@ class ModelParameterCheck:
     :ivar shift: ``(q,)`` the shift at the calibrated θ̂ (the middle of the ranges without a calibration).
     :ivar spread: ``(q,)`` √diag(G Σ_t Gᵀ).
     :ivar lo_t, hi_t: ``(p,)`` the ends, in t.
+    :ivar search_noise: ``(q,)`` the re-identifications' scatter about G (:func:`sensitivity_of_ends`), in ``spread``.
     """
 
     values: list[tuple[str, float]]
@@ -171,6 +173,7 @@ class ModelParameterCheck:
     lo_t: np.ndarray
     hi_t: np.ndarray
     n_simulations: int
+    search_noise: np.ndarray
 
     def largest(self) -> tuple[np.ndarray, np.ndarray]:
         """``(q,)`` largest |shift| over the ends, and the row that gives it."""
@@ -204,8 +207,30 @@ def model_parameter_check(problem: Problem, ledger: Ledger, u_opt: np.ndarray, t
     step, n_eval = options.self_check.initial_step, options.nuisance.max_evaluations or 20 * problem.q
     shifts, n_sims = reidentify(problem, ledger, u_opt, points, step, n_eval, log, executor)
     ends = shifts[:-1]
-    width_t = hi_t - lo_t
+    G, noise = sensitivity_of_ends(lo_t, hi_t, ends[0::2], ends[1::2])
+    # the searches' own scatter is a random error of the calibrated shift too: it adds to the spread
+    spread = np.hypot(model_spread(G, cov), noise)
+    return ModelParameterCheck(values, ends, G, shifts[-1], spread, lo_t, hi_t, n_sims, noise)
+
+
+def sensitivity_of_ends(lo_t: np.ndarray, hi_t: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """G = du_opt/dt ``(q, p)`` from the shifts at the ends of each parameter's range, and the re-identifications'
+    scatter about it ``(q,)``.
+
+    The shift is 0 at t = 0 (the nominal model) by definition, so each parameter's G is the least-squares slope
+    through the origin of its two ends (``lo_t``, ``hi_t`` ``(p,)``; shifts ``s_lo``, ``s_hi`` ``(p, q)``). A
+    linear response puts both ends on that line; what they miss it by (both ends moving the same way, or an end
+    at the nominal value moving) is the searches' scatter (a Nelder-Mead re-identification stops within its
+    tolerance and evaluation budget, with B fitted again) or a curvature: pooled over the parameters (one degree
+    of freedom each where both ends differ from the nominal), it is the standard deviation of one shift.
+    """
+    lo_t, hi_t = np.asarray(lo_t, float), np.asarray(hi_t, float)
+    s_lo, s_hi = np.asarray(s_lo, float), np.asarray(s_hi, float)
+    ss = lo_t ** 2 + hi_t ** 2                                            # (p,)
     with np.errstate(divide="ignore", invalid="ignore"):
-        G = np.where(width_t > 0, (ends[1::2] - ends[0::2]).T / width_t, 0.0)      # (q, p)
-    spread = model_spread(G, cov)
-    return ModelParameterCheck(values, ends, G, shifts[-1], spread, lo_t, hi_t, n_sims)
+        G = np.where(ss[:, None] > 0, (lo_t[:, None] * s_lo + hi_t[:, None] * s_hi) / ss[:, None], 0.0)  # (p, q)
+    resid = (s_lo - lo_t[:, None] * G) ** 2 + (s_hi - hi_t[:, None] * G) ** 2
+    dof = int(np.sum((lo_t != 0) & (hi_t != 0)))
+    noise = np.sqrt(resid.sum(axis=0) / dof) if dof else np.zeros(s_lo.shape[1])
+    return G.T, noise
