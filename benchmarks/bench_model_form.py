@@ -28,6 +28,12 @@ Usage (from the repository root)::
 
 A finished run (its result.json) is kept: running again completes a cut grid;
 ``--summary`` prints the table of the runs finished so far.
+
+``--compare-methods`` then runs both model-error methods (``linearised`` and ``full``) in this process on each
+finished run's problem, ledger, w_opt and sampling spread, and prints per component both methods' flags (trust
+under model error, with the "too uncertain" verdict of the bias-aware half-width), whether each interval holds the
+truth, each source of bias as each method measured it (self-check, half the groups' spread, the model parameters'
+shift and spread), the simulator calls of each check, and the agreement of the flags (the target is >= 90 %).
 """
 
 from __future__ import annotations
@@ -152,6 +158,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="nuisance parameters of the model-error check, e.g. k_yaw_s=5e6:20e6")
     ap.add_argument("--weights", choices=["reference"], default=None,
                     help="objective.weights of the runs (their run directories get the suffix -reference-weights)")
+    ap.add_argument("--compare-methods", action="store_true",
+                    help="after the runs, the linearised and full model-error checks on each run's w_opt, compared")
     ap.add_argument("--method", choices=["full", "linearised"], default=None,
                     help="identifiability.model_error.method of the runs (default: the config's default; the run "
                          "directories get the suffix -METHOD)")
@@ -224,6 +232,166 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  {obj}: " + ", ".join(cells))
     width_table(cfgs)
     budget_table(cfgs)
+    if a.compare_methods:
+        compare_table([c for c in cfgs if (c.parent / "runs" / c.stem / "result.json").exists()])
+
+
+METHOD_CHECKS = {"self-check": "self-check", "data groups": "disagree", "model parameters": "rests on",
+                 "too uncertain": "too uncertain", "adequacy bands": "inadequate",
+                 "no change": "do not tell it from its value at the reference date"}
+"""Each check's flag, from the start of its reason (the same words in both methods)."""
+
+
+def compare_methods(cfg: Path) -> dict:
+    """Both model-error methods on the finished run of ``cfg``: flags, intervals, sources and costs per method."""
+    from suspid.config import load_config
+    from suspid.infra.ledger import Ledger
+    from suspid.method.identifiability import bias_aware_half_width
+    from suspid.workflows.analysis import imprecise, model_error
+    from suspid.workflows.problem import build_problem
+
+    run_dir = cfg.parent / "runs" / cfg.stem
+    res = json.loads((run_dir / "result.json").read_text())
+    config = load_config(cfg)
+    ledger = Ledger(run_dir / "ledger.sqlite")
+    problem = build_problem(config, ledger)
+    opts, names = config.identifiability, problem.names
+    u_opt = np.array([res["w_opt_normalized"][n] for n in names])
+    sd = np.sqrt(np.clip(np.diag(np.array(res["interval_method"]["covariance_normalized"])), 0, None))
+    identifiable = np.array([res["identifiable"][n] for n in names])
+    truth = json.loads((cfg.parent / "measurement" / "truth.json").read_text())["parameters"]
+    u_true = problem.to_unit(np.array([truth[n] for n in names]))
+    out: dict = {"case": f"{cfg.parent.name}/{cfg.stem}", "identification": int(res["n_simulator_calls"]),
+                 "identifiable": res["identifiable"], "names": names}
+    for method in ("linearised", "full"):
+        t0 = time.perf_counter()
+        trust = model_error(problem, ledger, u_opt, opts.step, opts.model_error.model_copy(update={"method": method}),
+                            False, sd, None)
+        wall = time.perf_counter() - t0
+        corr = trust.get("correction")
+        u_est = u_opt if corr is None else np.clip(u_opt + corr, 0, 1)
+        half = (bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas) if trust["bias_bound"] is not None
+                else opts.n_sigmas * sd)
+        imprecise(trust, names, identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
+        rep = trust["report"]
+        out[method] = {
+            "flags": {n: trust["trustworthy"][n] is True for n in names},
+            "error": {n: float(100 * (u_est[k] - u_true[k])) for k, n in enumerate(names)},
+            "covered": {n: bool(abs(u_est[k] - u_true[k]) <= half[k]) for k, n in enumerate(names)},
+            "half": {n: float(100 * half[k]) for k, n in enumerate(names)},
+            "checks": {c: {n: any(w in r for r in trust["reasons"].get(n, [])) for n in names}
+                       for c, w in METHOD_CHECKS.items()},
+            "sources": {n: {"self_check": rep.get("self_check", {}).get("bias_percent", {}).get(n, 0.0),
+                            "groups_half": 0.5 * rep.get("adequacy", {}).get("groups", {}).get(
+                                "spread_percent", {}).get(n, 0.0),
+                            "model_shift": rep.get("nuisance", {}).get("shift_percent", {}).get(n, 0.0),
+                            "model_spread": rep.get("nuisance", {}).get("spread_percent", {}).get(n, 0.0)}
+                        for n in names},
+            "costs": {k: v for k, v in rep.get("budget", {}).items() if isinstance(v, int) and k != "total"},
+            "wall_s": round(wall, 1)}
+    return out
+
+
+def self_check_why(cfg: Path) -> dict:
+    """Why the two methods' self-checks differ, on the finished run of ``cfg``: the linearised self-check as run
+    (the reference spectra extrapolated linearly from the nominal model to the calibrated θ̂), the same on the
+    calibrated model's spectra simulated (one Jacobian at w0 and θ̂), and the full self-check (re-identified by
+    simulation on the calibrated model, from the run's ledger). ``name -> [extrapolated, simulated, full]`` (% of
+    the interval): where "simulated" is near "full", the difference is the extrapolation's, not the searches'."""
+    from suspid.config import load_config
+    from suspid.infra.ledger import Ledger
+    from suspid.workflows.linearised import date_jacobian, linear_self_check, model_parameters
+    from suspid.workflows.nuisance import calibrate_at_reference
+    from suspid.workflows.problem import build_problem
+    from suspid.workflows.reference import self_check
+
+    run_dir = cfg.parent / "runs" / cfg.stem
+    config = load_config(cfg)
+    ledger = Ledger(run_dir / "ledger.sqlite")
+    problem = build_problem(config, ledger)
+    opts = config.identifiability.model_error
+    theta = model_parameters(problem, opts)
+    cal = calibrate_at_reference(problem, ledger, theta, opts, None)
+    jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), problem.names, theta, None)
+    extrapolated = linear_self_check(problem, jac0, jac0.y + jac0.dt @ cal.t_hat, opts).mean(axis=0)
+    w_hat = theta.w(cal.t_hat)
+    jac_hat = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0) | w_hat, problem.names,
+                            theta, None)
+    simulated = linear_self_check(problem, jac_hat, jac_hat.y, opts).mean(axis=0)
+    full = self_check(problem, ledger, opts.self_check, extra=w_hat if np.any(cal.t_hat != 0) else None).bias
+    return {n: [float(100 * extrapolated[k]), float(100 * simulated[k]), float(100 * full[k])]
+            for k, n in enumerate(problem.names)}
+
+
+def compare_table(cfgs: list[Path]) -> None:
+    """The linearised and full methods on every finished run (:func:`compare_methods`): tables and agreement."""
+    rows = []
+    for cfg in cfgs:
+        t0 = time.time()
+        kept = cfg.parent / "runs" / cfg.stem / "compare_methods.json"   # a finished comparison (delete to redo)
+        if kept.exists():
+            r = json.loads(kept.read_text())
+        else:
+            r = compare_methods(cfg)
+            kept.write_text(json.dumps(r))
+        r["case"] = f"{cfg.parent.parent.name}:{r['case']}"     # the generator's folder too
+        rows.append(r)
+        print(f"compared {r['case']} ({time.time() - t0:.0f} s)", flush=True)
+    print("\n| case | component | identifiable | error % (lin / full) | linearised | full | self-check % (lin / full) "
+          "| groups ½ spread % | model shift % | model spread % |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        lin, full = r["linearised"], r["full"]
+        for n in r["names"]:
+            mark = lambda m: ("trusted" if m["flags"][n] else "flagged") + ("" if m["covered"][n] else "*")  # noqa: E731,B023
+            pair = lambda key: f"{lin['sources'][n][key]:+.1f} / {full['sources'][n][key]:+.1f}"  # noqa: E731,B023
+            print(f"| {r['case']} | {n} | {'yes' if r['identifiable'][n] else 'no'} | {lin['error'][n]:+.1f} / "
+                  f"{full['error'][n]:+.1f} | {mark(lin)} | {mark(full)} | {pair('self_check')} | "
+                  f"{pair('groups_half')} | {pair('model_shift')} | {pair('model_spread')} |")
+    print("(error: the reported (corrected) value minus the truth, % of the interval; * the truth outside that "
+          "method's interval)")
+    comps = [(r, n) for r in rows for n in r["names"]]
+    if not comps:
+        return
+    same = sum(r["linearised"]["flags"][n] == r["full"]["flags"][n] for r, n in comps)
+    print(f"\nsame flags, linearised vs full: {same}/{len(comps)} ({100 * same / len(comps):.0f} %)")
+    ident = [(r, n) for r, n in comps if r["identifiable"][n]]
+    same_i = sum(r["linearised"]["flags"][n] == r["full"]["flags"][n] for r, n in ident)
+    print(f"  identifiable components: {same_i}/{len(ident)}")
+    for check in METHOD_CHECKS:
+        agree = sum(r["linearised"]["checks"][check][n] == r["full"]["checks"][check][n] for r, n in comps)
+        print(f"  check '{check}': same verdict {agree}/{len(comps)}; flagged by linearised "
+              f"{sum(r['linearised']['checks'][check][n] for r, n in comps)}, by full "
+              f"{sum(r['full']['checks'][check][n] for r, n in comps)}")
+    print("  each source, linearised against full over the identifiable components (% of the interval): median "
+          "|difference|, largest |difference| (where)")
+    for key in ("self_check", "groups_half", "model_shift", "model_spread"):
+        diffs = [(abs(r["linearised"]["sources"][n][key] - r["full"]["sources"][n][key]), r["case"], n)
+                 for r, n in ident]
+        if diffs:
+            worst = max(diffs)
+            print(f"    {key}: {np.median([d for d, _, _ in diffs]):.1f}, {worst[0]:.1f} ({worst[1]} {worst[2]})")
+    half = [(abs(r["linearised"]["half"][n] - r["full"]["half"][n]), r["case"], n) for r, n in ident]
+    if half:
+        print(f"    bias-aware half-width: {np.median([d for d, _, _ in half]):.1f}, {max(half)[0]:.1f} "
+              f"({max(half)[1]} {max(half)[2]})")
+    print("  where the flags differ: the checks that differ, and each method's half-width (%)")
+    for r, n in comps:
+        if r["linearised"]["flags"][n] != r["full"]["flags"][n]:
+            checks = [c for c in METHOD_CHECKS if r["linearised"]["checks"][c][n] != r["full"]["checks"][c][n]]
+            print(f"    {r['case']} {n}: {', '.join(checks) or 'none'}; half-width {r['linearised']['half'][n]:.1f} "
+                  f"/ {r['full']['half'][n]:.1f}; groups' ½ spread {r['linearised']['sources'][n]['groups_half']:.1f}"
+                  f" / {r['full']['sources'][n]['groups_half']:.1f}")
+    for m in ("linearised", "full"):
+        rep = [(r, n) for r, n in ident if r[m]["flags"][n]]
+        print(f"{m}: reported (identifiable and trusted) {len(rep)}/{len(ident)}, interval holds the truth "
+              f"{sum(r[m]['covered'][n] for r, n in rep)}/{len(rep)}, within 5 % "
+              f"{sum(abs(r[m]['error'][n]) <= 5 for r, n in rep)}/{len(rep)}")
+    print("\nsimulator calls of the checks per run (an analytic Jacobian counts one): linearised | full | "
+          "identification")
+    for r in rows:
+        cost = lambda m: f"{sum(r[m]['costs'].values())} ({', '.join(f'{k} {v}' for k, v in r[m]['costs'].items())}; {r[m]['wall_s']} s)"  # noqa: E731,B023,E501
+        print(f"  {r['case']}: {cost('linearised')} | {cost('full')} | {r['identification']}")
 
 
 def finished(cfgs: list[Path]) -> list[tuple[Path, dict]]:
@@ -271,8 +439,8 @@ def budget_table(cfgs: list[Path]) -> None:
     ratios = []
     for cfg, res in finished(cfgs):
         me = res.get("model_error", {})
-        if me.get("method") == "linearised":
-            checks = int(me.get("budget", {}).get("total", 0))
+        if "total" in me.get("budget", {}):
+            checks = int(me["budget"]["total"])
         else:
             checks = sum(int(me.get(k, {}).get("n_simulations", 0)) for k in ("self_check", "nuisance")) \
                 + int(me.get("adequacy", {}).get("groups", {}).get("n_simulations", 0)) \

@@ -164,7 +164,8 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        "--w-refs quickstart --objectives overlap --segments 12 --jobs 1",
        "trust flags on the second independent train"),
     _b("trust_budget", f"benchmarks/bench_trust_budget.py {WORK}/trust_budget",
-       f"benchmarks/bench_trust_budget.py {WORK}/trust_budget-quick --w-refs quickstart --segments 12",
+       f"benchmarks/bench_trust_budget.py {WORK}/trust_budget-quick --w-refs quickstart --objectives overlap "
+       "--segments 12",
        "linearised against full model-error checks"),
     _b("localisation", f"benchmarks/bench_localisation.py --seeds 1 2 3 --out {WORK}/localisation",
        f"benchmarks/bench_localisation.py --seeds 1 --cases yaw-bogie1-50 null --segments 6 "

@@ -5,7 +5,6 @@ import pytest
 from scipy.stats import norm
 
 from suspid.method.identifiability import bias_aware_half_width
-from suspid.workflows.nuisance import NuisanceCheck
 
 LEVEL_2SIGMA = 2 * norm.cdf(2.0) - 1  # 0.9545
 
@@ -45,16 +44,6 @@ def test_quadrature_would_not_hold_the_level():
     assert norm.cdf(chi_quad - bound) - norm.cdf(-chi_quad - bound) == pytest.approx(0.797, abs=1e-3)
     chi = bias_aware_half_width(np.array([sd]), np.array([bound]), 2.0)[0]
     assert chi > chi_quad
-
-
-def test_nuisance_bias_bound_sums_each_parameters_larger_shift():
-    shifts = np.array([[0.01, -0.03],    # k_yaw_s low
-                       [-0.02, 0.01],    # k_yaw_s high
-                       [0.005, 0.0],     # conicity low
-                       [0.0, -0.04]])    # conicity high
-    check = NuisanceCheck([("k_yaw_s", 5e6), ("k_yaw_s", 2e7), ("conicity", 0.18), ("conicity", 0.35)], shifts, 0)
-    assert np.allclose(check.per_parameter(), [0.02 + 0.005, 0.03 + 0.04])
-    assert np.allclose(check.largest()[0], [0.02, 0.04])
 
 
 def test_a_component_too_uncertain_under_model_error_is_not_trustworthy():

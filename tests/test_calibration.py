@@ -18,6 +18,7 @@ from suspid.method.calibration import calibrate_step, implicit_shifts, octave_cl
 from suspid.method.identifiability import bias_aware_half_width
 from suspid.workflows import linearised as L
 from suspid.workflows.problem import build_problem
+from suspid.workflows.trust import BiasSources, combine_sources
 from test_nuisance import dates  # noqa: F401  (the fixture of the two dates with 5 MN/m yaw-damper mounts)
 
 
@@ -79,8 +80,9 @@ def test_a_significant_self_check_bias_is_corrected_and_the_interval_keeps_its_l
     zeros = np.zeros(n)
     half = {}
     for correct in (True, False):
-        corr, bound, fix = L.corrected_bound(sd, zeros, sc_bias, se, zeros, zeros, zeros, 2.0,
-                                             correct_self_check=correct)
+        sources = BiasSources(sc_bias, zeros, zeros, zeros, zeros, se)
+        bound, corr = combine_sources(sd, sources, True, 2.0, correct_self_check=correct)
+        fix = sources.significant_self_check() if correct else zeros
         half[correct] = bias_aware_half_width(sd, bound, 2.0)
         if correct:
             held, fixed = np.abs(error + corr) <= half[True], fix
@@ -90,8 +92,9 @@ def test_a_significant_self_check_bias_is_corrected_and_the_interval_keeps_its_l
     assert np.mean(half[False]) > 1.5 * np.mean(half[True])
     # within its noise: no correction, |b̂| bounds the bias
     one = np.zeros(1)
-    corr, bound, fix = L.corrected_bound(np.array([0.02]), one, np.array([0.015]), np.array([0.01]), one, one, one,
-                                         2.0)
+    sources = BiasSources(np.array([0.015]), one, one, one, one, np.array([0.01]))
+    bound, corr = combine_sources(np.array([0.02]), sources, True, 2.0, correct_self_check=True)
+    fix = sources.significant_self_check()
     assert fix[0] == 0.0 and corr[0] == 0.0 and bound[0] == pytest.approx(0.015)
 
 

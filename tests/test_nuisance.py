@@ -72,8 +72,13 @@ def _config(out: Path, nuisance: dict, path: str = "config.yaml") -> Path:
 
 @pytest.mark.slow
 def test_the_true_nuisance_value_recovers_the_truth_and_the_assumed_one_is_flagged(dates):
+    """Without the calibration the full checks sweep the assumed range: an end at the true value recovers the
+    truth, and the component is flagged (the shift there exceeds the threshold)."""
     out, c_yaw_true = dates
     cfg = _config(out, {"k_yaw_s": [TRUE_K_YAW_S, 20.0e6]})
+    data = yaml.safe_load(cfg.read_text())
+    data["identifiability"]["model_error"]["calibration"] = {"enabled": False}
+    cfg.write_text(yaml.safe_dump(data, sort_keys=False))
     assert _cli("run", str(cfg), "--quiet") == 0
     result = json.loads((out / "runs" / "nuisance" / "result.json").read_text())
     lo, hi = result["bounds"]["c_yaw"]
@@ -83,13 +88,39 @@ def test_the_true_nuisance_value_recovers_the_truth_and_the_assumed_one_is_flagg
     assert set(rows) == {TRUE_K_YAW_S, 20.0e6}
     # with the series stiffness at its true value the re-identification lands on the truth ...
     assert abs(u_opt + rows[TRUE_K_YAW_S] - u_true) < 0.03, (u_opt, rows, u_true)
-    # ... which the nominal model misses by more than the threshold: c_yaw is flagged, its interval widened
+    # ... which the nominal model misses by more than the threshold: c_yaw is flagged, its interval widened (an
+    # end of a uniform range is not within 2 standard deviations of its middle's shift: the interval is checked
+    # with the calibration, below)
     assert abs(u_opt - u_true) > 0.05
     assert result["trustworthy"]["c_yaw"] is False
     assert "k_yaw_s" in result["untrustworthy_reasons"]["c_yaw"][0]
     lo_i, hi_i = result["interval_normalized"]["c_yaw"]
-    assert lo_i <= u_true <= hi_i
-    assert "Nuisance parameters" in (out / "runs" / "nuisance" / "report.md").read_text()
+    slo, shi = (np.array(result["interval_sampling"]["c_yaw"]) - lo) / (hi - lo)
+    assert hi_i - lo_i > shi - slo + 0.1
+    assert "Model parameters: w_opt" in (out / "runs" / "nuisance" / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_the_full_checks_calibrate_the_mounts_and_correct_w_opt(dates):
+    """The full checks on the known answer: the reference date calibrates the yaw dampers' mounts near their true
+    5 MN/m, the re-identification with the calibrated model brings c_yaw to the truth, and the interval around the
+    corrected value holds it (the linearised checks' test in tests/test_calibration.py, by simulation)."""
+    out, c_yaw_true = dates
+    cfg = _config(out, {"k_yaw_s": [2.0e6, 20.0e6]}, "calibrated.yaml")
+    data = yaml.safe_load(cfg.read_text())
+    data["name"] = "full-calibrated"
+    cfg.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert _cli("run", str(cfg), "--quiet") == 0
+    result = json.loads((out / "runs" / "full-calibrated" / "result.json").read_text())
+    entry = result["calibration"]["parameters"]["k_yaw_s"]
+    assert entry["status"] == "calibrated" and entry["interval"][0] <= TRUE_K_YAW_S <= entry["interval"][1], entry
+    nu = result["model_error"]["nuisance"]
+    assert nu["status"] == "done" and not nu["linearised"] and nu["parameters"]["k_yaw_s"]["calibrated"]
+    lo, hi = result["bounds"]["c_yaw"]
+    assert abs(result["w_opt"]["c_yaw"] - c_yaw_true) / (hi - lo) > 0.05      # the nominal model misses it
+    assert abs(result["w_corrected"]["c_yaw"] - c_yaw_true) / (hi - lo) < 0.03, (result["w_corrected"], c_yaw_true)
+    assert result["interval"]["c_yaw"][0] <= c_yaw_true <= result["interval"]["c_yaw"][1], result["interval"]
+    assert result["model_error"]["budget"]["nuisance"] == nu["n_simulations"] > 0
 
 
 @pytest.mark.parametrize("nuisance, expected", [

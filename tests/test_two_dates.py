@@ -76,15 +76,18 @@ def test_run_identifies_the_noise_model_from_the_reference_files_and_flags_model
         slo, shi = result["interval_sampling"][n]
         assert lo <= slo + 1e-9 and hi >= shi - 1e-9
     me = result["model_error"]   # the bias-aware interval is w_opt ± the reported half-width, clipped to the box
+    centre = result.get("w_corrected_normalized") or result["w_opt_normalized"]   # bias-corrected (calibration)
     for n in result["parameters"]:
-        u, half = result["w_opt_normalized"][n], me["half_width_percent"][n] / 100
+        u, half = centre[n], me["half_width_percent"][n] / 100
         assert result["interval_normalized"][n] == pytest.approx([max(u - half, 0.0), min(u + half, 1.0)], abs=1e-9)
         assert me["bias_bound_percent"][n] >= 0
         if half > me["max_half_width_percent"] / 100 and result["identifiable"][n]:
             assert not result["trustworthy"][n]
     report = (run / "report.md").read_text()
     assert "## Model error" in report and "trustworthy under model error" in report
-    assert "Bound on the bias" in report
+    assert "Bias correction" in report   # the model parameters calibrated, their shift corrected (correct: true)
+    budget = result["model_error"]["budget"]   # every check's simulations, counted
+    assert budget["total"] == sum(v for k, v in budget.items() if k != "total") > result["n_simulator_calls"]
     # a second run reuses the reference-date simulation and the self-check from the ledger
     assert _cli("run", str(cfg), "--quiet") == 0
     assert json.loads((run / "result.json").read_text())["w_opt"] == result["w_opt"]

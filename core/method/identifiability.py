@@ -113,10 +113,11 @@ class ModelErrorOptions(Section):
     method: Literal["full", "linearised"] = Field(
         default="linearised", description="linearised: the model parameters calibrated at the reference date and "
         "every check on the spectra linearised at w0 and w_opt (one Jacobian per date, suspid.workflows.linearised; "
-        "a few simulator calls, fewer than the identification's); full: the checks re-identify w by simulation "
-        "(self-check splits, data groups, nuisance ends: about 30 times the identification's simulations)")
+        "a few simulator calls, fewer than the identification's); full: the same calibration, and every shift "
+        "re-identified by simulation (self-check splits, data groups, the model parameters' ends and calibrated "
+        "values: about 40 times the identification's simulations), combined on the same rule")
     correct: bool = Field(
-        default=True, description="linearised method: correct w_opt by the shift the model parameters calibrated "
+        default=True, description="both methods: correct w_opt by the shift the model parameters calibrated "
         "at the reference date give, centre the interval there with their posterior spread, and bound the rest "
         "(the self-check's bias, half the groups' spread) in quadrature; false: keep w_opt and add every source as "
         "a worst case (the self-check and the ends of each model parameter's range then flag on their own)")

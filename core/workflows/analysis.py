@@ -29,12 +29,12 @@ from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
-from suspid.workflows.nuisance import nuisance_shifts
+from suspid.workflows.nuisance import calibrate_at_reference, model_parameter_check
 from suspid.workflows.phases import Phases
-from suspid.workflows.linearised import calibration_result, linearised_model_error
+from suspid.workflows.linearised import calibration_result, linearised_model_error, model_parameters
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
 from suspid.workflows.reference import self_check
-from suspid.workflows.trust import CHECK_LABELS, checks_report, trust_states
+from suspid.workflows.trust import CHECK_LABELS, BiasSources, checks_report, combine_sources, trust_states
 from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
 from suspid.elements import declared_parameters
 
@@ -416,13 +416,16 @@ def no_change_check(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
 def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, options: ModelErrorOptions,
                 retry_failed: bool = False, sd: np.ndarray | None = None,
                 executor: Executor | None = None, phases: Phases | None = None, *,
-                apply_no_change_test: bool = True) -> dict[str, Any]:
-    """Trust under model error: the reference-date self-check and the adequacy test at w_opt.
+                apply_no_change_test: bool = True, model_parameters_check: bool = True) -> dict[str, Any]:
+    """Trust under model error: the reference-date self-check, the adequacy test at w_opt, the data groups and
+    the model parameters calibrated at the reference date, each re-identifying w by simulation (``method: full``).
 
-    A component is **not trustworthy under model error** when
+    The model parameters θ (:func:`suspid.workflows.linearised.model_parameters`) are calibrated at the
+    reference date as the linearised checks do (:func:`suspid.workflows.nuisance.calibrate_at_reference`);
+    the self-check then checks the calibrated model. A component is **not trustworthy under model error** when
 
-    - the self-check (:func:`suspid.workflows.reference.self_check`) moves it by more than
-      ``max_bias`` of its admissible interval at the reference date, where the truth is w0, and
+    - (``correct: false`` only) the self-check (:func:`suspid.workflows.reference.self_check`) moves it by more
+      than ``max_bias`` of its admissible interval at the reference date, where the truth is w0, and
       by more than 2 standard errors of the splits' mean (:func:`biased`); or
     - more than ``adequacy.max_share`` of its information (S_k² / Var B, weighted by α) lies in
       channel bands where the model at w_opt does not reproduce the measurements after B's mean
@@ -430,17 +433,12 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     - the data groups that inform it (channel directions, frequency halves) give estimates more
       than ``adequacy.max_spread`` apart, and further apart than 2√2 sampling standard deviations
       ``sd`` (:mod:`suspid.workflows.adequacy`); or
-    - a nuisance parameter (``nuisance.parameters``: a not-identified model parameter with a
-      plausible range) moves it by more than ``nuisance.max_shift`` at an end of its range
-      (:mod:`suspid.workflows.nuisance`).
+    - (unless corrected after a calibration) a model parameter moves it by more than ``nuisance.max_shift`` at
+      an end of its range (:mod:`suspid.workflows.nuisance`).
 
-    The checks also bound the bias that model-form error puts in w_opt, per component: the
-    self-check's |bias|, plus half the groups' spread, plus for each nuisance parameter its larger
-    |shift| of the two ends of its range. The terms come from different sources whose signs are
-    not known, so they are added (the bound of their sum), not combined in quadrature: on the
-    independent train of ``benchmarks/bench_model_form.py`` the quadrature left 30 % of the
-    reported intervals without the truth, mostly k_prim_z and c_sec_z, whose errors added up from
-    several differences of the vehicle (``benchmarks/RESULTS.md``).
+    Each check gives its source's shift of w_opt, and :func:`suspid.workflows.trust.combine_sources`, the rule
+    the linearised checks use, combines them into the bias bound (and the correction by the calibrated model's
+    shift): the two methods differ only in how each shift is obtained.
 
     The no-change test (:mod:`suspid.workflows.no_change`, ``no_change``) then asks whether the measurement
     date rejects w = w0; where it does not, the bound grows until every interval holds w0, and a component
@@ -451,10 +449,13 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
 
     :param sd: ``(q,)`` sampling standard deviations of w_opt in [0, 1] (the sandwich's).
     :param phases: shows each check while it runs (default: nowhere).
+    :param model_parameters_check: calibrate and check the model parameters (off where the linearised checks
+        call this for the adequacy bands alone).
     :returns: ``{"trustworthy": name -> True | False | None (not assessed), "reasons": name -> [str],
         "not_assessed": name -> [str] (the checks that did not run), "bias_bound": (q,) or None,
         that bound in [0, 1] (:func:`suspid.method.identifiability.bias_aware_half_width` widens the
-        intervals by it), "report": the JSON-able details for result.json}``.
+        intervals by it), "correction": (q,) or None, the shift added to u_opt, "report": the JSON-able
+        details for result.json}``.
     """
     names = problem.names
     q = problem.q
@@ -469,17 +470,27 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     if options.method == "linearised":  # the checks by linearisation, within budget (suspid.workflows.linearised)
         phases.start("model error (linearised)")
         return linearised_model_error(problem, ledger, u_opt, h, options, retry_failed, sd, executor, model_error)
-    report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias}
+    report: dict[str, Any] = {"max_bias_percent": 100 * options.max_bias, "method": "full"}
     phases.start("no-change test (1 simulation)")
     test, report["no_change"] = no_change_check(problem, ledger, u_opt, options, retry_failed, executor)
+    budget: dict[str, Any] = {"no_change": int(report["no_change"].get("n_simulations", 0))}
     checks: dict[str, str] = {}
-    bound = None
+    sources, ran = BiasSources.none(q), False
+    correct = options.correct
+    theta = model_parameters(problem, options) if model_parameters_check else None
+    cal = None
+    if theta is not None:
+        phases.start(f"calibration of {len(theta.names)} model parameters at the reference date")
+        cal = calibrate_at_reference(problem, ledger, theta, options, executor)
+        report["calibration"] = dict(cal.report)
+        budget["calibration"] = cal.n_simulations
+    extra = theta.w(cal.t_hat) if cal is not None and cal.done and np.any(cal.t_hat != 0) else None
     sc_opt = options.self_check
     if not sc_opt.enabled:
         report["self_check"] = {"status": "disabled (identifiability.model_error.self_check.enabled: false)"}
     else:
         phases.start(f"self-check ({sc_opt.n_splits} splits)")
-        check = self_check(problem, ledger, sc_opt, log=phases.status, executor=executor)
+        check = self_check(problem, ledger, sc_opt, log=phases.status, executor=executor, extra=extra)
         if check is None:
             if not problem.reference or not problem.reference_segments:
                 why = "the reference date's data are not part of this run" + (
@@ -489,14 +500,17 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
             report["self_check"] = {"status": f"not run: {why} (give noise.reference with at least 8 segments)"}
         else:
             bias = np.abs(check.bias)
-            bound = bias
+            sources.self_check, ran = np.asarray(check.bias, float), True
+            budget["self_check"] = check.n_evaluations
             n_splits = check.shifts.shape[0]
             se = check.scatter / np.sqrt(n_splits)
+            sources.self_check_se = se
             excess = np.maximum(bias - 2 * se, 0.0)  # what the scatter of the splits does not explain
-            report["self_check"] = {"status": "done", **check.to_dict(names),
+            report["self_check"] = {"status": "done", **check.to_dict(names), "calibrated_model": extra is not None,
                                     "standard_error_percent": {n: float(100 * v) for n, v in zip(names, se)},
                                     "excess_bias_percent": {n: float(100 * v) for n, v in zip(names, excess)}}
-            flagged = biased(bias, se, options.max_bias)
+            # corrected: the self-check's bias widens the interval (combine_sources) instead of flagging
+            flagged = np.zeros(q, bool) if correct else biased(bias, se, options.max_bias)
             for k in range(q):
                 if flagged[k]:
                     reasons[k].append(
@@ -554,7 +568,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                 "information_share": {g.name: {n: float(ge.share[i, k]) for k, n in enumerate(names)}
                                       for i, g in enumerate(ge.groups)},
                 "spread_percent": {n: float(100 * v) for n, v in zip(names, spread)}}
-            bound = spread / 2 if bound is None else bound + spread / 2
+            sources.groups_half, ran = spread / 2, True
+            budget["data_groups"] = ge.n_simulations
             for k in range(q):
                 if spread[k] > ad_opt.max_spread and spread[k] > 2 * np.sqrt(2) * sd_[k]:
                     parts = ", ".join(f"{g.name} {100 * ge.u[i, k]:.0f} %" for i, g in enumerate(ge.groups)
@@ -564,37 +579,87 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                       f"{100 * spread[k]:.0f} %, threshold {100 * ad_opt.max_spread:.0f} %): "
                                       f"the model's sensitivity to it differs from the vehicle's")
     checks["adequacy"] = report["adequacy"]["status"]
-    nu_opt = options.nuisance
-    if not nu_opt.parameters:
-        checks["nuisance"] = "not run: no nuisance parameters declared (identifiability.model_error.nuisance)"
-    else:
-        phases.start(f"nuisance parameters ({len(nu_opt.parameters)})")
-        check = nuisance_shifts(problem, ledger, u_opt, nu_opt, options.self_check.initial_step, executor=executor)
-        if check is None:
-            report["nuisance"] = {"status": "not run: the reference date's data are not part of this run "
-                                            "(give noise.reference)"}
-            checks["nuisance"] = report["nuisance"]["status"]
-        else:
-            checks["nuisance"] = "done"
-            largest, rows = check.largest()
-            report["nuisance"] = {**check.to_dict(names), "max_shift_percent": 100 * nu_opt.max_shift,
-                                  "largest_shift_percent": {n: float(100 * v) for n, v in zip(names, largest)}}
-            per_parameter = check.per_parameter()
-            report["nuisance"]["bias_bound_percent"] = {n: float(100 * v) for n, v in zip(names, per_parameter)}
-            bound = per_parameter if bound is None else bound + per_parameter
-            for k in range(q):
-                if largest[k] > nu_opt.max_shift:
-                    name, value = check.values[rows[k]]
-                    lo, hi = nu_opt.parameters[name]
-                    reasons[k].append(
-                        f"rests on an assumed model parameter: with {name} = {value:g} (plausible {lo:g} to {hi:g}) "
-                        f"it is identified {100 * check.shifts[rows[k], k]:+.1f} % of its interval away "
-                        f"(threshold {100 * nu_opt.max_shift:.0f} %)")
+    checks["nuisance"] = _model_parameters(problem, ledger, u_opt, options, theta, cal, sources, report, budget,
+                                           reasons, phases, executor)
+    ran = ran or checks["nuisance"] == "done"
+    bound, correction = combine_sources(np.zeros(q) if sd is None else sd, sources, correct,
+                                        problem.config.identifiability.n_sigmas, sc_opt.correct) if ran else (None, None)
+    if correction is not None:
+        sc_fix = sources.significant_self_check() if sc_opt.correct else np.zeros(q)
+        report["correction"] = {
+            "method": "w_opt + the shift the model parameters calibrated at the reference date give (re-identified)"
+                      + (" − the self-check's significant bias" if sc_opt.correct else ""),
+            "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
+            "self_check_percent": {n: float(-100 * c) for n, c in zip(names, sc_fix)},
+            "w_corrected": {n: float(v) for n, v in
+                            zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
+    if ran:
+        report["bias_sources_percent"] = {
+            n: {"self_check": float(100 * a), "groups_half_spread": float(100 * g),
+                "model_parameters_shift": float(100 * m), "model_parameters_spread": float(100 * v)}
+            for n, a, g, m, v in zip(names, sources.self_check, sources.groups_half, sources.model_shift,
+                                     sources.model_spread)}
+    budget["total"] = int(sum(v for v in budget.values()))
+    report["budget"] = budget
     if apply_no_change_test:   # (the linearised checks apply it to their own estimate and bound)
         u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))
+        u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
         by_name = {n: r for n, r in zip(names, reasons)}
-        bound = apply_no_change(test, names, sd, bound, np.asarray(u_opt, float) - u0,
+        bound = apply_no_change(test, names, sd, bound, u_est - u0,
                                 problem.config.identifiability.n_sigmas, options.max_half_width, by_name)
     checks["no_change"] = report["no_change"]["status"]
     report["checks"] = checks_report(checks)
-    return {**trust_states(names, reasons, checks), "bias_bound": bound, "report": report, "no_change": test}
+    return {**trust_states(names, reasons, checks), "bias_bound": bound, "report": report, "no_change": test,
+            "correction": correction}
+
+
+def _model_parameters(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options: ModelErrorOptions, theta: Any,
+                      cal: Any, sources: BiasSources, report: dict[str, Any], budget: dict[str, Any],
+                      reasons: list[list[str]], phases: Phases, executor: Executor | None) -> str:
+    """The full checks' model-parameter check (:func:`suspid.workflows.nuisance.model_parameter_check`): its
+    report, its sources (the shift at the calibrated θ̂, the spread of what remains uncertain) and its flags, on
+    the linearised checks' rule (a component whose shift at an end of a θ's range exceeds ``nuisance.max_shift``
+    is flagged, unless the calibrated shift is corrected). :returns: the check's status."""
+    names, q = problem.names, problem.q
+    if theta is None:
+        return "not run: the linearised checks propagate the model parameters"
+    if not theta.names:
+        report["nuisance"] = {"status": "not run: no model parameter"}
+        return report["nuisance"]["status"]
+    if not problem.reference or not problem.reference_segments:
+        report["nuisance"] = {"status": "not run: the reference date's data are not part of this run "
+                                        "(give noise.reference)"}
+        return report["nuisance"]["status"]
+    p = len(theta.names)
+    phases.start(f"model parameters ({p}: {2 * p + 1} re-identifications)")
+    mp = model_parameter_check(problem, ledger, u_opt, theta, cal, options, log=phases.status, executor=executor)
+    budget["nuisance"] = mp.n_simulations
+    sources.model_shift, sources.model_spread = mp.shift, mp.spread
+    largest, rows = mp.largest()
+    pinned = cal.pinned if cal.done else np.zeros(p, bool)
+    report["nuisance"] = {
+        "status": "done", "linearised": False, "n_simulations": mp.n_simulations,
+        "max_shift_percent": 100 * options.nuisance.max_shift,
+        "parameters": {n: {"range": [mp.values[2 * j][1], mp.values[2 * j + 1][1]], "calibrated": bool(pinned[j])}
+                       for j, n in enumerate(theta.names)},
+        "shifts_percent": [{"parameter": pn, "value": v, **{n: float(100 * s) for n, s in zip(names, row)}}
+                           for (pn, v), row in zip(mp.values, mp.shifts)],
+        "largest_shift_percent": {n: float(100 * v) for n, v in zip(names, largest)},
+        "sensitivity_percent_per_range": {n: {tn: float(100 * mp.sensitivity[k, j]) for j, tn in enumerate(theta.names)}
+                                          for k, n in enumerate(names)},
+        "shift_percent": {n: float(100 * v) for n, v in zip(names, mp.shift)},
+        "spread_percent": {n: float(100 * v) for n, v in zip(names, mp.spread)},
+        "search_noise_percent": {n: float(100 * v) for n, v in zip(names, mp.search_noise)},
+        "w_opt_calibrated": {n: float(v) for n, v in zip(names, problem.from_unit(np.clip(u_opt + mp.shift, 0, 1)))}}
+    if options.correct and cal.done:   # corrected: the posterior's spread widens the interval instead
+        return "done"
+    for k in range(q):
+        if largest[k] > options.nuisance.max_shift:
+            name, value = mp.values[rows[k]]
+            j = theta.names.index(name)
+            what = "its calibrated interval" if pinned[j] else "its assumed range"
+            reasons[k].append(
+                f"rests on a model parameter: with {name} = {value:g} (end of {what}) it is identified "
+                f"{100 * mp.shifts[rows[k], k]:+.1f} % of its interval away (threshold "
+                f"{100 * options.nuisance.max_shift:.0f} %)")
+    return "done"

@@ -52,14 +52,13 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
-from scipy.optimize import brentq
 
 from suspid.errors import ClusterError, SimulatorError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor, TrackSegment
 from suspid.method.calibration import UNIFORM_SD, calibrate_step, implicit_shifts, octave_clusters
-from suspid.method.identifiability import ModelErrorOptions, bias_aware_half_width
+from suspid.method.identifiability import ModelErrorOptions
 from suspid.workflows.jacobian import spectra_jacobian
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
 from suspid.method.noise import fit_noise_model
@@ -67,11 +66,12 @@ from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
-from suspid.workflows.trust import checks_report, trust_states
+from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, equivalent_bias_bound,  # noqa: F401
+                                    model_spread, trust_states)
 from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_of", "calibration_markdown",
-           "equivalent_bias_bound", "corrected_bound", "DateJacobian"]
+           "equivalent_bias_bound", "DateJacobian"]
 
 ModelErrorFn = Callable[..., dict[str, Any]]
 
@@ -184,53 +184,6 @@ def date_jacobian(problem: Problem, ledger: Ledger, segments: list[TrackSegment]
     methods = {n: ("analytic", "forward", "central")[int(m)] for n, m in zip(names, meta[1:])}
     return DateJacobian(np.asarray(y), jac[..., :q] * scale_u, jac[..., q:] * theta.width, int(meta[0]), methods,
                         cached)
-
-
-def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarray, n_sigmas: float) -> np.ndarray:
-    """The bias bound B that gives :func:`~suspid.method.identifiability.bias_aware_half_width` the interval of
-    an estimate with sampling spread ``sd``, a bias of at most ``|shift|`` and a further *random* spread
-    ``sd_model`` from the model parameters (all ``(q,)``, fractions of the admissible interval).
-
-    The uncertain θ move w_opt by G Δt, a random quantity independent of the sampling: its spread adds in
-    quadrature, σ_eff² = σ² + σ_model², and the interval of level P(|Z| ≤ n) is the bias-aware one of σ_eff
-    and |shift|. The analysis widens intervals by a bound B on top of σ, so B solves χ(σ, B) = χ(σ_eff, |shift|)
-    (χ increases with B).
-    """
-    sd = np.asarray(sd, float)
-    shift = np.abs(np.asarray(shift, float))
-    sd_model = np.nan_to_num(np.asarray(sd_model, float), nan=0.0)
-    target = bias_aware_half_width(np.sqrt(sd ** 2 + sd_model ** 2), shift, n_sigmas)
-    out = np.empty_like(target)
-    for k, (s, chi) in enumerate(zip(sd, target)):
-        if s <= 0:
-            out[k] = chi
-            continue
-        f = lambda b: bias_aware_half_width(np.array([s]), np.array([b]), n_sigmas)[0] - chi  # noqa: E731,B023
-        out[k] = 0.0 if f(0.0) >= 0 else brentq(f, 0.0, chi + n_sigmas * s + 1.0)
-    return out
-
-
-def corrected_bound(sd: np.ndarray, shift_known: np.ndarray, sc_bias: np.ndarray, sc_se: np.ndarray,
-                    groups_half: np.ndarray, last_step: np.ndarray, sd_model: np.ndarray, n_sigmas: float,
-                    correct_self_check: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The linearised checks' correction of w_opt and the bias bound of what they leave (all ``(q,)``, fractions
-    of the admissible interval).
-
-    Corrected, with their signs: the calibrated model's shift ``shift_known``, and the self-check's mean shift
-    ``sc_bias`` where it is a bias (beyond 2 standard errors ``sc_se``): measured on the calibrated model where
-    the truth is w0, whose standard error is a random error of the correction and adds to the model parameters'
-    spread ``sd_model`` in quadrature. Bounded, signs unknown: a self-check shift within its noise and half the
-    data groups' spread (independent: in quadrature), plus the size of the correction's last linearised step.
-
-    :returns: ``(correction, bound, sc_fix)``: the estimate is w_opt + correction; ``bound`` goes to
-        :func:`~suspid.method.identifiability.bias_aware_half_width` with ``sd``; ``sc_fix`` the self-check bias
-        corrected (0 where it was not).
-    """
-    sc_bias, sc_se = np.asarray(sc_bias, float), np.asarray(sc_se, float)
-    sc_fix = np.where(np.abs(sc_bias) > 2 * sc_se, sc_bias, 0.0) if correct_self_check else np.zeros_like(sc_bias)
-    bound = equivalent_bias_bound(sd, np.hypot(sc_bias - sc_fix, groups_half) + np.abs(last_step),
-                                  np.hypot(sd_model, np.where(sc_fix != 0, sc_se, 0.0)), n_sigmas)
-    return np.asarray(shift_known, float) - sc_fix, bound, sc_fix
 
 
 # ----------------------------------------------------------------------------------------------- calibration
@@ -434,7 +387,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         "method": "full", "self_check": options.self_check.model_copy(update={"enabled": False}),
         "adequacy": options.adequacy.model_copy(update={"groups": False}),
         "nuisance": options.nuisance.model_copy(update={"parameters": {}}), "no_change": False})
-    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False)
+    trust = full(problem, ledger, u_opt, h, base_opts, retry_failed, sd, executor, apply_no_change_test=False,
+                 model_parameters_check=False)
     report = trust["report"]
     report["method"] = "linearised"
     names, q = problem.names, problem.q
@@ -608,7 +562,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                 budget["jacobians_at_calibrated"] += 0 if at_1.cached else at_1.n_simulations
                 last_step = search_point(problem, at_1, ref_hat.y, u1, step, n_eval)
                 shift_known = u1 + last_step - np.asarray(u_opt, float) - base
-        sd_model = np.sqrt(np.clip(np.diag(Gz @ cov @ Gz.T), 0, None))
+        sd_model = model_spread(Gz, cov)
         report["nuisance"] = {
             "status": "done", "linearised": True, "n_simulations": 0, "max_shift_percent": 100 * options.nuisance.max_shift,
             "parameters": {n: {"range": [float(theta.theta_of(np.eye(p)[j] * lo_t[j])[j]),
@@ -637,15 +591,15 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"identified {100 * shifts[largest_row[k], k]:+.1f} % of its interval away (threshold "
                     f"{100 * options.nuisance.max_shift:.0f} %)")
     correction = None
-    sc_fix = np.zeros(q)
+    sources = BiasSources(sc_bias, groups_half, shift_known, sd_model, last_step, sc_se)  # (suspid.workflows.trust)
+    sc_fix = sources.significant_self_check() if correct and sc_opt.correct else np.zeros(q)
     if correct:
         # the calibrated model's shift corrected (a bias with its sign); the self-check's mean shift and half the
         # groups' spread bound what remains, two independent sources of unknown sign combined in quadrature; the
         # model parameters' posterior spread adds to the sampling one. The self-check's shift is not corrected:
         # it is measured on half-dates (B fitted on half the reference segments, w identified on the other half),
         # and with the overlap objective it does not carry over to the whole dates (benchmarks/RESULTS.md)
-        correction, bound, sc_fix = corrected_bound(sd_, shift_known, sc_bias, sc_se, groups_half, last_step, sd_model,
-                                                    n_sigmas, sc_opt.correct)
+        bound, correction = combine_sources(sd_, sources, correct, n_sigmas, sc_opt.correct)
         report["correction"] = {
             "method": "w_opt + the shift the model parameters calibrated at the reference date give"
                       + (" − the self-check's significant bias" if sc_opt.correct else ""),
@@ -655,7 +609,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "w_corrected": {n: float(v) for n, v in
                             zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
     else:
-        bound = equivalent_bias_bound(sd_, bound_known + np.abs(shift_known), sd_model, n_sigmas)
+        bound, _ = combine_sources(sd_, sources, correct, n_sigmas)
     u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
     no_change, report["no_change"] = _no_change(problem, ledger, u_opt, u0, correction, options, retry_failed,
                                                 executor)

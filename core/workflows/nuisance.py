@@ -1,4 +1,4 @@
-"""How much of w_opt rests on assumed model parameters: re-identification with nuisance values (beyond the paper).
+"""How much of w_opt rests on the model's other parameters, by re-identification (the full checks; beyond the paper).
 
 The reference-date self-check (:mod:`suspid.workflows.reference`) and the data
 groups (:mod:`suspid.workflows.adequacy`) see model-form error where it shows
@@ -8,100 +8,117 @@ without the series stiffness of its bushes feels a change of its rate more
 than the vehicle does, on every channel and in every band; every group then
 agrees on the same wrong value, and the residuals at w_opt are small.
 
-What is known is which of the model's *other* parameters are uncertain and
-over which range (the yaw damper's series stiffness, the creep coefficients'
-fraction of Kalker's theory, the equivalent conicity, ...): the config lists
-them as nuisance parameters, each with a plausible range. For each nuisance
-parameter θ at each end of its range:
+What is known is which of the model's *other* parameters θ are uncertain (the
+yaw damper's series stiffness, the creep coefficients' fraction of Kalker's
+theory, the equivalent conicity, ...; :func:`suspid.workflows.linearised.model_parameters`)
+and that at the reference date w = w0 is known, so that θ can be calibrated there
+(:mod:`suspid.method.calibration`, the same Gauss-Newton as the linearised
+checks'). This module measures, by simulation, what θ does to w_opt:
 
-1. the reference date is simulated at w0 with θ and the noise model B fitted
-   again (eq. 3): that model explains the reference date as well as the
-   nominal one, since B absorbs the difference there;
-2. w is identified again on the measurement date with that model and its B,
-   by a bounded Nelder-Mead search started at w_opt;
-3. the **shift** is that estimate minus the same search with the nominal
-   model (same noise draws, so that the Monte Carlo of Y_mod cancels).
+1. for a value of θ the reference date is simulated at w0 with it and the noise
+   model B fitted again (eq. 3): that model explains the reference date as well
+   as the nominal one, since B absorbs the difference there;
+2. w is identified again on the measurement date with that model and its B, by
+   a bounded Nelder-Mead search started at w_opt;
+3. the **shift** is that estimate minus the same search with the nominal model
+   (same noise draws, so that the Monte Carlo of Y_mod cancels).
 
-A component that some θ within its plausible range moves by more than
-``max_shift`` of its admissible interval is *not trustworthy under model
-error*: the data do not decide it, the assumed θ does. Every nuisance
-parameter may be off at once: the sum over θ of each one's larger |shift|
-bounds the bias they cause together, and the intervals are widened by it
-(:func:`suspid.method.identifiability.bias_aware_half_width`). The searches cost about ``(2 n_θ + 1) · 20 q``
-simulations of the measurement date and one of the reference date per end.
+Shifts are measured at each end of each θ's range (its calibrated interval where
+the reference date pins it down, its assumed range otherwise) and at the
+calibrated θ̂ (the middle of the ranges without a calibration). The ends give
+the sensitivity G = du_opt/dt (:func:`sensitivity_of_ends`), hence the spread √diag(G Σ_t Gᵀ) that
+what remains uncertain of θ gives w_opt (Σ_t the calibration's posterior, with
+its correlations), and the searches' own scatter, which adds to it; the shift at θ̂ is a known bias, corrected. Both go to the
+combination rule the linearised checks use (:func:`suspid.workflows.trust.combine_sources`).
+The searches cost about ``(2 p + 2) · 20 q`` simulations of the measurement date and one of the reference
+date per value of θ.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor
-from suspid.method.identifiability import NuisanceOptions
+from suspid.method.calibration import UNIFORM_SD
+from suspid.method.identifiability import ModelErrorOptions
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
+from suspid.workflows.linearised import ModelParameters, calibrate, date_jacobian
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import SearchObjective, local_search
 from suspid.workflows.tasks import SpectraTask, run_one
+from suspid.workflows.trust import model_spread
 from suspid.elements import declared_parameters
+
+__all__ = ["Calibration", "ModelParameterCheck", "calibrate_at_reference", "model_parameter_check", "reidentify",
+           "sensitivity_of_ends"]
 
 
 @dataclass
-class NuisanceCheck:
-    """Shifts of w_opt per nuisance value: ``shifts (n_values, q)`` in fractions of the admissible interval.
+class Calibration:
+    """θ at the reference date in the units t = (θ − θ_nominal) / width of its range.
 
-    :ivar values: ``(name, SI value)`` of each row of ``shifts``.
-    :ivar n_simulations: simulations made by all the searches.
+    :ivar report: JSON-able details (result.json's ``calibration``), with ``"status"``.
+    :ivar t_hat: ``(p,)`` the estimate (zeros where the calibration did not run).
+    :ivar covariance_t: ``(p, p)`` its posterior covariance.
+    :ivar pinned: ``(p,)`` bool, the parameters the reference date pins down.
+    :ivar n_simulations: simulations it took (its Jacobians', an analytic Jacobian counting one).
     """
 
-    values: list[tuple[str, float]]
-    shifts: np.ndarray
+    report: dict[str, Any]
+    t_hat: np.ndarray
+    covariance_t: np.ndarray
+    pinned: np.ndarray
     n_simulations: int
 
-    def largest(self) -> tuple[np.ndarray, list[int]]:
-        """``(q,)`` largest |shift| per component and the row that gives it."""
-        rows = np.argmax(np.abs(self.shifts), axis=0)
-        return np.abs(self.shifts[rows, np.arange(self.shifts.shape[1])]), [int(r) for r in rows]
-
-    def per_parameter(self) -> np.ndarray:
-        """``(q,)`` the sum over nuisance parameters of each one's larger |shift| (of the ends of its range):
-        a bound on the shift when every parameter is off at once, each within its range (linear response)."""
-        names = list(dict.fromkeys(name for name, _ in self.values))
-        return sum(np.abs(self.shifts[[i for i, (n, _) in enumerate(self.values) if n == name]]).max(axis=0)
-                   for name in names)
-
-    def to_dict(self, names: list[str]) -> dict:
-        return {"status": "done", "n_simulations": self.n_simulations,
-                "shifts_percent": [{"parameter": p, "value": v, **{n: float(100 * s) for n, s in zip(names, row)}}
-                                   for (p, v), row in zip(self.values, self.shifts)]}
+    @property
+    def done(self) -> bool:
+        return self.report.get("status") == "done"
 
 
-def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options: NuisanceOptions,
-                    initial_step: float, log: Callable[[str], None] = lambda s: None,
-                    executor: Executor | None = None) -> NuisanceCheck | None:
-    """The check of the module docstring, or None without nuisance parameters or reference-date data.
+def calibrate_at_reference(problem: Problem, ledger: Ledger, theta: ModelParameters, options: ModelErrorOptions,
+                           executor: Executor | None) -> Calibration:
+    """The linearised checks' calibration of θ at the reference date (:func:`suspid.workflows.linearised.calibrate`,
+    the same Jacobian at w0, kept in the ledger), for the full checks."""
+    p = len(theta.names)
+    none = lambda why: Calibration({"status": why}, np.zeros(p), np.zeros((p, p)), np.zeros(p, bool), 0)  # noqa: E731
+    if not theta.names:
+        return none("not run: no model parameter to calibrate (the simulator declares none calibratable; give "
+                    "identifiability.model_error.calibration.parameters)")
+    if not problem.reference or not problem.reference_segments:
+        return none("not run: the reference date's data are not part of this run (give noise.reference)")
+    if not options.calibration.enabled:
+        return none("disabled")
+    jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), problem.names, theta, executor)
+    cal = calibrate(problem, ledger, theta, jac0, problem.names, options, executor)
+    t_hat, cov, pinned = np.array(cal.pop("t_hat")), np.array(cal.pop("covariance_t")), np.array(cal.pop("pinned"))
+    return Calibration(cal, t_hat, cov, pinned, (0 if jac0.cached else jac0.n_simulations) + cal["n_simulations"])
 
-    Cached in the run ledger (keyed by the data, w_opt and the options), so that a
-    resumed run does not simulate it again. Simulations run on ``executor``.
+
+def reidentify(problem: Problem, ledger: Ledger, u_opt: np.ndarray, points: list[dict[str, float]],
+               initial_step: float, max_evaluations: int, log: Callable[[str], None] = lambda s: None,
+               executor: Executor | None = None) -> tuple[np.ndarray, int]:
+    """Steps 1-3 of the module docstring for each of ``points`` (SI values of model parameters):
+    ``(shifts (len(points), q), simulations)``; a point at the nominal model has shift 0 without a search.
+
+    Cached in the run ledger (keyed by the data, w_opt, the points and the options), so that a resumed run does
+    not simulate it again. Simulations run on ``executor``.
     """
-    ref, ref_segments = problem.reference, problem.reference_segments
-    if not options.parameters or not ref or not ref_segments:
-        return None
-    config, q = problem.config, problem.q
-    values = [(name, float(v)) for name, ends in options.parameters.items() for v in ends]
-    key = stable_hash("nuisance", problem.simulator_identity, problem.data_identity, segments_digest(ref_segments),
-                      np.asarray(u_opt).tolist(), options.model_dump(), config.noise.model_dump(mode="json"),
-                      config.objective.plugin, config.objective.options, problem.weights.tolist(),
-                      config.spectra.model_dump(), config.seed, initial_step)
+    ref, ref_segments, config, q = problem.reference, problem.reference_segments, problem.config, problem.q
+    key = stable_hash("model-parameter-shifts", problem.simulator_identity, problem.data_identity,
+                      segments_digest(ref_segments), np.asarray(u_opt).tolist(), points,
+                      config.noise.model_dump(mode="json"), config.objective.plugin, config.objective.options,
+                      problem.weights.tolist(), config.spectra.model_dump(), config.seed, initial_step,
+                      max_evaluations)
     cached = ledger.get_array(key)
     if cached is not None:
-        return NuisanceCheck(values, cached[:, :q], int(cached[0, q]))
+        return cached[:, :q], int(cached[0, q]) if len(cached) else 0
     noise_options = config.noise.model_dump(exclude={"path", "reference"})
-    max_eval = options.max_evaluations or 20 * q
     ref_task = SpectraTask.of(problem.simulator, ref_segments, config.spectra)
     task = SpectraTask.of(problem.simulator, problem.segments, config.spectra)
     n_sims = 0
@@ -116,21 +133,104 @@ def nuisance_shifts(problem: Problem, ledger: Ledger, u_opt: np.ndarray, options
                                                 weights=problem.weights, channels=problem.channels,
                                                 speeds=problem.speeds)
         neg_j = SearchObjective(problem, task, fn, executor, extra)
-        found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_eval)
+        found = local_search(neg_j, np.asarray(u_opt, float), initial_step, max_evaluations)
         n_sims += neg_j.n_simulations
         return found
 
     nominal = {p.name: p.nominal for p in declared_parameters(problem.simulator)}
     base = identify({}, ref["y_sim0"])
-    shifts = np.zeros((len(values), q))
-    for i, (name, value) in enumerate(values):
-        if value == nominal.get(name):  # the nominal model again: the same search, no shift
+    shifts = np.zeros((len(points), q))
+    for i, extra in enumerate(points):
+        if all(v == nominal.get(n) for n, v in extra.items()):  # the nominal model again: the same search
             continue
-        extra = {name: value}
         y_sim0 = run_one(executor, ref_task, problem.w0 | extra)
         n_sims += 1
         shifts[i] = identify(extra, y_sim0) - base
-        log(f"nuisance {name} = {value:g}: w_opt moves by "
+        log(", ".join(f"{n} = {v:g}" for n, v in extra.items()) + ": w_opt moves by "
             + ", ".join(f"{n} {100 * d:+.1f} %" for n, d in zip(problem.names, shifts[i])))
-    ledger.put_array(key, np.column_stack([shifts, np.full(len(values), n_sims)]))
-    return NuisanceCheck(values, shifts, n_sims)
+    ledger.put_array(key, np.column_stack([shifts, np.full(len(points), n_sims)]))
+    return shifts, n_sims
+
+
+@dataclass
+class ModelParameterCheck:
+    """The model parameters' effect on w_opt, each shift by a re-identification (fractions of the interval).
+
+    :ivar values: ``(name, SI value)`` of each end row of ``shifts``.
+    :ivar shifts: ``(2 p, q)`` the shift with one parameter at an end of its range, the others nominal.
+    :ivar sensitivity: ``(q, p)`` G, the secant of each parameter's two ends per unit of t.
+    :ivar shift: ``(q,)`` the shift at the calibrated θ̂ (the middle of the ranges without a calibration).
+    :ivar spread: ``(q,)`` √diag(G Σ_t Gᵀ).
+    :ivar lo_t, hi_t: ``(p,)`` the ends, in t.
+    :ivar search_noise: ``(q,)`` the re-identifications' scatter about G (:func:`sensitivity_of_ends`), in ``spread``.
+    """
+
+    values: list[tuple[str, float]]
+    shifts: np.ndarray
+    sensitivity: np.ndarray
+    shift: np.ndarray
+    spread: np.ndarray
+    lo_t: np.ndarray
+    hi_t: np.ndarray
+    n_simulations: int
+    search_noise: np.ndarray
+
+    def largest(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(q,)`` largest |shift| over the ends, and the row that gives it."""
+        rows = np.argmax(np.abs(self.shifts), axis=0)
+        return np.abs(self.shifts[rows, np.arange(self.shifts.shape[1])]), rows
+
+
+def model_parameter_check(problem: Problem, ledger: Ledger, u_opt: np.ndarray, theta: ModelParameters,
+                          cal: Calibration, options: ModelErrorOptions, log: Callable[[str], None] = lambda s: None,
+                          executor: Executor | None = None) -> ModelParameterCheck:
+    """The shifts of the module docstring: the ends of each θ's range (its calibrated interval ± ``n_sigmas``
+    standard deviations where pinned down, its assumed range otherwise) and θ̂, each re-identified."""
+    p = len(theta.names)
+    n_c = options.calibration.n_sigmas
+    sd_t = np.sqrt(np.clip(np.diag(cal.covariance_t), 0, None))
+    pinned = cal.pinned if cal.done else np.zeros(p, bool)
+    lo_t = np.where(pinned, cal.t_hat - n_c * sd_t, theta.t_of(theta.lower))
+    hi_t = np.where(pinned, cal.t_hat + n_c * sd_t, theta.t_of(theta.upper))
+    values, points = [], []
+    for j, name in enumerate(theta.names):
+        for t_end, si_end in ((lo_t[j], theta.lower[j]), (hi_t[j], theta.upper[j])):
+            v = float(theta.theta_of(np.eye(p)[j] * t_end)[j]) if pinned[j] else float(si_end)
+            values.append((name, v))
+            points.append({name: v})
+    # what remains uncertain: the calibration's posterior, or each θ uniform over its assumed range
+    if cal.done:
+        mean_t, cov = cal.t_hat, cal.covariance_t
+    else:
+        mean_t, cov = 0.5 * (theta.t_of(theta.lower) + theta.t_of(theta.upper)), np.eye(p) * UNIFORM_SD ** 2
+    points.append(theta.w(mean_t))
+    step, n_eval = options.self_check.initial_step, options.nuisance.max_evaluations or 20 * problem.q
+    shifts, n_sims = reidentify(problem, ledger, u_opt, points, step, n_eval, log, executor)
+    ends = shifts[:-1]
+    G, noise = sensitivity_of_ends(lo_t, hi_t, ends[0::2], ends[1::2])
+    # the searches' own scatter is a random error of the calibrated shift too: it adds to the spread
+    spread = np.hypot(model_spread(G, cov), noise)
+    return ModelParameterCheck(values, ends, G, shifts[-1], spread, lo_t, hi_t, n_sims, noise)
+
+
+def sensitivity_of_ends(lo_t: np.ndarray, hi_t: np.ndarray, s_lo: np.ndarray, s_hi: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """G = du_opt/dt ``(q, p)`` from the shifts at the ends of each parameter's range, and the re-identifications'
+    scatter about it ``(q,)``.
+
+    The shift is 0 at t = 0 (the nominal model) by definition, so each parameter's G is the least-squares slope
+    through the origin of its two ends (``lo_t``, ``hi_t`` ``(p,)``; shifts ``s_lo``, ``s_hi`` ``(p, q)``). A
+    linear response puts both ends on that line; what they miss it by (both ends moving the same way, or an end
+    at the nominal value moving) is the searches' scatter (a Nelder-Mead re-identification stops within its
+    tolerance and evaluation budget, with B fitted again) or a curvature: pooled over the parameters (one degree
+    of freedom each where both ends differ from the nominal), it is the standard deviation of one shift.
+    """
+    lo_t, hi_t = np.asarray(lo_t, float), np.asarray(hi_t, float)
+    s_lo, s_hi = np.asarray(s_lo, float), np.asarray(s_hi, float)
+    ss = lo_t ** 2 + hi_t ** 2                                            # (p,)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        G = np.where(ss[:, None] > 0, (lo_t[:, None] * s_lo + hi_t[:, None] * s_hi) / ss[:, None], 0.0)  # (p, q)
+    resid = (s_lo - lo_t[:, None] * G) ** 2 + (s_hi - hi_t[:, None] * G) ** 2
+    dof = int(np.sum((lo_t != 0) & (hi_t != 0)))
+    noise = np.sqrt(resid.sum(axis=0) / dof) if dof else np.zeros(s_lo.shape[1])
+    return G.T, noise

@@ -123,10 +123,14 @@ class SelfCheck:
 
 
 def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
-               log: Callable[[str], None] = lambda s: None, executor: Executor | None = None) -> SelfCheck | None:
+               log: Callable[[str], None] = lambda s: None, executor: Executor | None = None,
+               extra: dict[str, float] | None = None) -> SelfCheck | None:
     """The self-check of the module docstring, or None without reference-date data (or fewer than 8 segments).
 
     Each simulation of the searches runs on ``executor`` (entered; in this process without one).
+
+    :param extra: SI values of not-identified model parameters (the ones calibrated at the reference date): the
+        model checked is then that one, its reference-date spectra simulated once more at w0 with them.
 
     The result is cached in the run ledger (keyed by the reference data, the
     simulator, the objective and the options), so a resumed run does not redo it.
@@ -143,7 +147,7 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
     key = stable_hash("self-check", problem.simulator_identity, segments_digest(segments), problem.names,
                       problem.bounds.tolist(), options.model_dump(), config.noise.model_dump(mode="json"),
                       config.objective.plugin, config.objective.options, problem.weights.tolist(),
-                      config.spectra.model_dump(), config.seed)
+                      config.spectra.model_dump(), config.seed, *([dict(extra)] if extra else []))
     cached = ledger.get_array(key)
     n_fit = v0 // 2
     if cached is not None:
@@ -153,17 +157,21 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
     rng = named_rng(config.seed, "self-check")
     noise_options = config.noise.model_dump(exclude={"path", "reference"})
     n_sims = 0
+    y_sim0 = ref["y_sim0"]
+    if extra:
+        y_sim0 = run_one(executor, SpectraTask.of(problem.simulator, segments, config.spectra), problem.w0 | extra)
+        n_sims += 1
     shifts = np.empty((options.n_splits, q))
     for s in range(options.n_splits):
         perm = rng.permutation(v0)
         a, b = np.sort(perm[:n_fit]), np.sort(perm[n_fit:])
-        model = fit_noise_model(y_mes0[a], ref["y_sim0"][a], noise_options, freqs=problem.freqs,
+        model = fit_noise_model(y_mes0[a], y_sim0[a], noise_options, freqs=problem.freqs,
                                 channels=problem.channels, speeds=[segments[i].mean_speed for i in a])
         fn = ObjectiveFunction.from_noise_model(problem.objective, y_mes0[b], problem.freqs, model, rng,
                                                 weights=problem.weights, channels=problem.channels,
                                                 speeds=[segments[i].mean_speed for i in b])
         task = SpectraTask.of(problem.simulator, [segments[i] for i in b], config.spectra)
-        neg_j = SearchObjective(problem, task, fn, executor)
+        neg_j = SearchObjective(problem, task, fn, executor, extra)
         shifts[s] = local_search(neg_j, u0, options.initial_step, max_eval) - u0
         n_sims += neg_j.n_simulations
         log(f"self-check split {s + 1}/{options.n_splits}: shift "

@@ -321,10 +321,12 @@ def model_error_section(result: dict[str, Any]) -> str:
         out.append(f"Adequacy at w_opt: {ad.get('status', 'not run')}.")
     nu = me.get("nuisance")
     if nu and nu.get("status") == "done":
-        out += ["", f"Nuisance parameters: w identified again, from w_opt, with each assumed model parameter at an "
-                    f"end of its plausible range (B fitted again at the reference date); shift against the nominal "
-                    f"model in % of the interval. A component moved by more than {nu['max_shift_percent']:.0f} % "
-                    f"rests on the assumption, not on the data.", "",
+        how = "linearised" if nu.get("linearised") else "re-identified from w_opt"
+        out += ["", f"Model parameters: w_opt's shift ({how}) with each model parameter at an end of its range (its "
+                    f"calibrated interval where the reference date pins it down, its assumed range otherwise; B "
+                    f"fitted again at the reference date), against the nominal model, in % of the interval. "
+                    f"Uncorrected, a component moved by more than {nu['max_shift_percent']:.0f} % rests on the "
+                    f"assumption, not on the data.", "",
                 markdown_table(["nuisance parameter", "value"] + names,
                                [[row["parameter"], f"{row['value']:g}"] + [f"{row[n]:+.1f}" for n in names]
                                 for row in nu["shifts_percent"]])]
@@ -352,8 +354,9 @@ def model_error_section(result: dict[str, Any]) -> str:
                                [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}",
                                  f"{bound[n]:.1f}", f"{me['half_width_percent'][n]:.1f}"] for n in names])]
     elif bound:
-        out += ["", f"Bound on the bias of w_opt (the self-check's |bias| + half the groups' spread + each nuisance "
-                    f"parameter's larger |shift|, their signs unknown) and the bias-aware interval's half-width, "
+        out += ["", f"Bound on the bias of w_opt (the self-check's |bias| + half the groups' spread + the model "
+                    f"parameters' |shift| at their calibrated values, their signs unknown, with the model parameters' "
+                    f"remaining spread added to the sampling one) and the bias-aware interval's half-width, "
                     f"in % of the interval. A component wider than ± {me['max_half_width_percent']:.0f} % is not "
                     f"trustworthy.", "",
                 markdown_table(["parameter", "bound on the bias (%)", "half-width (%)"],

@@ -1,16 +1,24 @@
-"""Trust per component under model error: yes, no or not assessed, and which checks ran.
+"""Trust per component under model error: yes, no or not assessed, which checks ran, and the bias bound.
 
 Shared by the full checks (:func:`suspid.workflows.analysis.model_error`) and the linearised ones
 (:func:`suspid.workflows.linearised.linearised_model_error`), so that both call a component
-trustworthy on the same rule.
+trustworthy on the same rule and combine the sources of bias on the same rule
+(:func:`combine_sources`): the two methods differ only in how each source's shift of w_opt is
+obtained (re-identification by simulation, or on spectra linearised once per date).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "check_labels", "checks_report", "trust_states",
-           "trust_word"]
+import numpy as np
+from scipy.optimize import brentq
+
+from suspid.method.identifiability import bias_aware_half_width
+
+__all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "BiasSources", "check_labels", "checks_report",
+           "combine_sources", "equivalent_bias_bound", "model_spread", "trust_states", "trust_word"]
 
 REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 """The checks that must all have run for a component to be called trustworthy: the reference-date self-check
@@ -66,3 +74,108 @@ def trust_states(names: list[str], flags: list[list[str]], checks: dict[str, str
         trustworthy[n] = False if f else (None if missing else True)
     return {"trustworthy": trustworthy, "reasons": {n: f for n, f in zip(names, flags) if f},
             "not_assessed": {n: list(missing) for n in names if trustworthy[n] is None}}
+
+
+def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarray, n_sigmas: float) -> np.ndarray:
+    """The bias bound B that gives :func:`~suspid.method.identifiability.bias_aware_half_width` the interval of
+    an estimate with sampling spread ``sd``, a bias of at most ``|shift|`` and a further *random* spread
+    ``sd_model`` from the model parameters (all ``(q,)``, fractions of the admissible interval).
+
+    The uncertain θ move w_opt by G Δt, a random quantity independent of the sampling: its spread adds in
+    quadrature, σ_eff² = σ² + σ_model², and the interval of level P(|Z| ≤ n) is the bias-aware one of σ_eff
+    and |shift|. The analysis widens intervals by a bound B on top of σ, so B solves χ(σ, B) = χ(σ_eff, |shift|)
+    (χ increases with B).
+    """
+    sd = np.asarray(sd, float)
+    shift = np.abs(np.asarray(shift, float))
+    sd_model = np.nan_to_num(np.asarray(sd_model, float), nan=0.0)
+    target = bias_aware_half_width(np.sqrt(sd ** 2 + sd_model ** 2), shift, n_sigmas)
+    out = np.empty_like(target)
+    for k, (s, chi) in enumerate(zip(sd, target)):
+        if s <= 0:
+            out[k] = chi
+            continue
+        f = lambda b: bias_aware_half_width(np.array([s]), np.array([b]), n_sigmas)[0] - chi  # noqa: E731,B023
+        out[k] = 0.0 if f(0.0) >= 0 else brentq(f, 0.0, chi + n_sigmas * s + 1.0)
+    return out
+
+
+def model_spread(sensitivity: np.ndarray, covariance_t: np.ndarray) -> np.ndarray:
+    """``(q,)`` the standard deviation of w_opt's shift G Δt when Δt has covariance Σ_t: √diag(G Σ_t Gᵀ), with the
+    correlations of the model parameters (two that the reference date can only tell apart in a combination move
+    w_opt together, or against each other).
+
+    :param sensitivity: ``(q, p)`` G = du_opt/dt (NaN, where a component is flat, counts 0).
+    :param covariance_t: ``(p, p)`` Σ_t.
+    """
+    G = np.nan_to_num(np.asarray(sensitivity, float))
+    return np.sqrt(np.clip(np.diag(G @ np.asarray(covariance_t, float) @ G.T), 0, None))
+
+
+@dataclass
+class BiasSources:
+    """What moves w_opt besides the sampling, per source: each ``(q,)`` in fractions of the admissible interval,
+    however it was obtained (a check that did not run gives zeros).
+
+    :ivar self_check: the reference-date self-check's mean shift u_opt − u0 over its splits (signed).
+    :ivar groups_half: half the spread of the data groups' estimates.
+    :ivar model_shift: the shift of w_opt the model parameters give at their calibrated values (at the middle of
+        their assumed ranges without a calibration), signed: a known bias.
+    :ivar model_spread: the standard deviation of w_opt's shift from what remains uncertain of the model
+        parameters, √diag(G Σ_t Gᵀ), G = du_opt/dt, Σ_t the calibration's posterior (with its correlations) or the
+        uniform spread of the assumed ranges.
+    :ivar residual: what the way ``model_shift`` was obtained may still miss (the linearised search's last step;
+        0 for a re-identification by simulation).
+    :ivar self_check_se: the standard error of ``self_check`` over its splits (``None``: not measured, the shift
+        is then never corrected).
+    """
+
+    self_check: np.ndarray
+    groups_half: np.ndarray
+    model_shift: np.ndarray
+    model_spread: np.ndarray
+    residual: np.ndarray
+    self_check_se: np.ndarray | None = None
+
+    def significant_self_check(self) -> np.ndarray:
+        """``(q,)`` the self-check's mean shift where it is a bias (beyond 2 standard errors), 0 elsewhere: measured
+        on the (calibrated) model where the truth is w0, it can be corrected with its sign."""
+        sc = np.asarray(self.self_check, float)
+        if self.self_check_se is None:
+            return np.zeros_like(sc)
+        return np.where(np.abs(sc) > 2 * np.asarray(self.self_check_se, float), sc, 0.0)
+
+    @classmethod
+    def none(cls, q: int) -> "BiasSources":
+        """No source measured yet: every term 0."""
+        return cls(*(np.zeros(q) for _ in range(5)))
+
+
+def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigmas: float,
+                    correct_self_check: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """The bias bound of w_opt's interval from its sources (:class:`BiasSources`), and the correction.
+
+    - ``correct`` (the default): the model parameters' shift is a known bias and is corrected (the estimate
+      becomes w_opt + ``model_shift``); the self-check's mean shift and half the groups' spread, two sources of
+      unknown sign, are combined in quadrature, plus ``residual``; the model parameters' remaining spread adds to
+      the sampling one in quadrature (:func:`equivalent_bias_bound`). With ``correct_self_check``, the
+      self-check's significant bias (:meth:`BiasSources.significant_self_check`) is corrected too, and its
+      standard error, a random error of that correction, adds to the model parameters' spread in quadrature.
+    - otherwise: w_opt is kept and every source is added as a worst case, |self_check| + groups_half +
+      |model_shift|, with the same spread.
+
+    :param sd: ``(q,)`` the sampling standard deviations of w_opt (fractions of the interval).
+    :returns: ``(bound (q,), correction (q,) or None)``: the bound B for
+        :func:`~suspid.method.identifiability.bias_aware_half_width`, and the shift to add to u_opt.
+    """
+    sd = np.asarray(sd, float)
+    sc, gh = np.asarray(sources.self_check, float), np.asarray(sources.groups_half, float)
+    if correct:
+        fix = sources.significant_self_check() if correct_self_check else np.zeros_like(sc)
+        se = np.zeros_like(sc) if sources.self_check_se is None else np.asarray(sources.self_check_se, float)
+        known = np.hypot(sc - fix, gh) + np.abs(sources.residual)
+        spread = np.hypot(np.nan_to_num(np.asarray(sources.model_spread, float)), np.where(fix != 0, se, 0.0))
+        return (equivalent_bias_bound(sd, known, spread, n_sigmas),
+                np.asarray(sources.model_shift, float) - fix)
+    known = np.abs(sc) + gh + np.abs(sources.model_shift)
+    return equivalent_bias_bound(sd, known, sources.model_spread, n_sigmas), None
