@@ -18,7 +18,12 @@ Two parts, each measured in one run so that the ratios hold on a loaded machine:
    reach / calls), the worst error at the end, the coverage of the intervals, and for the
    gradient method its Jacobians (count, and cost in plain-solve equivalents). Every method of
    a seed is judged on the components the paper's EGO flags identifiable in that seed (the
-   study's rule); each run's own flags are printed too.
+   study's rule); each run's own flags are printed too. ``--extra gauss-newton-8`` adds
+   ``gauss-newton`` with J averaged over 8 draws of the noise paths (``objective.noise_draws``).
+3. ``cost``: the cost ratios alone, for whichever suspid is installed, with the FFT floor of a
+   forward Jacobian of all parameters (:func:`fft_floor`).
+4. ``maximiser``: where J's maximiser lies on either problem for several draws of the noise
+   paths, one draw's J or J averaged over ``--average`` draws.
 
 Usage::
 
@@ -26,6 +31,9 @@ Usage::
     python benchmarks/bench_gradient.py identify --seeds 1 2 3 4 5 --out /tmp/bench_gradient
     python benchmarks/bench_gradient.py identify --problems quickstart --table1-m0 60
     python benchmarks/bench_gradient.py identify --seeds 1 2 --out /tmp/bench_gradient --reuse   # tables again
+    python benchmarks/bench_gradient.py identify --problems table1 --extra gauss-newton-8 --reuse --out /tmp/bench_gradient
+    python benchmarks/bench_gradient.py cost --repeats 3
+    python benchmarks/bench_gradient.py maximiser --problem table1 --draws 1 --paths 1 --average 8
 
 The Table 1 analogue's paper design has m0 = 500 (``configs/table1.yaml``); ``--table1-m0``
 sets the EGO variants' design (default 60, the config's own small-design variant: the
