@@ -18,7 +18,12 @@ Two parts, each measured in one run so that the ratios hold on a loaded machine:
    reach / calls), the worst error at the end, the coverage of the intervals, and for the
    gradient method its Jacobians (count, and cost in plain-solve equivalents). Every method of
    a seed is judged on the components the paper's EGO flags identifiable in that seed (the
-   study's rule); each run's own flags are printed too.
+   study's rule); each run's own flags are printed too. ``--extra gauss-newton-8`` adds
+   ``gauss-newton`` with J averaged over 8 draws of the noise paths (``objective.noise_draws``).
+3. ``cost``: the cost ratios alone, for whichever suspid is installed, with the FFT floor of a
+   forward Jacobian of all parameters (:func:`fft_floor`).
+4. ``maximiser``: where J's maximiser lies on either problem for several draws of the noise
+   paths, one draw's J or J averaged over ``--average`` draws.
 
 Usage::
 
@@ -26,6 +31,9 @@ Usage::
     python benchmarks/bench_gradient.py identify --seeds 1 2 3 4 5 --out /tmp/bench_gradient
     python benchmarks/bench_gradient.py identify --problems quickstart --table1-m0 60
     python benchmarks/bench_gradient.py identify --seeds 1 2 --out /tmp/bench_gradient --reuse   # tables again
+    python benchmarks/bench_gradient.py identify --problems table1 --extra gauss-newton-8 --reuse --out /tmp/bench_gradient
+    python benchmarks/bench_gradient.py cost --repeats 3
+    python benchmarks/bench_gradient.py maximiser --problem table1 --draws 1 --paths 1 --average 8
 
 The Table 1 analogue's paper design has m0 = 500 (``configs/table1.yaml``); ``--table1-m0``
 sets the EGO variants' design (default 60, the config's own small-design variant: the
@@ -168,6 +176,12 @@ def cost_part(problems: list[str], repeats: int) -> None:
                 t, c = time.perf_counter(), time.process_time()
                 spectra_jacobian(sim, wk, asked, segments, config.spectra)
                 rows[which].append(((time.perf_counter() - t) / p, (time.process_time() - c) / pc, pc))
+        floor = [fft_floor(sim, w, segments, len(names), config.spectra, k) for k in range(repeats)]
+        print(json.dumps({"problem": problem, "parameters": "all", "n_p": len(names),
+                          "fft_floor_cpu_ratio": round(statistics.mean(f[0] for f in floor), 2),
+                          "fft_floor_sd": round(statistics.stdev(f[0] for f in floor), 2) if repeats > 1 else 0.0,
+                          "records": floor[0][1], "n_fft": floor[0][2], "n_t": floor[0][3],
+                          "load": round(os.getloadavg()[0], 1)}), flush=True)
         for which, sel in rows.items():
             wall, cpu, plain = zip(*sel)
             print(json.dumps({"problem": problem, "parameters": which, "n_p": len(names if which == "all" else ident),
@@ -177,12 +191,50 @@ def cost_part(problems: list[str], repeats: int) -> None:
                   flush=True)
 
 
+def fft_floor(sim, w: dict, segments: list, n_p: int, spectra, k: int) -> tuple[float, int, int, int]:
+    """The least a forward Jacobian of ``n_p`` parameters adds to a plain solve, in plain solves (CPU time).
+
+    Each derivative record is the window [0, T) of a response the solver has on its FFT grid of n_fft lines:
+    whatever computes ∂H/∂p U, every parameter, channel and segment then takes at least one inverse FFT of
+    length n_fft, its truncation to the record's n_t samples and one forward FFT of length n_t (the windowed
+    record's lines that the cells read; single precision, all of a segment's records in one batched call).
+    Returns ``(1 + t_ffts / t_plain, records, n_fft, n_t)`` with t_plain the CPU time of a plain solve
+    (``simulate_spectra`` at a point moved by a relative 1e-6 k, so that nothing of it is cached) timed just
+    before; the derivatives' own products and cell sums are left out, so the true cost lies above this floor."""
+    from scipy import fft as sfft
+
+    from suspid.plugins.simulators.exudyn_train.solvers import FrequencyResponse, fft_plan
+    from suspid.plugins.simulators.exudyn_train.model import TimeFeatures
+    from suspid.workflows.tasks import simulate_spectra
+
+    values = sim.values(w)
+    speed = float(segments[0].mean_speed)
+    response = FrequencyResponse(sim._model(values, speed, TimeFeatures()).linear_system())
+    n_ts, n_fft = fft_plan(response, list(segments), sim.opts.fs_hz, sim.opts.settle_s)
+    n_out = len(sim.channels())
+    rng = np.random.default_rng(0)
+    dY = (rng.standard_normal((n_p, n_out, n_fft // 2 + 1))
+          + 1j * rng.standard_normal((n_p, n_out, n_fft // 2 + 1))).astype(np.complex64)
+    c = time.process_time()
+    first = next(iter(w))
+    simulate_spectra(sim, {**w, first: w[first] * (1 + 1e-6 * (k + 1) + 3e-8)}, segments, spectra)
+    plain = time.process_time() - c
+    c = time.process_time()
+    for n in n_ts:
+        sfft.rfft(np.ascontiguousarray(sfft.irfft(dY, n=n_fft, axis=-1)[..., :n]), axis=-1)
+    return 1.0 + (time.process_time() - c) / plain, n_p * n_out * len(n_ts), n_fft, max(n_ts)
+
+
 # ------------------------------------------------------------------------------------------- identify
 RUNS = {
     "ego": {"ego.refine.enabled": False},
     "ego+refine": {"ego.refine.enabled": True},
     "gauss-newton": {"optimizer.plugin": "gauss-newton"},
+    # J averaged over 8 draws of the noise paths (objective.noise_draws): another J, so its J_max is not
+    # compared with the others' (the seed's J maximiser is that of the one-draw J)
+    "gauss-newton-8": {"optimizer.plugin": "gauss-newton", "objective.noise_draws": 8},
 }
+ONE_DRAW = ("ego", "ego+refine", "gauss-newton")
 
 
 def one_run(problem: str, method: str, seed: int, out: Path, table1_m0: int, reuse: bool = False) -> dict:
@@ -235,23 +287,24 @@ def row_of(problem: str, seed: int, method: str, run: dict, reference: dict, w_m
             "jacobians": jac.get("n_jacobians", 0), "jacobian_plain_equivalents": jac.get("plain_solve_equivalents_each")}
 
 
-def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: int, reuse: bool = False) -> None:
+def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: int, reuse: bool = False,
+                  extra: list[str] = ()) -> None:
     header("identify")
     rows = []
-    methods = ["ego", "ego+refine", "gauss-newton"]
+    methods = ["ego", "ego+refine", "gauss-newton", *extra]
     for problem in problems:
         for seed in seeds:
             # Table 1: the paper's loop is the prefix of the ego+refine run (same design, same points)
-            kinds = ["ego+refine", "gauss-newton"] if problem == "table1" else methods
+            kinds = [m for m in methods if not (problem == "table1" and m == "ego")]
             runs = {m: one_run(problem, m, seed, out, table1_m0, reuse) for m in kinds}
             ref_run = runs.get("ego", runs["ego+refine"])
             reference = ref_run["result"]["identifiable"]
-            w_max = max((r["result"] for r in runs.values()), key=lambda r: r["J_max"])["w_opt"]
+            w_max = max((r["result"] for m, r in runs.items() if m in ONE_DRAW), key=lambda r: r["J_max"])["w_opt"]
             if problem == "table1":
                 new = [row_of(problem, seed, "ego", runs["ego+refine"], reference, w_max, paper_loop=True)]
             else:
                 new = [row_of(problem, seed, "ego", runs["ego"], reference, w_max)]
-            new += [row_of(problem, seed, m, runs[m], reference, w_max) for m in ("ego+refine", "gauss-newton")]
+            new += [row_of(problem, seed, m, runs[m], reference, w_max) for m in kinds if m != "ego"]
             for row in new:
                 print(json.dumps(row), flush=True)
             rows += new
@@ -285,7 +338,8 @@ def identify_part(problems: list[str], seeds: list[int], out: Path, table1_m0: i
 
 # ------------------------------------------------------------------------------------------- maximiser
 def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, objectives: list[str],
-                   overrides: list[str] = (), synthetic: bool = False) -> None:
+                   overrides: list[str] = (), synthetic: bool = False, problem_name: str = "quickstart",
+                   average: int = 1) -> None:
     """Where J's maximiser lies on the quickstart, per seed, for several draws of the noise paths b_i.
 
     The run's J uses one fixed path b_i per segment (common random numbers, eq. 4): its maximiser moves with
@@ -300,7 +354,10 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
     weighted least squares). ``overrides``: ``key=value`` changes of the quickstart config (e.g. the
     measurement process without its sensor floor) to see what moves the maximiser. ``synthetic``: the
     measured spectra replaced by the model's own, y_sim_i(w_ref) + b*_i with b* a fresh draw of B: what the
-    estimator itself does where the data follow its model exactly."""
+    estimator itself does where the data follow its model exactly. ``problem_name``: the config (quickstart or
+    table1). ``average``: J averaged over that many independent draws of the v paths (each draw's J as the run
+    computes it; the first draw of the average is the row's own draw), the noise paths' share of the
+    maximiser's scatter divided by about its square root."""
     from scipy.optimize import minimize
 
     from suspid import registry
@@ -311,11 +368,11 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
     from suspid.workflows.jacobian import spectra_jacobian
     from suspid.workflows.problem import build_problem, segment_speeds
 
-    header(f"maximiser {' '.join(overrides)}{' synthetic' if synthetic else ''}")
+    header(f"maximiser {problem_name} average {average} {' '.join(overrides)}{' synthetic' if synthetic else ''}")
     rows = []
     for seed in seeds:
-        config = load_config(PROBLEMS["quickstart"], [f"seed={seed}", *overrides])
-        with open_run_dir(out / f"maximiser-{seed}", config_name=config.name, config_file=config.source_file,
+        config = load_config(PROBLEMS[problem_name], [f"seed={seed}", *overrides])
+        with open_run_dir(out / f"maximiser-{problem_name}-{seed}", config_name=config.name, config_file=config.source_file,
                           fresh=True, log=lambda s: None) as ledger:
             problem = build_problem(config, ledger)
         names, bounds = problem.names, np.asarray(problem.bounds, dtype=float)
@@ -347,15 +404,18 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
             else:
                 b = problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-{k}-{K}"), speeds * K)
             plugin = problem.objective if objective == "config" else registry.get("objective", objective)()
-            fn = ObjectiveFunction(plugin, y_mes, problem.freqs, b, weights=problem.weights,
-                                   channels=problem.channels, floor=problem.noise_model.floor_)
+            bs = [b] + [problem.noise_model.sample(K * v, named_rng(seed, f"bench-maximiser-avg-{k}-{K}-{a}"),
+                                                   speeds * K) for a in range(1, average)]
+            fns = [ObjectiveFunction(plugin, y_mes, problem.freqs, bb, weights=problem.weights,
+                                     channels=problem.channels, floor=problem.noise_model.floor_) for bb in bs]
             x = w_ref.copy()
             for _ in range(3):
                 y, jac = linear_model(x)
 
                 def negJ(u, y=y, jac=jac, x=x):
                     z = np.log(bounds[:, 0] + u * width) - np.log(x)
-                    return -fn.evaluate(np.tile(y + jac @ z, (K, 1, 1)))[0]
+                    y_lin = np.tile(y + jac @ z, (K, 1, 1))
+                    return -float(np.mean([fn.evaluate(y_lin)[0] for fn in fns]))
 
                 u0 = (x - bounds[:, 0]) / width
                 lo, hi = np.clip(u0 - 0.15, 0, 1), np.clip(u0 + 0.15, 0, 1)
@@ -363,7 +423,8 @@ def maximiser_part(seeds: list[int], draws: int, paths: list[int], out: Path, ob
                              options={"maxiter": 40, "eps": 1e-5})
                 x = bounds[:, 0] + np.clip(r.x, lo, hi) * width
             err = 100 * (x - w_ref) / width
-            row = {"seed": seed, "objective": objective, "draw": k, "paths_per_segment": K,
+            row = {"problem": problem_name, "seed": seed, "objective": objective, "draw": k, "paths_per_segment": K,
+                   "average": average,
                    "errors": dict(zip(names, np.round(err, 2).tolist())), "worst": float(np.max(np.abs(err)))}
             rows.append(row)
             print(json.dumps(row), flush=True)
@@ -391,6 +452,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="maximiser: a change of the quickstart config (repeatable)")
     ap.add_argument("--synthetic", action="store_true",
                     help="maximiser: measured spectra replaced by y_sim(w_ref) plus a draw of B")
+    ap.add_argument("--problem", choices=list(PROBLEMS), default="quickstart", help="maximiser: the config")
+    ap.add_argument("--average", type=int, default=1,
+                    help="maximiser: J averaged over this many draws of the noise paths")
     ap.add_argument("--objectives", nargs="+", default=["config"],
                     help="maximiser: 'config' (the config's objective) and/or objective plugins")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3, 4, 5])
@@ -400,6 +464,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--segments", type=int, default=None, help="jacobian: first N segments only")
     ap.add_argument("--table1-m0", type=int, default=60)
     ap.add_argument("--reuse", action="store_true", help="identify: read the runs already finished in --out")
+    ap.add_argument("--extra", nargs="*", default=[], choices=[m for m in RUNS if m not in ONE_DRAW],
+                    help="identify: further methods (gauss-newton-8: J averaged over 8 draws of the noise paths)")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     if args.part == "jacobian":
@@ -407,9 +473,10 @@ def main(argv: list[str] | None = None) -> int:
     elif args.part == "cost":
         cost_part(args.problems, args.repeats)
     elif args.part == "maximiser":
-        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives, args.set, args.synthetic)
+        maximiser_part(args.seeds, args.draws, args.paths, args.out, args.objectives, args.set, args.synthetic,
+                       args.problem, args.average)
     else:
-        identify_part(args.problems, args.seeds, args.out, args.table1_m0, args.reuse)
+        identify_part(args.problems, args.seeds, args.out, args.table1_m0, args.reuse, args.extra)
     return 0
 
 

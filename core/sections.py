@@ -46,6 +46,11 @@ class ObjectiveSection(PluginSection):
         default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; 'reference': "
         "from the noise model B, down-weighting the channels the model misses most at the reference date; "
         "default 1/n")
+    noise_draws: int = Field(
+        default=1, ge=1, le=64, description="J averaged over this many independent draws of the noise paths b_i "
+        "(each J of eq. 5 with its own draw, the same draws at every w: common random numbers); the draw of the "
+        "paths moves J's maximiser, and the average takes that share out at no simulation's cost (K times J's "
+        "own cost). 1: the paper's J, one draw")
 
 
 class SurrogateSection(PluginSection):

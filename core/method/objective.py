@@ -87,7 +87,9 @@ class ObjectiveFunction:
     :param y_mes: ``(v_mes, n_channels, n_freqs)`` measured spectra in dB.
     :param freqs: ``(n_freqs,)`` Hz.
     :param noise_paths: ``(v, n_channels, n_freqs)`` dB, the paths b_i, fixed
-        for the run; v is the number of simulated spectra per evaluation.
+        for the run; v is the number of simulated spectra per evaluation. Or
+        ``(K, v, n_channels, n_freqs)``: K independent draws of them, J and Ψ then the means over the
+        draws of each draw's J and Ψ (the share of J's scatter the draw makes divided by K).
     :param weights: α_k as accepted by :func:`validate_weights` (default 1/n).
     :param channels: channel names, needed when ``weights`` is a mapping.
     :param floor: the noise model's sensor-noise floor, or None (y_mod = y_sim + b_i, eq. 4);
@@ -148,6 +150,8 @@ class ObjectiveFunction:
         """``(n_channels, n_freqs)`` dB²: the sample variance of the noise paths b_i (ddof = 1), the
         noise model's variance as this run draws it; passed to objectives with ``uses_noise_variance``."""
         paths = np.asarray(self.noise_paths, dtype=float)
+        if paths.ndim == 4:                # several draws: each is a sample of B, pooled
+            paths = paths.reshape(-1, *paths.shape[2:])
         if paths.shape[0] < 2:
             raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' needs the noise variance, "
                             f"which takes at least 2 noise paths; got {paths.shape[0]}")
@@ -161,16 +165,22 @@ class ObjectiveFunction:
         :raises DataError: ``y_sim`` does not match the noise paths.
         """
         y_sim = np.asarray(y_sim, dtype=float)
-        if y_sim.shape != np.shape(self.noise_paths):
+        paths = np.asarray(self.noise_paths)
+        draws = paths if paths.ndim == 4 else paths[None]
+        if y_sim.shape != draws.shape[1:]:
             raise DataError(f"simulated spectra have shape {y_sim.shape}; this objective function holds "
-                            f"noise paths of shape {np.shape(self.noise_paths)} (v, n_channels, n_freqs)")
+                            f"noise paths of shape {draws.shape[1:]} (v, n_channels, n_freqs)")
         wants_variance = getattr(self.objective, "uses_noise_variance", False)
         extra = {"noise_variance": self.noise_variance} if wants_variance else {}
-        y_mod = modelled_spectra(y_sim, self.noise_paths, self.floor)
-        psi = np.asarray(self.objective.psi(self.y_mes, y_mod, self.freqs, **extra), dtype=float)
-        if psi.shape != self.alpha.shape:
-            raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "
-                            f"{psi.shape}, expected {self.alpha.shape}")
+        psi = np.zeros(self.alpha.shape)
+        for b in draws:
+            y_mod = modelled_spectra(y_sim, b, self.floor)
+            psi_b = np.asarray(self.objective.psi(self.y_mes, y_mod, self.freqs, **extra), dtype=float)
+            if psi_b.shape != self.alpha.shape:
+                raise DataError(f"objective '{getattr(self.objective, 'name', '?')}' returned psi of shape "
+                                f"{psi_b.shape}, expected {self.alpha.shape}")
+            psi += psi_b
+        psi /= len(draws)
         return float(self.alpha @ psi), psi
 
     __call__ = evaluate

@@ -46,12 +46,12 @@ def j_of_spectra(problem: Problem, y_sim: np.ndarray, b: np.ndarray | None = Non
 def objective_on(problem: Problem, b: np.ndarray | None = None, y_mes: np.ndarray | None = None,
                  noise_model: NoiseModel | None = None) -> ObjectiveFunction:
     """J of eq. 5 with the run's objective plugin and weights on other data: noise paths ``b``
-    ``(v, n_channels, n_freqs)`` dB, measured spectra ``y_mes`` (same shape) and ``noise_model``'s floor
-    (each by default the run's)."""
+    ``(v, n_channels, n_freqs)`` dB (by default the run's, all its draws: :attr:`Problem.noise_paths`),
+    measured spectra ``y_mes`` (same shape) and ``noise_model``'s floor (each by default the run's)."""
     model = problem.noise_model if noise_model is None else noise_model
     return ObjectiveFunction(problem.objective, problem.y_mes if y_mes is None else y_mes, problem.freqs,
-                             problem.b if b is None else b, weights=problem.weights, channels=problem.channels,
-                             floor=model.floor_)
+                             problem.noise_paths if b is None else b, weights=problem.weights,
+                             channels=problem.channels, floor=model.floor_)
 
 
 def simulate_spectra_task(task: tuple) -> np.ndarray:

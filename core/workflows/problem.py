@@ -81,6 +81,8 @@ class Problem:
     :ivar segments: measurement-date track segments (v of them).
     :ivar y_mes: ``(v, n_channels, n_freqs)`` dB measured spectra.
     :ivar b: ``(v, n_channels, n_freqs)`` dB noise paths for Y_mod.
+    :ivar b_more: ``(K - 1, v, n_channels, n_freqs)`` dB, the further draws of the paths J is averaged
+        over (``objective.noise_draws`` K > 1), or None (the paper's J, one draw: ``b``).
     :ivar freqs: ``(n_freqs,)`` Hz.
     :ivar reference: ``y_mes0``, ``y_sim0`` ``(v0, n_channels, n_freqs)`` dB at the reference date, when
         its data are part of the run (numerical experiment, or ``noise.reference``); empty otherwise.
@@ -104,6 +106,13 @@ class Problem:
     noise_model: NoiseModel | None = None
     reference_segments: list[TrackSegment] = field(default_factory=list)  # the reference date's track
     w0: dict[str, float] = field(default_factory=dict)  # nominal values of the identified parameters (SI)
+    b_more: np.ndarray | None = None
+
+    @property
+    def noise_paths(self) -> np.ndarray:
+        """The paths the run's J uses: ``b`` ``(v, n_channels, n_freqs)``, or with further draws
+        ``(K, v, n_channels, n_freqs)``, ``b`` first (:class:`~suspid.method.objective.ObjectiveFunction`)."""
+        return self.b if self.b_more is None else np.concatenate([self.b[None], self.b_more])
 
     @property
     def q(self) -> int:
@@ -140,7 +149,7 @@ class Problem:
         """The run's J (eq. 5): the measured spectra, the fixed noise paths b_i, the objective plugin, the
         weights α_k and the noise model's floor, built once per problem (a problem made by
         :func:`dataclasses.replace`, e.g. with corrected y_mes, builds its own)."""
-        return ObjectiveFunction(self.objective, self.y_mes, self.freqs, self.b, weights=self.weights,
+        return ObjectiveFunction(self.objective, self.y_mes, self.freqs, self.noise_paths, weights=self.weights,
                                  channels=self.channels, floor=self.noise_model.floor_)
 
 
@@ -428,15 +437,21 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             raise config.error(NO_NOISE_MODEL, "noise")
     noise_model.check_grid(freqs, channels)
     b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), segment_speeds(segments))
+    b_more = None
+    if config.objective.noise_draws > 1:   # further draws, each from a stream of its own: b is the same for any K
+        b_more = np.stack([noise_model.sample(len(segments), named_rng(config.seed, f"noise-model-draw-{k}"),
+                                              segment_speeds(segments))
+                           for k in range(1, config.objective.noise_draws)])
 
     objective_cls = registry.get("objective", config.objective.plugin)
     objective = objective_cls(**config.objective.options)
     weights = reference_weights(noise_model) if config.objective.weights == "reference" \
         else channel_weights(config, channels)
-    data_identity = stable_hash("data", array_digest(y_mes, b), segments_digest(segments),
+    data_identity = stable_hash("data", array_digest(y_mes, b, *([] if b_more is None else [b_more])),
+                                segments_digest(segments),
                                 config.objective.plugin, config.objective.options, weights.tolist(),
                                 spectra_options.model_dump())
     return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
                    channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
                    data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model,
-                   reference_segments=reference_segments, w0=w0)
+                   reference_segments=reference_segments, w0=w0, b_more=b_more)
