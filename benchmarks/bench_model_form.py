@@ -39,6 +39,7 @@ shift and spread), the simulator calls of each check, and the agreement of the f
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
@@ -293,9 +294,9 @@ def compare_methods(cfg: Path) -> dict:
 
 
 def self_check_why(cfg: Path) -> dict:
-    """Why the two methods' self-checks differ, on the finished run of ``cfg``: the linearised self-check as run
-    (the reference spectra extrapolated linearly from the nominal model to the calibrated θ̂), the same on the
-    calibrated model's spectra simulated (one Jacobian at w0 and θ̂), and the full self-check (re-identified by
+    """Why the two methods' self-checks differ, on the finished run of ``cfg``: the linearised self-check on the
+    reference spectra extrapolated linearly from the nominal model to the calibrated θ̂ (the former rule), the same
+    on the calibrated model's spectra simulated (one Jacobian at w0 and θ̂, the rule now), and the full self-check (re-identified by
     simulation on the calibrated model, from the run's ledger). ``name -> [extrapolated, simulated, full]`` (% of
     the interval): where "simulated" is near "full", the difference is the extrapolation's, not the searches'."""
     from suspid.config import load_config
@@ -313,11 +314,12 @@ def self_check_why(cfg: Path) -> dict:
     theta = model_parameters(problem, opts)
     cal = calibrate_at_reference(problem, ledger, theta, opts, None)
     jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), problem.names, theta, None)
-    extrapolated = linear_self_check(problem, jac0, jac0.y + jac0.dt @ cal.t_hat, opts).mean(axis=0)
+    extrapolated = linear_self_check(problem, dataclasses.replace(jac0, y=jac0.y + jac0.dt @ cal.t_hat),
+                                     opts).mean(axis=0)
     w_hat = theta.w(cal.t_hat)
     jac_hat = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0) | w_hat, problem.names,
                             theta, None)
-    simulated = linear_self_check(problem, jac_hat, jac_hat.y, opts).mean(axis=0)
+    simulated = linear_self_check(problem, jac_hat, opts).mean(axis=0)
     full = self_check(problem, ledger, opts.self_check, extra=w_hat if np.any(cal.t_hat != 0) else None).bias
     return {n: [float(100 * extrapolated[k]), float(100 * simulated[k]), float(100 * full[k])]
             for k, n in enumerate(problem.names)}

@@ -55,8 +55,9 @@ def main(argv: list[str] | None = None) -> None:
     print("\n# both generators", flush=True)
     done = [c for c in cfgs if (c.parent / "runs" / c.stem / "compare_methods.json").exists()]
     MF.compare_table(done)
-    print("\nself-check bias, % of the interval: linearised as run (reference spectra extrapolated to the calibrated "
-          "model) / linearised on the calibrated model simulated / full (MF.self_check_why)")
+    print("\nself-check bias, % of the interval: linearised on the nominal reference spectra extrapolated to the "
+          "calibrated model (the former rule) / linearised on the calibrated model simulated (the rule now) / full "
+          "(MF.self_check_why)")
     for cfg in done:
         why = MF.self_check_why(cfg)
         print(f"  {cfg.parent.parent.name}:{cfg.parent.name}/{cfg.stem}: "
