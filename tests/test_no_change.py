@@ -43,6 +43,12 @@ def test_apply_no_change_only_where_w0_is_not_rejected():
     new = apply_no_change(kept, names, sd, bound, distance, 2.0, 0.08, reasons)
     assert bias_aware_half_width(sd, new, 2.0)[0] == pytest.approx(0.12, rel=1e-6)
     assert list(reasons) == ["a"] and "do not tell it from its value at the reference date" in reasons["a"][0]
+    assert "is 1.0 bootstrap standard deviations below J(w_opt)" in reasons["a"][0]
+    # J higher at the null than at w_opt (the search's maximum is not the highest point): said as such
+    above: dict[str, list[str]] = {}
+    apply_no_change(NoChange(delta_j=-0.02, sd=0.1, rejected=False, n_redraws=32, n_sigmas=2.0), names, sd, bound,
+                    distance, 2.0, 0.08, above)
+    assert "is 0.2 bootstrap standard deviations above J(w_opt)" in above["a"][0]
 
 
 @pytest.fixture(scope="module")

@@ -131,7 +131,8 @@ def apply_no_change(test: NoChange | None, names: list[str], sd: np.ndarray, bou
     for k, n in enumerate(names):
         if abs(distance[k]) > max_half_width:
             reasons.setdefault(n, []).append(
-                f"the data do not tell it from its value at the reference date: J({test.null}) is {test.z:.1f} bootstrap "
-                f"standard deviations below J(w_opt) on the measurement date (w0 rejected beyond "
+                f"the data do not tell it from its value at the reference date: J({test.null}) is {abs(test.z):.1f} "
+                f"bootstrap standard deviations {'below' if test.z >= 0 else 'above'} J(w_opt) on the measurement "
+                f"date (w0 rejected beyond "
                 f"{test.n_sigmas:g}), and w0 lies {100 * abs(distance[k]):.1f} % of the interval away")
     return new
