@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from suspid.method.identifiability import bias_aware_half_width
+from suspid.method.identifiability import bias_aware_half_width, bias_bound_for_half_width
 
 LEVEL_2SIGMA = 2 * norm.cdf(2.0) - 1  # 0.9545
 
@@ -35,6 +35,20 @@ def test_the_level_holds_for_every_bias_within_the_bound(t):
     # ... exactly at the bound (the shortest such interval), and shorter than adding the bound to 2 sd
     assert norm.cdf((chi - bound) / sd) - norm.cdf((-chi - bound) / sd) == pytest.approx(LEVEL_2SIGMA, abs=1e-9)
     assert chi <= bound + 2 * sd + 1e-12
+
+
+def test_the_bias_bound_for_a_half_width_inverts_it():
+    """Known answers: B(χ(σ, B)) = B; a half-width the unbiased interval reaches already needs no bias (the lower
+    end of the bracket); without sampling spread the bound is the half-width itself."""
+    for s, b in ((0.02, 0.01), (0.05, 0.3), (0.001, 0.05)):
+        chi = bias_aware_half_width(np.array([s]), np.array([b]), 2.0)[0]
+        assert bias_bound_for_half_width(s, chi, 2.0) == pytest.approx(b, abs=1e-9)
+    unbiased = bias_aware_half_width(np.array([0.02]), np.array([0.0]), 2.0)[0]
+    assert unbiased == pytest.approx(0.04, rel=1e-9)
+    assert bias_bound_for_half_width(0.02, unbiased, 2.0) == 0.0
+    assert bias_bound_for_half_width(0.02, 0.03, 2.0) == 0.0            # 2 σ = 0.04 > 0.03
+    assert bias_bound_for_half_width(0.02, 0.03, 2.0, lower=0.01) == 0.01
+    assert bias_bound_for_half_width(0.0, 0.07, 2.0) == 0.07
 
 
 def test_quadrature_would_not_hold_the_level():

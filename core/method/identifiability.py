@@ -196,6 +196,22 @@ def bias_aware_half_width(sd: np.ndarray, bias_bound: np.ndarray, n_sigmas: floa
     return chi
 
 
+def bias_bound_for_half_width(sd: float, half_width: float, n_sigmas: float, lower: float = 0.0,
+                              upper: float | None = None) -> float:
+    """The inverse of :func:`bias_aware_half_width` in the bias bound: the B ≥ ``lower`` whose half-width χ(σ, B)
+    is ``half_width`` (χ increases with B), for one component (fractions of the admissible interval).
+
+    ``lower`` where χ(σ, ``lower``) reaches ``half_width`` already; ``half_width`` itself where σ = 0 (χ = B). The
+    root is bracketed in [``lower``, ``upper``], by default up to ``half_width`` + n σ + 1 (χ ≥ B exceeds it there).
+    """
+    if sd <= 0:
+        return float(half_width)
+    f = lambda b: bias_aware_half_width(np.array([sd]), np.array([b]), n_sigmas)[0] - half_width  # noqa: E731
+    if f(lower) >= 0:
+        return float(lower)
+    return float(brentq(f, lower, half_width + n_sigmas * sd + 1.0 if upper is None else upper))
+
+
 def mean_hessian(mean_fn, u: np.ndarray, h: float = 0.02) -> np.ndarray:
     """Hessian ``(q, q)`` of a scalar function at ``u`` by central differences (one batched call)."""
     q = u.size

@@ -29,10 +29,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
 
 from suspid.infra.seeds import rng as named_rng
-from suspid.method.identifiability import bias_aware_half_width
+from suspid.method.identifiability import bias_aware_half_width, bias_bound_for_half_width
 from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem, segment_speeds
@@ -108,8 +107,7 @@ def reach_bound(sd: np.ndarray, bound: np.ndarray, distance: np.ndarray, n_sigma
     out = bound.copy()
     half = bias_aware_half_width(sd, bound, n_sigmas)
     for k in np.flatnonzero(half < dist):
-        f = lambda b: bias_aware_half_width(sd[k:k + 1], np.array([b]), n_sigmas)[0] - dist[k]  # noqa: E731,B023
-        out[k] = brentq(f, bound[k], dist[k] + 1.0) if sd[k] > 0 else dist[k]
+        out[k] = bias_bound_for_half_width(sd[k], dist[k], n_sigmas, lower=bound[k], upper=dist[k] + 1.0)
     return out
 
 

@@ -13,9 +13,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import brentq
 
-from suspid.method.identifiability import bias_aware_half_width
+from suspid.method.identifiability import bias_aware_half_width, bias_bound_for_half_width
 
 __all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "BiasSources", "check_labels", "checks_report",
            "combine_sources", "equivalent_bias_bound", "model_spread", "trust_states", "trust_word"]
@@ -90,14 +89,7 @@ def equivalent_bias_bound(sd: np.ndarray, shift: np.ndarray, sd_model: np.ndarra
     shift = np.abs(np.asarray(shift, float))
     sd_model = np.nan_to_num(np.asarray(sd_model, float), nan=0.0)
     target = bias_aware_half_width(np.sqrt(sd ** 2 + sd_model ** 2), shift, n_sigmas)
-    out = np.empty_like(target)
-    for k, (s, chi) in enumerate(zip(sd, target)):
-        if s <= 0:
-            out[k] = chi
-            continue
-        f = lambda b: bias_aware_half_width(np.array([s]), np.array([b]), n_sigmas)[0] - chi  # noqa: E731,B023
-        out[k] = 0.0 if f(0.0) >= 0 else brentq(f, 0.0, chi + n_sigmas * s + 1.0)
-    return out
+    return np.array([bias_bound_for_half_width(s, chi, n_sigmas) for s, chi in zip(sd, target)])
 
 
 def model_spread(sensitivity: np.ndarray, covariance_t: np.ndarray) -> np.ndarray:
