@@ -111,8 +111,6 @@ def test_the_corrected_null_is_where_w_opt_lies_when_nothing_changed(damaged):
     correction, not at w0: the test against that point. Known answers on the numerical experiment: w_opt halfway
     to the damaged suspension, rejected against w0; with the correction that maps it onto w0 exactly, its null is
     w_opt itself (ΔJ = 0, not rejected); with half that correction still rejected; without one, the plain test."""
-    from suspid.workflows.linearised import _no_change
-
     problem, ledger = damaged
     names = problem.names
     u0 = problem.to_unit(np.array([problem.w0[n] for n in names]))
@@ -120,12 +118,12 @@ def test_the_corrected_null_is_where_w_opt_lies_when_nothing_changed(damaged):
     opts = problem.config.identifiability.model_error
     plain, _ = no_change_check(problem, ledger, u_opt, opts, False, None)       # simulates w0 and w_opt
     assert plain.rejected
-    exact, report = _no_change(problem, ledger, u_opt, u0, u0 - u_opt, opts, False, None)
+    exact, report = no_change_check(problem, ledger, u_opt, opts, False, None, u0 - u_opt)
     assert exact.delta_j == 0.0 and exact.z == 0.0 and not exact.rejected
     assert report["n_simulations"] == 0 and report["against_w0"]["z"] == pytest.approx(plain.z)   # both cached
-    half, report = _no_change(problem, ledger, u_opt, u0, 0.5 * (u0 - u_opt), opts, False, None)
+    half, report = no_change_check(problem, ledger, u_opt, opts, False, None, 0.5 * (u0 - u_opt))
     assert half.rejected and report["n_simulations"] == 1                          # the new null simulated
-    none, report = _no_change(problem, ledger, u_opt, u0, None, opts, False, None)
+    none, report = no_change_check(problem, ledger, u_opt, opts, False, None, None)
     assert none.delta_j == plain.delta_j and "against_w0" not in report
     off = opts.model_copy(update={"no_change": False})
-    assert _no_change(problem, ledger, u_opt, u0, None, off, False, None)[0] is None
+    assert no_change_check(problem, ledger, u_opt, off, False, None, None)[0] is None

@@ -53,14 +53,14 @@ from typing import Any, Callable
 
 import numpy as np
 
-from suspid.errors import ClusterError, SimulatorError, SuspidError
+from suspid.errors import ClusterError, SuspidError
 from suspid.infra.ledger import Ledger, stable_hash
 from suspid.infra.seeds import rng as named_rng
 from suspid.interfaces import Executor, TrackSegment
 from suspid.method.calibration import UNIFORM_SD, calibrate_step, implicit_shifts, octave_clusters
 from suspid.method.identifiability import ModelErrorOptions
 from suspid.workflows.jacobian import spectra_jacobian
-from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
+from suspid.workflows.no_change import apply_no_change
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
@@ -382,6 +382,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     :returns: the same contract as ``full``; the report adds ``"method": "linearised"``, ``"calibration"`` and
         ``"budget"`` (the simulations each check took).
     """
+    from suspid.workflows.analysis import no_change_check   # (analysis imports this module)
+
     t_start = time.perf_counter()
     base_opts = options.model_copy(update={
         "method": "full", "self_check": options.self_check.model_copy(update={"enabled": False}),
@@ -413,7 +415,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
         raise
     except SuspidError as exc:   # e.g. an unstable vehicle at a finite-difference step: no linearised check
         why = f"not run: the spectra's Jacobian failed ({exc})"
-        no_change, report["no_change"] = _no_change(problem, ledger, u_opt, u0, None, options, retry_failed, executor)
+        no_change, report["no_change"] = no_change_check(problem, ledger, u_opt, options, retry_failed, executor)
         budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
         report.update({"self_check": {"status": why}, "nuisance": {"status": why}, "calibration": {"status": why},
                        "budget": budget})
@@ -611,8 +613,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     else:
         bound, _ = combine_sources(sd_, sources, correct, n_sigmas)
     u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
-    no_change, report["no_change"] = _no_change(problem, ledger, u_opt, u0, correction, options, retry_failed,
-                                                executor)
+    no_change, report["no_change"] = no_change_check(problem, ledger, u_opt, options, retry_failed, executor,
+                                                      correction)
     budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
     bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
@@ -630,49 +632,6 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
               "nuisance": report.get("nuisance", {}).get("status", "done"),
               "no_change": report.get("no_change", {}).get("status", "not run")}
     return {**_trust(names, reasons, checks, bound, report), "correction": correction}
-
-
-def _no_change(problem: Problem, ledger: Ledger, u_opt: np.ndarray, u0: np.ndarray, correction: np.ndarray | None,
-               options: ModelErrorOptions, retry_failed: bool, executor: Executor | None
-               ) -> tuple[NoChange | None, dict[str, Any]]:
-    """The no-change test (:mod:`suspid.workflows.no_change`) against where w_opt lies when nothing changed: w0
-    less the checks' ``correction`` ``(q,)`` (normalised; w0 itself without one). The reported estimate is
-    w_opt + correction, so with w = w0 the model's maximiser sits at w0 − correction, not at w0 (the likelihood's
-    model-form bias made J(w_opt) exceed J(w0) at w_ref = w0). One simulation there, on the measurement date's
-    segments (cached in the ledger). Where w0's spectra are in the ledger already, the test against w0 itself is
-    reported too (``against_w0``, no simulation).
-
-    :returns: the test (None where it did not run) and its report.
-    """
-    from suspid.workflows.analysis import _y_sim_key, cached_y_sim
-
-    if not options.no_change:
-        return None, {"status": "disabled (identifiability.model_error.no_change: false)"}
-    shift = np.zeros(problem.q) if correction is None else np.asarray(correction, float)
-    u_null = np.clip(u0 - shift, 0, 1)
-    n_sims = 0 if ledger.get_array(_y_sim_key(problem, u_null)[0] + ":y") is not None else 1
-    where = "w0 − the correction" if shift.any() else "w0"
-    try:
-        y_null = cached_y_sim(problem, ledger, u_null, retry_failed, executor)
-        y_opt = cached_y_sim(problem, ledger, np.asarray(u_opt, float), retry_failed, executor)
-    except SimulatorError as exc:
-        return None, {"status": f"not run: the simulation at {where} failed ({exc})", "n_simulations": n_sims}
-    ident = problem.config.identifiability
-
-    def test_against(y: np.ndarray) -> NoChange:
-        return no_change_test(problem, y_opt, y, ident.n_redraws, ident.n_sigmas, reference=ident.bootstrap_reference)
-
-    test = test_against(y_null)
-    test.null = where
-    out = test.to_dict(n_sims)
-    if shift.any():
-        out |= {"null": "w0 moved by the bias the checks correct (w0 − correction)",
-                "null_shift_percent": {n: float(-100 * c) for n, c in zip(problem.names, shift)}}
-        y0 = ledger.get_array(_y_sim_key(problem, u0)[0] + ":y")
-        if y0 is not None:
-            plain = test_against(y0).to_dict(0)
-            out["against_w0"] = {k: plain[k] for k in ("delta_J", "sd_delta_J", "z", "rejected")}
-    return test, out
 
 
 def _base_status(report: dict[str, Any], check: str) -> str:
