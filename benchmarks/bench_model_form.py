@@ -302,7 +302,7 @@ def self_check_why(cfg: Path) -> dict:
     from suspid.config import load_config
     from suspid.infra.ledger import Ledger
     from suspid.workflows.linearised import date_jacobian, linear_self_check, model_parameters
-    from suspid.workflows.nuisance import calibrate_at_reference
+    from suspid.workflows.linearised import calibrate_at_reference
     from suspid.workflows.problem import build_problem
     from suspid.workflows.reference import self_check
 

@@ -29,9 +29,10 @@ from suspid.workflows.evaluation import j_of_spectra, objective_on
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
-from suspid.workflows.nuisance import calibrate_at_reference, model_parameter_check
+from suspid.workflows.nuisance import model_parameter_check
 from suspid.workflows.phases import Phases
-from suspid.workflows.linearised import calibration_result, linearised_model_error, model_parameters
+from suspid.workflows.linearised import (calibrate_at_reference, calibration_result, linearised_model_error,
+                                         model_parameters)
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import CHECK_LABELS, BiasSources, checks_report, combine_sources, trust_states
@@ -445,7 +446,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     the model parameters calibrated at the reference date, each re-identifying w by simulation (``method: full``).
 
     The model parameters θ (:func:`suspid.workflows.linearised.model_parameters`) are calibrated at the
-    reference date as the linearised checks do (:func:`suspid.workflows.nuisance.calibrate_at_reference`);
+    reference date as the linearised checks do (:func:`suspid.workflows.linearised.calibrate_at_reference`);
     the self-check then checks the calibrated model. A component is **not trustworthy under model error** when
 
     - (``correct: false`` only) the self-check (:func:`suspid.workflows.reference.self_check`) moves it by more

@@ -70,8 +70,8 @@ from suspid.workflows.trust import (BiasSources, checks_report, combine_sources,
                                     model_spread, trust_states)
 from suspid.elements import declared_parameters
 
-__all__ = ["linearised_model_error", "model_parameters", "calibration_result", "calibration_of", "calibration_markdown",
-           "equivalent_bias_bound", "DateJacobian"]
+__all__ = ["linearised_model_error", "model_parameters", "calibrate_at_reference", "Calibration", "calibration_result",
+           "calibration_of", "calibration_markdown", "equivalent_bias_bound", "DateJacobian"]
 
 ModelErrorFn = Callable[..., dict[str, Any]]
 
@@ -427,22 +427,13 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     budget["jacobian_measurement_w_opt"] = jac_opt.n_simulations
     budget["methods"] = jac_opt.methods
 
-    # calibration of θ at the reference date
+    # calibration of θ at the reference date (jac0's simulations are counted above)
     p = len(theta.names)
-    t_hat, cov_t, pinned = np.zeros(p), np.zeros((p, p)), np.zeros(p, bool)
-    if not theta.names:
-        report["calibration"] = {"status": "not run: no model parameter to calibrate (the simulator declares none "
-                                           "calibratable; give identifiability.model_error.calibration.parameters)"}
-    elif not have_ref:
-        report["calibration"] = {"status": "not run: the reference date's data are not part of this run "
-                                           "(give noise.reference)"}
-    elif not options.calibration.enabled:
-        report["calibration"] = {"status": "disabled"}
-    else:
-        cal = calibrate(problem, ledger, theta, jac0, names, options, executor)
-        t_hat, cov_t, pinned = np.array(cal.pop("t_hat")), np.array(cal.pop("covariance_t")), np.array(cal.pop("pinned"))
-        budget["calibration"] = cal["n_simulations"]
-        report["calibration"] = cal
+    cal = calibrate_at_reference(problem, ledger, theta, options, executor, jac0)
+    t_hat, cov_t, pinned = cal.t_hat, cal.covariance_t, cal.pinned
+    if cal.done:
+        budget["calibration"] = cal.n_simulations
+    report["calibration"] = cal.report
     # the calibrated model's reference spectra and their Jacobian, simulated at θ̂ (one Jacobian more): extrapolated
     # linearly from the nominal θ (y_sim0 + ∂y/∂t Δt) they inflated the self-check's bias, the spectra being far from
     # linear in a mount's stiffness (independent2, seed 7: k_prim_z -10.4 % extrapolated, -8.0 % simulated)
@@ -645,6 +636,54 @@ def _trust(names: list[str], reasons: dict[str, list[str]], checks: dict[str, st
     report["checks"] = checks_report(checks)
     return {**trust_states(names, [reasons.get(n, []) for n in names], checks), "bias_bound": bound,
             "report": report}
+
+
+@dataclass
+class Calibration:
+    """θ at the reference date in the units t = (θ − θ_nominal) / width of its range.
+
+    :ivar report: JSON-able details (result.json's ``calibration``), with ``"status"``.
+    :ivar t_hat: ``(p,)`` the estimate (zeros where the calibration did not run).
+    :ivar covariance_t: ``(p, p)`` its posterior covariance.
+    :ivar pinned: ``(p,)`` bool, the parameters the reference date pins down.
+    :ivar n_simulations: simulations it took (its Jacobians', an analytic Jacobian counting one).
+    """
+
+    report: dict[str, Any]
+    t_hat: np.ndarray
+    covariance_t: np.ndarray
+    pinned: np.ndarray
+    n_simulations: int
+
+    @property
+    def done(self) -> bool:
+        return self.report.get("status") == "done"
+
+
+def calibrate_at_reference(problem: Problem, ledger: Ledger, theta: ModelParameters, options: ModelErrorOptions,
+                           executor: Executor | None, jac0: DateJacobian | None = None) -> Calibration:
+    """θ calibrated at the reference date (:func:`calibrate`), or why not, for both methods' checks.
+
+    :param jac0: the reference date's spectra and Jacobian at w0 and the nominal θ, where the caller holds them
+        (otherwise from :func:`date_jacobian`, kept in the ledger; its simulations count in ``n_simulations``).
+    """
+    p = len(theta.names)
+    none = lambda why: Calibration({"status": why}, np.zeros(p), np.zeros((p, p)), np.zeros(p, bool), 0)  # noqa: E731
+    if not theta.names:
+        return none("not run: no model parameter to calibrate (the simulator declares none calibratable; give "
+                    "identifiability.model_error.calibration.parameters)")
+    if not problem.reference or not problem.reference_segments:
+        return none("not run: the reference date's data are not part of this run (give noise.reference)")
+    if not options.calibration.enabled:
+        return none("disabled")
+    n_jac0 = 0
+    if jac0 is None:
+        jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), problem.names, theta,
+                             executor)
+        n_jac0 = 0 if jac0.cached else jac0.n_simulations
+    cal = calibrate(problem, ledger, theta, jac0, problem.names, options, executor)
+    t_hat, cov, pinned = np.array(cal.pop("t_hat")), np.array(cal.pop("covariance_t")), np.array(cal.pop("pinned"))
+    return Calibration(cal, t_hat, cov, pinned, n_jac0 + cal["n_simulations"])
 
 
 # ----------------------------------------------------------------------------------------------- reporting

@@ -37,7 +37,7 @@ date per value of θ.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -48,56 +48,14 @@ from suspid.method.calibration import UNIFORM_SD
 from suspid.method.identifiability import ModelErrorOptions
 from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
-from suspid.workflows.linearised import ModelParameters, calibrate, date_jacobian
+from suspid.workflows.linearised import Calibration, ModelParameters
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import SearchObjective, local_search
 from suspid.workflows.tasks import SpectraTask, run_one
 from suspid.workflows.trust import model_spread
 from suspid.elements import declared_parameters
 
-__all__ = ["Calibration", "ModelParameterCheck", "calibrate_at_reference", "model_parameter_check", "reidentify",
-           "sensitivity_of_ends"]
-
-
-@dataclass
-class Calibration:
-    """θ at the reference date in the units t = (θ − θ_nominal) / width of its range.
-
-    :ivar report: JSON-able details (result.json's ``calibration``), with ``"status"``.
-    :ivar t_hat: ``(p,)`` the estimate (zeros where the calibration did not run).
-    :ivar covariance_t: ``(p, p)`` its posterior covariance.
-    :ivar pinned: ``(p,)`` bool, the parameters the reference date pins down.
-    :ivar n_simulations: simulations it took (its Jacobians', an analytic Jacobian counting one).
-    """
-
-    report: dict[str, Any]
-    t_hat: np.ndarray
-    covariance_t: np.ndarray
-    pinned: np.ndarray
-    n_simulations: int
-
-    @property
-    def done(self) -> bool:
-        return self.report.get("status") == "done"
-
-
-def calibrate_at_reference(problem: Problem, ledger: Ledger, theta: ModelParameters, options: ModelErrorOptions,
-                           executor: Executor | None) -> Calibration:
-    """The linearised checks' calibration of θ at the reference date (:func:`suspid.workflows.linearised.calibrate`,
-    the same Jacobian at w0, kept in the ledger), for the full checks."""
-    p = len(theta.names)
-    none = lambda why: Calibration({"status": why}, np.zeros(p), np.zeros((p, p)), np.zeros(p, bool), 0)  # noqa: E731
-    if not theta.names:
-        return none("not run: no model parameter to calibrate (the simulator declares none calibratable; give "
-                    "identifiability.model_error.calibration.parameters)")
-    if not problem.reference or not problem.reference_segments:
-        return none("not run: the reference date's data are not part of this run (give noise.reference)")
-    if not options.calibration.enabled:
-        return none("disabled")
-    jac0 = date_jacobian(problem, ledger, problem.reference_segments, dict(problem.w0), problem.names, theta, executor)
-    cal = calibrate(problem, ledger, theta, jac0, problem.names, options, executor)
-    t_hat, cov, pinned = np.array(cal.pop("t_hat")), np.array(cal.pop("covariance_t")), np.array(cal.pop("pinned"))
-    return Calibration(cal, t_hat, cov, pinned, (0 if jac0.cached else jac0.n_simulations) + cal["n_simulations"])
+__all__ = ["ModelParameterCheck", "model_parameter_check", "reidentify", "sensitivity_of_ends"]
 
 
 def reidentify(problem: Problem, ledger: Ledger, u_opt: np.ndarray, points: list[dict[str, float]],
