@@ -35,7 +35,8 @@ from suspid.workflows.linearised import (calibrate_at_reference, calibration_res
                                          model_parameters)
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
 from suspid.workflows.reference import self_check
-from suspid.workflows.trust import CHECK_LABELS, BiasSources, checks_report, combine_sources, trust_states
+from suspid.workflows.trust import (CHECK_LABELS, BiasSources, checks_report, combine_sources, correction_report,
+                                    trust_states)
 from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
 from suspid.elements import declared_parameters
 
@@ -610,14 +611,8 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
     bound, correction = combine_sources(np.zeros(q) if sd is None else sd, sources, correct,
                                         problem.config.identifiability.n_sigmas, sc_opt.correct) if ran else (None, None)
     if correction is not None:
-        sc_fix = sources.significant_self_check() if sc_opt.correct else np.zeros(q)
-        report["correction"] = {
-            "method": "w_opt + the shift the model parameters calibrated at the reference date give (re-identified)"
-                      + (" − the self-check's significant bias" if sc_opt.correct else ""),
-            "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
-            "self_check_percent": {n: float(-100 * c) for n, c in zip(names, sc_fix)},
-            "w_corrected": {n: float(v) for n, v in
-                            zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
+        report["correction"] = correction_report(problem, u_opt, correction, sources, sc_opt.correct,
+                                                 " (re-identified)")
     if ran:
         report["bias_sources_percent"] = {
             n: {"self_check": float(100 * a), "groups_half_spread": float(100 * g),

@@ -66,8 +66,8 @@ from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
-from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, equivalent_bias_bound,  # noqa: F401
-                                    model_spread, trust_states)
+from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, correction_report,  # noqa: F401
+                                    equivalent_bias_bound, model_spread, trust_states)
 from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibrate_at_reference", "Calibration", "calibration_result",
@@ -583,26 +583,16 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"rests on a model parameter (linearised): with {name} = {value:g} (end of {what}) it is "
                     f"identified {100 * shifts[largest_row[k], k]:+.1f} % of its interval away (threshold "
                     f"{100 * options.nuisance.max_shift:.0f} %)")
-    correction = None
     sources = BiasSources(sc_bias, groups_half, shift_known, sd_model, last_step, sc_se)  # (suspid.workflows.trust)
-    sc_fix = sources.significant_self_check() if correct and sc_opt.correct else np.zeros(q)
-    if correct:
-        # the calibrated model's shift corrected (a bias with its sign); the self-check's mean shift and half the
-        # groups' spread bound what remains, two independent sources of unknown sign combined in quadrature; the
-        # model parameters' posterior spread adds to the sampling one. The self-check's shift is not corrected:
-        # it is measured on half-dates (B fitted on half the reference segments, w identified on the other half),
-        # and with the overlap objective it does not carry over to the whole dates (benchmarks/RESULTS.md)
-        bound, correction = combine_sources(sd_, sources, correct, n_sigmas, sc_opt.correct)
-        report["correction"] = {
-            "method": "w_opt + the shift the model parameters calibrated at the reference date give"
-                      + (" − the self-check's significant bias" if sc_opt.correct else ""),
-            "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
-            "self_check_percent": {n: float(-100 * c) for n, c in zip(names, sc_fix)},
-            "last_step_percent": {n: float(100 * c) for n, c in zip(names, last_step)},
-            "w_corrected": {n: float(v) for n, v in
-                            zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
-    else:
-        bound, _ = combine_sources(sd_, sources, correct, n_sigmas)
+    # with correct (the default): the calibrated model's shift corrected (a bias with its sign), and the self-check's
+    # mean shift where it is beyond 2 standard errors (self_check.correct: measured on the calibrated model's own
+    # spectra where the truth is w0), its standard error added to the spread; what is left of the self-check's
+    # shift and half the groups' spread bound the rest, two independent sources of unknown sign in quadrature; the
+    # model parameters' posterior spread adds to the sampling one
+    bound, correction = combine_sources(sd_, sources, correct, n_sigmas, sc_opt.correct)
+    if correction is not None:
+        report["correction"] = correction_report(problem, u_opt, correction, sources, sc_opt.correct,
+                                                 last_step_percent=last_step)
     u_est = np.asarray(u_opt, float) if correction is None else np.clip(np.asarray(u_opt, float) + correction, 0, 1)
     no_change, report["no_change"] = no_change_check(problem, ledger, u_opt, options, retry_failed, executor,
                                                       correction)

@@ -17,7 +17,8 @@ import numpy as np
 from suspid.method.identifiability import bias_aware_half_width, bias_bound_for_half_width
 
 __all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "BiasSources", "check_labels", "checks_report",
-           "combine_sources", "equivalent_bias_bound", "model_spread", "trust_states", "trust_word"]
+           "combine_sources", "correction_report", "equivalent_bias_bound", "model_spread", "trust_states",
+           "trust_word"]
 
 REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 """The checks that must all have run for a component to be called trustworthy: the reference-date self-check
@@ -171,3 +172,25 @@ def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigma
                 np.asarray(sources.model_shift, float) - fix)
     known = np.abs(sc) + gh + np.abs(sources.model_shift)
     return equivalent_bias_bound(sd, known, sources.model_spread, n_sigmas), None
+
+
+def correction_report(problem: Any, u_opt: np.ndarray, correction: np.ndarray, sources: BiasSources,
+                      correct_self_check: bool, how: str = "", **terms: np.ndarray) -> dict[str, Any]:
+    """result.json's ``model_error.correction``, for both methods: what was corrected, the correction and the
+    self-check's part of it (% of the interval), ``terms`` (name -> ``(q,)``, e.g. the linearised search's last
+    step) and the corrected values (SI).
+
+    :param problem: the run's :class:`~suspid.workflows.problem.Problem` (names, unit cube).
+    :param correction: ``(q,)`` the shift added to u_opt (:func:`combine_sources`).
+    :param how: how the model parameters' shift was obtained, appended to the description.
+    """
+    names = problem.names
+    fix = sources.significant_self_check() if correct_self_check else np.zeros(len(names))
+    return {
+        "method": "w_opt + the shift the model parameters calibrated at the reference date give" + how
+                  + (" − the self-check's significant bias" if correct_self_check else ""),
+        "correction_percent": {n: float(100 * c) for n, c in zip(names, correction)},
+        "self_check_percent": {n: float(-100 * c) for n, c in zip(names, fix)},
+        **{key: {n: float(100 * c) for n, c in zip(names, v)} for key, v in terms.items()},
+        "w_corrected": {n: float(v) for n, v in
+                        zip(names, problem.from_unit(np.clip(np.asarray(u_opt, float) + correction, 0, 1)))}}
