@@ -176,13 +176,15 @@ class FunctionEvaluator(Evaluator):
         self.func_batch = func_batch
         self.batch = batch
 
+    def _batched(self, trials: list[Trial]) -> bool:
+        """Trials of an EGO batch (``ego.batch`` > 1): evaluated and told together."""
+        return self.batch > 1 and all(t.phase == "ego" for t in trials)
+
     def groups(self, trials: list[Trial]) -> list[list[Trial]]:
-        if self.batch > 1 and all(t.phase == "ego" for t in trials):
-            return [trials]
-        return [[t] for t in trials]
+        return [trials] if self._batched(trials) else [[t] for t in trials]
 
     def evaluate(self, trials: list[Trial]) -> list[Outcome]:
-        if len(trials) == 1 and not (self.batch > 1 and trials[0].phase == "ego"):
+        if len(trials) == 1 and not self._batched(trials):
             return [Outcome(*self._one(trials[0].x))]
         X = np.array([t.x for t in trials])
         t0 = time.perf_counter()

@@ -436,12 +436,15 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
         else:
             raise config.error(NO_NOISE_MODEL, "noise")
     noise_model.check_grid(freqs, channels)
-    b = noise_model.sample(len(segments), named_rng(config.seed, "noise-model"), segment_speeds(segments))
+    path_speeds = segment_speeds(segments)
+
+    def draw(stream: str) -> np.ndarray:
+        return noise_model.sample(len(segments), named_rng(config.seed, stream), path_speeds)
+
+    b = draw("noise-model")
     b_more = None
     if config.objective.noise_draws > 1:   # further draws, each from a stream of its own: b is the same for any K
-        b_more = np.stack([noise_model.sample(len(segments), named_rng(config.seed, f"noise-model-draw-{k}"),
-                                              segment_speeds(segments))
-                           for k in range(1, config.objective.noise_draws)])
+        b_more = np.stack([draw(f"noise-model-draw-{k}") for k in range(1, config.objective.noise_draws)])
 
     objective_cls = registry.get("objective", config.objective.plugin)
     objective = objective_cls(**config.objective.options)

@@ -88,9 +88,7 @@ class EGOOptimizer(Optimizer):
             self.ego_.tell(X, values)
 
     def result(self) -> OptimizerResult:
-        self._start()
-        with single_blas_thread():  # the final refit
-            res = self.ego_.result()
+        res = self.loop_state()
         told = [t for t in self.ego_.book_.trials if t.told]
         return OptimizerResult(x_opt=res.x_opt, y_opt=res.y_opt, X=np.array([t.x for t in told]).reshape(
             -1, self.bounds_.shape[0]), y=np.array([np.nan if t.J is None else t.J for t in told], dtype=float),
