@@ -418,7 +418,7 @@ def _estimate(spec: _Spectra | None, names: list[str], channel: str, f_band: tup
             Dj = np.abs(B - b[sel]) ** 2 - (dd.sum(axis=0) - dd)
             for j, kv_j in enumerate(kcv):           # the control's vertical in place of the control
                 if kv_j is not None:
-                    Cj = np.conj(G[:, j]) * S[sel][:, kv_j, kzi].sum(axis=0)
+                    Cj = np.conj(G[:, j]) * S[sel, kv_j, kzi].sum(axis=0)
                     rho_num[j] += float((w * np.real(Cj * np.conj(B))).sum())
             for bb in range(n_bands):
                 on = band == bb
