@@ -506,10 +506,10 @@ def _refine(fit: HypothesisFit, analysis: ElementAnalysis, problem: Problem, *, 
         channels = [(theta + t_k, s_k * math.sqrt(max(1.0, c_k / max(1, column.shape[1] - 1))))
                     for t_k, s_k, c_k in own]
         theta += step
-        chi2 = float(np.sum((analysis.delta - model - column * step) ** 2 / var))
+        misfit = analysis.delta - model - column * step
+        chi2 = float(np.sum(misfit ** 2 / var))
         sd = sd_step
         sw = sandwich_sd(column, var, analysis.residuals)
-        misfit = analysis.delta - model - column * step
         if abs(step) < 1e-3:
             break
     n_cells = int(np.isfinite(var).sum())                  # the cells of the channels fitted

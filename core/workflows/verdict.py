@@ -136,12 +136,15 @@ MISFIT = ("; the interval holds the segments' spread and the misfit the localisa
 
 
 def judge(*, identifiable: bool, trust: str, change: float | None, interval: tuple[float, float] | None,
-          warning: tuple | None, alarm: tuple | None, reasons: Sequence[str] = ()) -> tuple[str, str]:
+          warning: tuple | None, alarm: tuple | None, reasons: Sequence[str] = (),
+          caveat: str = SAMPLING) -> tuple[str, str]:
     """``(verdict, rule)`` by the rules of the module docstring.
 
     :param change: the identified change in % of nominal (None: no nominal value).
     :param interval: its interval in % of nominal.
     :param reasons: why the component is not identifiable or not trustworthy (quoted in the rule).
+    :param caveat: what the interval holds, appended to a verdict whose trust is not "yes" (:data:`SAMPLING`, or
+        :data:`MISFIT` for a localisation whose interval holds its fit's misfit).
     """
     why = f": {'; '.join(reasons)}" if reasons else ""
     if not identifiable:
@@ -163,7 +166,7 @@ def judge(*, identifiable: bool, trust: str, change: float | None, interval: tup
               for s, lv in (("warning", warning), ("alarm", alarm)) if lv is not None]
     rule = f"the whole interval {lo:+.1f} to {hi:+.1f} % is {state} ({'; '.join(levels)})"
     if trust != "yes":
-        rule += SAMPLING
+        rule += caveat
     return state, rule
 
 
@@ -218,7 +221,8 @@ def label_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[str
 # -- rows from a result ----------------------------------------------------------------------------------
 def _row(name: str, value: float, interval: Sequence[float], identifiable: bool, trust: str, reasons: Sequence[str],
          unit: str, parameters: Mapping[str, Parameter], limits: Mapping[str, Limits], source: str,
-         w_ref: float | None = None, error: float | None = None, alternatives: Sequence[str] = ()) -> VerdictRow:
+         w_ref: float | None = None, error: float | None = None, alternatives: Sequence[str] = (),
+         caveat: str = SAMPLING) -> VerdictRow:
     nominal = nominal_of(name, parameters, limits)
     lim = limits_for(name, limits)
     warning, alarm = (lim.warning, lim.alarm) if lim is not None else (None, None)
@@ -228,7 +232,7 @@ def _row(name: str, value: float, interval: Sequence[float], identifiable: bool,
         a, b = (_percent(v, nominal) for v in interval)
         interval_pc = (min(a, b), max(a, b))
     verdict, rule = judge(identifiable=identifiable, trust=trust, change=change, interval=interval_pc,
-                          warning=warning, alarm=alarm, reasons=reasons)
+                          warning=warning, alarm=alarm, reasons=reasons, caveat=caveat)
     return VerdictRow(name=name, label=label_of(name, parameters, limits), unit=unit, nominal=nominal,
                       value=float(value), interval=(float(interval[0]), float(interval[1])), change_percent=change,
                       interval_percent=interval_pc, identifiable=bool(identifiable), trust=trust,
@@ -280,11 +284,11 @@ def verdict_rows(result: Mapping[str, Any], parameters: Sequence[Parameter], lim
         t = trust_word(item.get("trustworthy"))
         row = _row(name, float(item["value"]), item["interval"], bool(item.get("identifiable", True)), t,
                    list(item.get("reasons", [])), unit, params, limits, "localisation", None, None,
-                   [_group_name(a) for a in item.get("alternatives") or []])
+                   [_group_name(a) for a in item.get("alternatives") or []],
+                   # the interval holds the fit's model-form misfit too
+                   MISFIT if item.get("interval_statistical") is not None else SAMPLING)
         if item.get("not_separated"):   # a cluster of elements the sensors only see together (suspid.elements)
             row = replace(row, label=f"{row.label} ({item['not_separated']})")
-        if item.get("interval_statistical") is not None:   # the interval holds the fit's model-form misfit too
-            row = replace(row, rule=row.rule.replace(SAMPLING, MISFIT))
         rows.append(row)
     return rows
 

@@ -183,11 +183,8 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
         if e is None or e.n < 3:
             continue
         b_raw, se_raw = e.beta(), _jackknife_se(e.beta_jk())
-        b0, se0 = model_coupling.get(c, 0.0), 0.0
         r = ref.get(c)
-        if r is not None and r.n >= 3:
-            b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
-        beta, se = b_raw - b0, math.hypot(se_raw, se0)
+        beta, se = _beyond(b_raw, se_raw, model_coupling.get(c, 0.0), r)
         jk[c] = e.beta_jk()
         n = e.n if r is None else min(e.n, r.n)
         t_own = beta / se if se > 0 else 0.0
@@ -263,11 +260,8 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
             r = (_estimate(ref_spec, names, c, f_band, n_bands, controls=untilted)
                  if ref_spec is not None else None)
             if e is not None and e.n == rows[c]["n_segments"]:
-                b0 = row["beta_model"] - sum(e.rho[j] * rows[u]["beta_model"] for j, u in enumerate(untilted))
-                se0 = 0.0
-                if r is not None and r.n >= 3:
-                    b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
-                beta, se = e.beta() - b0, math.hypot(_jackknife_se(e.beta_jk()), se0)
+                b_model = row["beta_model"] - sum(e.rho[j] * rows[u]["beta_model"] for j, u in enumerate(untilted))
+                beta, se = _beyond(e.beta(), _jackknife_se(e.beta_jk()), b_model, r)
                 row.update(beta=beta, se=se, t=beta / se if se > 0 else 0.0, controls=list(untilted),
                            estimate="against the model's coupling, the lateral motion of "
                                     f"{', '.join(untilted)} removed")
@@ -279,6 +273,15 @@ def coupling_test(records: Sequence, channels: Sequence[str], f_band: tuple[floa
             if jk[c].shape == jk[o].shape:
                 rows[c]["covariance"][o] = float(_jackknife_cov(np.column_stack([jk[c], jk[o]]))[0, 1])
     return [rows[c] for c in lateral if c in rows]
+
+
+def _beyond(b_raw: float, se_raw: float, b_model: float, r: _Estimate | None) -> tuple[float, float]:
+    """``(beta, se)``: a channel's coupling ``b_raw`` ± ``se_raw`` less the model's ``b_model`` and, with 3 or more
+    records, the reference date's ``r`` (its jackknife standard error added in quadrature)."""
+    b0, se0 = b_model, 0.0
+    if r is not None and r.n >= 3:
+        b0, se0 = b0 + r.beta(), _jackknife_se(r.beta_jk())
+    return b_raw - b0, math.hypot(se_raw, se0)
 
 
 def pooled_tilt(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -418,7 +421,7 @@ def _estimate(spec: _Spectra | None, names: list[str], channel: str, f_band: tup
             Dj = np.abs(B - b[sel]) ** 2 - (dd.sum(axis=0) - dd)
             for j, kv_j in enumerate(kcv):           # the control's vertical in place of the control
                 if kv_j is not None:
-                    Cj = np.conj(G[:, j]) * S[sel][:, kv_j, kzi].sum(axis=0)
+                    Cj = np.conj(G[:, j]) * S[sel, kv_j, kzi].sum(axis=0)
                     rho_num[j] += float((w * np.real(Cj * np.conj(B))).sum())
             for bb in range(n_bands):
                 on = band == bb

@@ -403,7 +403,7 @@ def receptance_derivatives(response: FrequencyResponse, derivatives: list[Matrix
                 # (-ω² L + Ld) diag(z) Psi[:, rows] W, right to left
                 r = rows.size
                 Wk = W[offsets[k]:offsets[k + 1]].reshape(r, 3 * nb)
-                u = (Psi[:, [row_at[i] for i in rows]] @ Wk).reshape(m2, 3, nb)
+                u = (Psi[:, stack_rows[offsets[k]:offsets[k + 1]]] @ Wk).reshape(m2, 3, nb)
                 u *= z.T[:, None, :]
                 u = u.reshape(m2, 3 * nb)
                 res = (response.L @ u).reshape(n_out, 3, nb) * (-(w ** 2))[None, None, :]
