@@ -79,7 +79,7 @@ GENERATORS = {
                      "generate": MS2.generate_two_dates},
 }
 """Per generator: suspid's car for its data, bounds overriding the preset's, the w_ref cases and the function
-writing both dates (the same interface). independent2 adds issue 34's element cases (one degraded element group
+writing both dates (the same interface). independent2 adds the localisation benchmark's element cases (one degraded element group
 each, identified here per kind: the truth of a kind is the mean of its elements)."""
 GEN = GENERATORS["independent"]
 
