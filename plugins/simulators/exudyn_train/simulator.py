@@ -394,9 +394,13 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
 
     def calibratable(self) -> list[str]:
         """The model parameters the vehicle tables give as assumptions or ranges (:data:`.parameters.CALIBRATABLE`):
-        the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity."""
+        the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity; then the fitted
+        parameters of the enabled effects (``<effect>/<parameter>``, e.g. ``carbody-bending/frequency_hz``): a
+        configured effect's frequency and damping are an assumption or a diagnosis's estimate as well, and where
+        the model's added resonance sits elsewhere than the vehicle's, an element's sensitivity near it has the
+        wrong shape."""
         names = {p.name for p in self.parameters()}
-        return [n for n in P.CALIBRATABLE if n in names]
+        return [n for n in P.CALIBRATABLE if n in names] + [p.name for p in self._effect_parameters()]
 
     def sensors(self, values: Mapping[str, float] | None = None) -> list[Sensor]:
         """The sensors of the configured channels (defaults depend on the geometry ``values``)."""
