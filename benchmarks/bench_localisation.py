@@ -29,7 +29,7 @@ null silent, every verdict right.
     PYTHONPATH=tests python benchmarks/bench_localisation.py [--generator independent2] [--seeds 1 2 3]
         [--segments 40] [--out DIR] [--floor auto] [--no-calibrate] [--gain-octaves none|OCTAVES]
         [--model-form-octaves none|OCTAVES] [--all-channels] [--physics NAME=VALUE ...]
-        [--effect none|NAME:KEY=VALUE,... ...]
+        [--effect none|NAME:KEY=VALUE,... ...] [--creep-at-axle]
 
 The last three switch this session's parts of the method off or change them, for the ablations of
 ``benchmarks/RESULTS.md``: the smooth gain estimated with the calibration, the interval's model-form part, the
@@ -79,15 +79,19 @@ CASES: dict[str, tuple[str, tuple[tuple[str, str], ...], float, str] | None] = {
 names: the finest level the default sensors separate), None for the null."""
 
 GENERATORS = {
-    "independent2": {"nominal": VH2.KINDS, "generate": MS.generate_date, "vehicle": PR.VEHICLE, "effects": []},
+    "independent2": {"nominal": VH2.KINDS, "generate": MS.generate_date, "vehicle": PR.VEHICLE, "effects": [],
+                     "contact_point": False},
     "independent": {"nominal": TR1.SHARED, "generate": TR1.generate_date, "vehicle": PR1.VEHICLE,
-                    "effects": [{"name": "carbody-bending", "frequency_hz": 10.0}]},
+                    "effects": [{"name": "carbody-bending", "frequency_hz": 10.0}], "contact_point": True},
 }
-"""Generator -> its kind-level nominal values (SI), its date writer, suspid's vehicle for its car and the effects
-of suspid's model for it (``simulator.options.effects``). The first generator's carbody is flexible: suspid's
-model has the carbody-bending effect at the effect's default guess (10 Hz), its frequency and damping calibrated
-on the reference date with the other calibratable model parameters (the generator's own frequency stays hidden);
-``--effect none`` leaves it out."""
+"""Generator -> its kind-level nominal values (SI), its date writer, suspid's vehicle for its car, the effects of
+suspid's model for it (``simulator.options.effects``) and whether its lateral creep forces act at the contact
+points (``contact.creep_at_contact_point``). The first generator's car has a flexible carbody and wheelsets that
+roll on an elastic contact with the creep force at the contact points: suspid's model has the carbody-bending
+effect at the effect's default guess (10 Hz; its frequency and damping calibrated on the reference date with the
+other calibratable model parameters, the generator's own value stays hidden) and the contact-point creep. The
+second generator's carbody is rigid and its wheelsets have no roll. ``--effect none`` and ``--creep-at-axle``
+leave them out (the ablations)."""
 
 LIMITS = {"c_yaw": {"warning": -25, "alarm": -40}, "c_sec_y": {"warning": -25, "alarm": -40},
           "c_prim_z": {"warning": -25, "alarm": -40},
@@ -125,7 +129,7 @@ flange contact), for ``--linear``: what is left of the value's error is then not
 
 def config_for(generator: str, case_dir: Path, reference: Path, seed: int, segments: int,
                floor: str = "none", calibrate: bool = True, localisation: dict | None = None,
-               effects: list[dict] | None = None) -> dict:
+               effects: list[dict] | None = None, contact_point: bool = False) -> dict:
     if generator == "independent2":
         path = PR.write_config(case_dir, seed=seed, identified=tuple(KINDS))
         cfg = yaml.safe_load(path.read_text(encoding="utf-8"))
@@ -142,6 +146,8 @@ def config_for(generator: str, case_dir: Path, reference: Path, seed: int, segme
     cfg["noise"]["floor"] = floor
     if effects:
         cfg["simulator"]["options"]["effects"] = [dict(e) for e in effects]
+    if contact_point:
+        cfg["simulator"]["options"].setdefault("contact", {})["creep_at_contact_point"] = True
     cfg["localisation"] = {"kinds": KINDS, "enabled": True, "n_segments": min(8, segments), "calibrate": calibrate,
                           **(localisation or {})}
     cfg["limits"] = LIMITS
@@ -242,6 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--effect", nargs="*", default=[], metavar="NAME:KEY=VALUE,...",
                     help="the effects in suspid's model (simulator.options.effects) instead of the generator's entry in "
                     "GENERATORS, e.g. carbody-bending:frequency_hz=9.5,damping=0.02; 'none': no effect")
+    ap.add_argument("--creep-at-axle", action="store_true", help="suspid's lateral creep force at the axle "
+                    "(contact.creep_at_contact_point: false) for the first generator too")
     ap.add_argument("--gain-octaves", default="1.0", help="localisation.calibration_gain_octaves ('none': a flat "
                     "gain per channel only)")
     ap.add_argument("--model-form-octaves", default="1.0", help="localisation.model_form_octaves ('none': the "
@@ -262,6 +270,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                       if kv)})
         except ValueError:
             ap.error(f"--effect takes NAME:KEY=VALUE,... with numbers, got {item}")
+    contact_point = GENERATORS[a.generator]["contact_point"] and not a.creep_at_axle
     generate = GENERATORS[a.generator]["generate"]
     linear = dict(LINEAR) if a.linear else {}
     try:
@@ -272,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"load {os.getloadavg()[0]:.1f}; generator {a.generator}; {len(a.seeds)} seed(s) x {len(a.cases)} case(s), "
           f"{a.segments} segments per date{', linear generator' if a.linear else ''}"
           f"{'; generator physics ' + str(a.physics) if a.physics else ''}"
-          f"{'; suspid effects ' + str(effects) if effects else ''}; noise.floor {a.floor}; "
+          f"{'; suspid effects ' + str(effects) if effects else ''}"
+          f"{'; creep at the contact points' if contact_point else ''}; noise.floor {a.floor}; "
           f"localisation.calibrate {not a.no_calibrate}; {octaves}; files in {base}", flush=True)
     rows = []
     for seed in a.seeds:
@@ -288,7 +298,8 @@ def main(argv: list[str] | None = None) -> int:
                 generate(case_dir / "measurement", degraded(a.generator, case) | linear, seed=seed * 2 + 2,
                          n_segments=a.segments, speed_mps=SPEED, chainage_m=200_000.0, instrument_seed=seed)
             out, wall, widths, verdicts, limits = run_case(config_for(a.generator, case_dir, reference, seed, a.segments,
-                                                              a.floor, not a.no_calibrate, octaves, effects))
+                                                              a.floor, not a.no_calibrate, octaves, effects,
+                                                              contact_point))
             kind = kind_of(expected(a.generator, case)[0] or "")
             s = score(a.generator, case, out, widths.get(kind), verdicts, limits) | {"case": case, "seed": seed,
                                                                                      "wall_s": wall}

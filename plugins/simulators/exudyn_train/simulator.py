@@ -64,6 +64,12 @@ class ContactOptions(BaseModel):
     wheelset_rolling: bool = Field(
         default=True, description="the wheelsets move longitudinally and spin, held by the longitudinal creep "
         "forces (false: their longitudinal motion and spin are held to ground, as in models that neglect them)")
+    creep_at_contact_point: bool = Field(
+        default=False, description="the lateral creep force acts at the contact points, r0 below the axle: the "
+        "lateral creepage is (y' + r0 roll') / v - yaw (the wheelset's roll rate moves the contact points "
+        "sideways) and the force has the moment r0 F_y on the wheelset's roll (Garg and Dukkipati, Dynamics of "
+        "Railway Vehicle Systems, 1984, ch. 4); false: at the axle, as the model had it before, the results of "
+        "earlier runs unchanged")
 
 
 class YawDamperOptions(BaseModel):
@@ -445,7 +451,8 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
                 model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll,
-                                   self.opts.layout, rolling=self.opts.contact.wheelset_rolling)
+                                   self.opts.layout, rolling=self.opts.contact.wheelset_rolling,
+                                   contact_point=self.opts.contact.creep_at_contact_point)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
