@@ -29,7 +29,7 @@ null silent, every verdict right.
     PYTHONPATH=tests python benchmarks/bench_localisation.py [--generator independent2] [--seeds 1 2 3]
         [--segments 40] [--out DIR] [--floor auto] [--no-calibrate] [--gain-octaves none|OCTAVES]
         [--model-form-octaves none|OCTAVES] [--all-channels] [--physics NAME=VALUE ...]
-        [--effect none|NAME:KEY=VALUE,... ...] [--creep-at-axle]
+        [--effect none|NAME:KEY=VALUE,... ...] [--creep-at axle|contact]
 
 The last three switch this session's parts of the method off or change them, for the ablations of
 ``benchmarks/RESULTS.md``: the smooth gain estimated with the calibration, the interval's model-form part, the
@@ -90,7 +90,7 @@ points (``contact.creep_at_contact_point``). The first generator's car has a fle
 roll on an elastic contact with the creep force at the contact points: suspid's model has the carbody-bending
 effect at the effect's default guess (10 Hz; its frequency and damping calibrated on the reference date with the
 other calibratable model parameters, the generator's own value stays hidden) and the contact-point creep. The
-second generator's carbody is rigid and its wheelsets have no roll. ``--effect none`` and ``--creep-at-axle``
+second generator's carbody is rigid and its wheelsets have no roll. ``--effect none`` and ``--creep-at axle``
 leave them out (the ablations)."""
 
 LIMITS = {"c_yaw": {"warning": -25, "alarm": -40}, "c_sec_y": {"warning": -25, "alarm": -40},
@@ -248,8 +248,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--effect", nargs="*", default=[], metavar="NAME:KEY=VALUE,...",
                     help="the effects in suspid's model (simulator.options.effects) instead of the generator's entry in "
                     "GENERATORS, e.g. carbody-bending:frequency_hz=9.5,damping=0.02; 'none': no effect")
-    ap.add_argument("--creep-at-axle", action="store_true", help="suspid's lateral creep force at the axle "
-                    "(contact.creep_at_contact_point: false) for the first generator too")
+    ap.add_argument("--creep-at", choices=["axle", "contact"], default=None, help="suspid's lateral creep force "
+                    "at the axle or at the contact points (contact.creep_at_contact_point) instead of the "
+                    "generator's entry in GENERATORS")
     ap.add_argument("--gain-octaves", default="1.0", help="localisation.calibration_gain_octaves ('none': a flat "
                     "gain per channel only)")
     ap.add_argument("--model-form-octaves", default="1.0", help="localisation.model_form_octaves ('none': the "
@@ -270,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
                                                                       if kv)})
         except ValueError:
             ap.error(f"--effect takes NAME:KEY=VALUE,... with numbers, got {item}")
-    contact_point = GENERATORS[a.generator]["contact_point"] and not a.creep_at_axle
+    contact_point = GENERATORS[a.generator]["contact_point"] if a.creep_at is None else a.creep_at == "contact"
     generate = GENERATORS[a.generator]["generate"]
     linear = dict(LINEAR) if a.linear else {}
     try:

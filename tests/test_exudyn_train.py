@@ -264,7 +264,6 @@ def test_nonlinear_options_reduce_to_the_linear_model_for_small_inputs():
         assert np.all(np.abs(rel - 1) < 0.02), (contact, rel)
 
 
-@pytest.mark.slow
 def test_creep_at_the_contact_point_is_the_same_in_the_matrices_and_in_the_creep_function():
     """``contact.creep_at_contact_point`` on small inputs: the time solver's symbolic creep function (taken
     with creep saturation) gives the records of the linear matrices (:meth:`.model.TrainModel.wheelset_matrices`)
