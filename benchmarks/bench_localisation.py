@@ -129,7 +129,11 @@ flange contact), for ``--linear``: what is left of the value's error is then not
 
 def config_for(generator: str, case_dir: Path, reference: Path, seed: int, segments: int,
                floor: str = "none", calibrate: bool = True, localisation: dict | None = None,
-               effects: list[dict] | None = None, contact_point: bool = False) -> dict:
+               effects: list[dict] | None = None, contact_point: bool | None = None) -> dict:
+    """The config of one case: the generator's vehicle, ``effects`` and ``contact_point`` in suspid's model (None:
+    the generator's entry in :data:`GENERATORS`), the localisation over :data:`KINDS`, the limits :data:`LIMITS`."""
+    effects = GENERATORS[generator]["effects"] if effects is None else effects
+    contact_point = GENERATORS[generator]["contact_point"] if contact_point is None else contact_point
     if generator == "independent2":
         path = PR.write_config(case_dir, seed=seed, identified=tuple(KINDS))
         cfg = yaml.safe_load(path.read_text(encoding="utf-8"))
