@@ -167,7 +167,7 @@ BENCHMARKS: tuple[Benchmark, ...] = (
        f"benchmarks/bench_trust_budget.py {WORK}/trust_budget-quick --w-refs quickstart --objectives overlap "
        "--segments 12",
        "linearised against full model-error checks"),
-    _b("localisation", f"benchmarks/bench_localisation.py --seeds 1 2 3 --out {WORK}/localisation",
+    _b("localisation", f"benchmarks/bench_localisation.py --seeds 1 2 3 --segments 100 --out {WORK}/localisation",
        f"benchmarks/bench_localisation.py --seeds 1 --cases yaw-bogie1-50 null --segments 6 "
        f"--out {WORK}/localisation-quick",
        "localisation of one degraded element group (tests/independent2)"),

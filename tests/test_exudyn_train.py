@@ -264,6 +264,22 @@ def test_nonlinear_options_reduce_to_the_linear_model_for_small_inputs():
         assert np.all(np.abs(rel - 1) < 0.02), (contact, rel)
 
 
+def test_creep_at_the_contact_point_is_the_same_in_the_matrices_and_in_the_creep_function():
+    """``contact.creep_at_contact_point`` on small inputs: the time solver's symbolic creep function (taken
+    with creep saturation) gives the records of the linear matrices (:meth:`.model.TrainModel.wheelset_matrices`)
+    within 2 %, and the option moves the bogies' lateral response (the roll rate's creepage acts)."""
+    (rough,) = track(300.0, 200.0)
+    seg = [TrackSegment("smooth", rough.distance, 0.05 * rough.irregularities, rough.speed)]
+    on = {"creep_at_contact_point": True}
+    base = ExudynTrain(solver="time", contact=on).simulate({}, seg)[0]
+    other = ExudynTrain(solver="time", contact=on | {"creep_saturation": True}).simulate({}, seg)[0]
+    rel = np.std(other.accelerations, axis=1) / np.std(base.accelerations, axis=1)
+    assert np.all(np.abs(rel - 1) < 0.02), rel
+    off = ExudynTrain(solver="time").simulate({}, seg)[0]
+    k = base.channels.index("bogie_front_lateral")
+    assert abs(np.std(base.accelerations[k]) / np.std(off.accelerations[k]) - 1) > 0.05
+
+
 def test_bump_stops_act_on_a_large_lateral_kink():
     """A 60 mm lateral kink drives the carbody-bogie play past a 10 mm gap: the stops then push the
     carbody, whose lateral acceleration peak rises."""

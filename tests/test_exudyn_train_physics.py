@@ -565,3 +565,28 @@ def test_articulated_variable_speed_matches_constant_speed():
     (rc,) = sim.simulate({}, [const])
     assert np.std(rc.accelerations) > 0
     assert np.allclose(rv.accelerations, rc.accelerations, rtol=0, atol=1e-3 * np.max(np.abs(rc.accelerations)))
+
+
+def test_creep_at_the_contact_point_adds_the_roll_rate_and_the_moment():
+    """``contact.creep_at_contact_point``: the lateral creep force -2 f22 ((y' + r0 roll') / v - yaw) acts at the
+    contact points y_c = y + r0 roll (r0 below the axle), so its generalised force is J_c^T F with J_c = e_y + r0
+    e_roll: the damping 2 f22 / v on y becomes (2 f22 / v) J_c^T J_c on (y, roll), and the yaw term's force
+    2 f22 yaw gains its moment r0 2 f22 yaw on the roll. Off (the default), the matrices are the earlier ones."""
+    speed = 300 * KMH
+    off, on = ExudynTrain(), ExudynTrain(contact={"creep_at_contact_point": True})
+    m_off = off._model(off.values({}), speed, TimeFeatures())
+    m_on = on._model(on.values({}), speed, TimeFeatures())
+    assert not m_off.contact_point and m_on.contact_point
+    p = off.values({})
+    K0, D0 = m_off.wheelset_matrices(p, speed)
+    K1, D1 = m_on.wheelset_matrices(p, speed)
+    f22 = P.creep_coefficients(p, m_off.layout.wheel_load(p, 0))[1]
+    assert D0[1, 1] == pytest.approx(2 * f22 / speed, rel=1e-12) and D0[3, 3] == 0.0
+    J_c = np.zeros(6)
+    J_c[1], J_c[3] = 1.0, p["r0"]
+    e_y = np.eye(6)[1]
+    assert np.allclose(D1, D0 + 2 * f22 / speed * (np.outer(J_c, J_c) - np.outer(e_y, e_y)), rtol=1e-12, atol=0)
+    expected_K = K0.copy()
+    expected_K[3, 5] = -2 * f22 * p["r0"]
+    assert K0[1, 5] == pytest.approx(-2 * f22, rel=1e-12)
+    assert np.allclose(K1, expected_K, rtol=1e-12, atol=0)

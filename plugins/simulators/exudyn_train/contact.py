@@ -53,7 +53,8 @@ def coordinate_response(simulator, segment: TrackSegment, w=None, fs: float | No
 def creep_usage(simulator, segment: TrackSegment, friction: float, w=None) -> list[dict[str, float]]:
     """Linear creep forces per wheelset against the friction limit mu N (static wheel load N).
 
-    Per wheel: lateral creep force F_y = -f22 (y'/v - psi), longitudinal
+    Per wheel: lateral creep force F_y = -f22 (y'/v - psi) (with ``contact.creep_at_contact_point``:
+    -f22 ((y' + r0 roll')/v - psi)), longitudinal
     F_x = f11 (l0 psi'/v + lambda (y - Y) / r0) (left wheel; the right one
     the opposite) plus, with rolling wheelsets, -f11 (x' - r0 pitch') / v on
     both wheels (the larger of the two wheels counts), Kalker's f11, f22 for
@@ -76,6 +77,8 @@ def creep_usage(simulator, segment: TrackSegment, friction: float, w=None) -> li
         dy, dpsi = np.gradient(y, 1 / fs), np.gradient(psi, 1 / fs)
         load = layout.wheel_load(p, j)
         f11, f22 = P.creep_coefficients(p, load)
+        if simulator.opts.contact.creep_at_contact_point:       # the contact points move with the roll rate too
+            dy = dy + p["r0"] * np.gradient(q[lin.labels.index((name, "roll"))], 1 / fs)
         fy = -f22 * (dy / v - psi)
         fx = f11 * (p["l0"] * dpsi / v + p["conicity"] / p["r0"] * (y - r[j, 1]))
         if (name, "longitudinal") in lin.labels:      # rolling wheelsets: the common longitudinal creep

@@ -234,9 +234,10 @@ class TrainModel:
 
     def __init__(self, values: dict[str, float], sensors: Sequence[Sensor], speed: float,
                  features: TimeFeatures | None = None, effects: Sequence = (), gravity_roll: bool = True,
-                 layout: Layout = SINGLE, rolling: bool = True) -> None:
+                 layout: Layout = SINGLE, rolling: bool = True, contact_point: bool = False) -> None:
         self.features = features or TimeFeatures()
         self.rolling = bool(rolling)
+        self.contact_point = bool(contact_point)
         self.restrained = {} if self.rolling else dict(RESTRAINED)
         self.layout = layout
         self.bodies = layout.bodies
@@ -647,6 +648,12 @@ class TrainModel:
             K[5, 1] = 2.0 * f11 * l0 * lam / r0
             D[1, 1] = 2.0 * f22 / speed
             D[5, 5] = 2.0 * f11 * l0 ** 2 / speed
+            if self.contact_point:
+                # the lateral creep force at the contact points (y_c = y + r0 roll): creepage (y' + r0 roll') / v
+                # - yaw, and its moment r0 F_y on the roll
+                D[1, 3] = D[3, 1] = 2.0 * f22 * r0 / speed
+                D[3, 3] = 2.0 * f22 * r0 ** 2 / speed
+                K[3, 5] = -2.0 * f22 * r0
             if self.rolling:
                 # longitudinal creepage (x' - r0 pitch') / v, the same on both wheels: force -2 f11 on x,
                 # its moment -r0 F_x on the spin (contact points r0 below the axle)
@@ -855,7 +862,7 @@ class TrainModel:
             fy = c["kg"] * Y
             # creep forces computed here: speed from the odometer, optional saturation
             v = q_t[6] * c["dx"]
-            nu_y = q_t[1] / v - q[5]                                  # lateral creepage
+            nu_y = (q_t[1] + c["r0"] * q_t[3] if self.contact_point else q_t[1]) / v - q[5]   # lateral creepage
             a_long = c["l0"] * q_t[5] / v + c["lam_r0"] * (q[1] - Y)  # minus the left wheel's long. creepage
             fy_wheel = -c["f22"] * nu_y                               # lateral creep force per wheel
             fx_left = c["f11"] * a_long                               # longitudinal, left wheel; right: -fx_left
@@ -868,9 +875,12 @@ class TrainModel:
                 eps_l = _saturation(esym, fx_l, fy_wheel, c["mu"] * c["n0"])
                 eps_r = _saturation(esym, fx_r, fy_wheel, c["mu"] * c["n0"])
                 fx_l, fx_r = eps_l * fx_l, eps_r * fx_r
-                fy = fy + (eps_l + eps_r) * fy_wheel
+                fy_creep = (eps_l + eps_r) * fy_wheel
             else:
-                fy = fy + 2.0 * fy_wheel
+                fy_creep = 2.0 * fy_wheel
+            fy = fy + fy_creep
+            if self.contact_point:                                    # the creep force r0 below the axle
+                mx = mx + c["r0"] * fy_creep
             fx = fx_l + fx_r
             mz = -c["l0"] * (fx_l - fx_r)
             return [fx, fy, fz, mx, -c["r0"] * fx, mz, 0.0]

@@ -64,6 +64,12 @@ class ContactOptions(BaseModel):
     wheelset_rolling: bool = Field(
         default=True, description="the wheelsets move longitudinally and spin, held by the longitudinal creep "
         "forces (false: their longitudinal motion and spin are held to ground, as in models that neglect them)")
+    creep_at_contact_point: bool = Field(
+        default=False, description="the lateral creep force acts at the contact points, r0 below the axle: the "
+        "lateral creepage is (y' + r0 roll') / v - yaw (the wheelset's roll rate moves the contact points "
+        "sideways) and the force has the moment r0 F_y on the wheelset's roll (Garg and Dukkipati, Dynamics of "
+        "Railway Vehicle Systems, 1984, ch. 4); false: at the axle, as the model had it before, the results of "
+        "earlier runs unchanged")
 
 
 class YawDamperOptions(BaseModel):
@@ -394,9 +400,13 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
 
     def calibratable(self) -> list[str]:
         """The model parameters the vehicle tables give as assumptions or ranges (:data:`.parameters.CALIBRATABLE`):
-        the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity."""
+        the dampers' series stiffnesses, the creep-coefficient scale and the equivalent conicity; then the fitted
+        parameters of the enabled effects (``<effect>/<parameter>``, e.g. ``carbody-bending/frequency_hz``): a
+        configured effect's frequency and damping are an assumption or a diagnosis's estimate as well, and where
+        the model's added resonance sits elsewhere than the vehicle's, an element's sensitivity near it has the
+        wrong shape."""
         names = {p.name for p in self.parameters()}
-        return [n for n in P.CALIBRATABLE if n in names]
+        return [n for n in P.CALIBRATABLE if n in names] + [p.name for p in self._effect_parameters()]
 
     def sensors(self, values: Mapping[str, float] | None = None) -> list[Sensor]:
         """The sensors of the configured channels (defaults depend on the geometry ``values``)."""
@@ -441,7 +451,8 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
         if model is None or model.needs_rebuild(values, sensors, features):
             try:
                 model = TrainModel(values, sensors, speed, features, self.effects(), self.opts.gravity_roll,
-                                   self.opts.layout, rolling=self.opts.contact.wheelset_rolling)
+                                   self.opts.layout, rolling=self.opts.contact.wheelset_rolling,
+                                   contact_point=self.opts.contact.creep_at_contact_point)
             except ValueError as exc:
                 raise SimulatorError(f"exudyn-train: cannot build the model: {exc}") from exc
             self._models[key] = model
