@@ -318,3 +318,13 @@ def test_write_simulation_and_modes_report(tmp_path, freq_sim):
     assert {"frequency_hz", "damping_ratio", "body", "motion"} <= set(saved["modes"][0])
     text = format_modes(report, max_hz=20.0)
     assert "stable" in text and "carbody" in text
+
+
+def test_an_option_added_later_at_its_earlier_value_keeps_the_identity():
+    """``contact.creep_at_contact_point`` at false is the model before the option: the identity (the key of
+    every cached evaluation) leaves it out, so earlier runs resume; switched on, the identity changes."""
+    default = ExudynTrain().identity()
+    assert "creep_at_contact_point" not in default["options"]["contact"]
+    assert "wheelset_rolling" in default["options"]["contact"]
+    on = ExudynTrain(contact={"creep_at_contact_point": True}).identity()
+    assert on["options"]["contact"]["creep_at_contact_point"] is True and on != default

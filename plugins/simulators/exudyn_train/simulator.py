@@ -35,6 +35,11 @@ earlier model are not reused. 2: Maxwell yaw dampers, free longitudinal carbody 
 traction rods, Kalker creep coefficients, track support, g × roll in lateral sensors, vehicle presets."""
 
 
+LATER_OPTIONS: dict[tuple[str, str], Any] = {("contact", "creep_at_contact_point"): False}
+"""Options added after :data:`MODEL_VERSION` was last raised, with the value at which the model is the earlier
+one exactly: at that value :meth:`ExudynTrain.identity` leaves them out (cached evaluations stay valid)."""
+
+
 class SensorOptions(BaseModel):
     """One accelerometer channel."""
 
@@ -802,7 +807,14 @@ class ExudynTrain(Simulator, DifferentiableSimulator, ElementSimulator):
 
     # ------------------------------------------------------------------ identity, pickling
     def identity(self) -> dict[str, Any]:
-        return {"plugin": self.name, "model": MODEL_VERSION, "options": self.opts.model_dump(mode="json")}
+        """Plugin, :data:`MODEL_VERSION` and options: what a cached evaluation was made with. An option of
+        :data:`LATER_OPTIONS` at the value that reproduces the earlier model is left out, so that a run
+        written before the option existed resumes from its ledger instead of simulating again."""
+        options = self.opts.model_dump(mode="json")
+        for (section, key), earlier in LATER_OPTIONS.items():
+            if options.get(section, {}).get(key) == earlier:
+                del options[section][key]
+        return {"plugin": self.name, "model": MODEL_VERSION, "options": options}
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
