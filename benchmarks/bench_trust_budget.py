@@ -15,7 +15,11 @@ how each source's shift of w_opt is obtained.
 Usage (from the repository root)::
 
     python benchmarks/bench_trust_budget.py OUT_DIR [--generators independent independent2] [--seeds 7]
-        [--w-refs w0 quickstart] [--objectives overlap likelihood] [--segments 24]
+        [--w-refs w0 quickstart] [--objectives overlap likelihood] [--segments 100]
+
+100 segments of 1 km per date by default, the acceptance setting of ``bench_model_form.py`` (the paper's
+"about one hundred" track realisations per date); runs that ``bench_model_form.py`` finished in the same
+OUT_DIR/GENERATOR folders are reused, not identified again.
 
 Each comparison is kept beside its run (``compare_methods.json``): running again completes a cut grid, and the
 last table (both generators) holds every comparison finished so far.
@@ -40,7 +44,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seeds", nargs="+", default=["7"])
     ap.add_argument("--w-refs", nargs="+", default=["w0", "quickstart"])
     ap.add_argument("--objectives", nargs="+", default=["overlap", "likelihood"])
-    ap.add_argument("--segments", default="24")
+    ap.add_argument("--segments", default="100", help="segments of 1 km per date (default 100, the acceptance "
+                    "setting; 24 was the earlier, faster comparison)")
     a = ap.parse_args(argv)
     cfgs = []
     for objective in a.objectives:     # run by run, the generators alternating: a cut grid still holds both
