@@ -60,6 +60,7 @@ from independent2 import measure as MS  # noqa: E402
 from independent2 import protocol as PR  # noqa: E402
 from independent2 import vehicle as VH2  # noqa: E402
 
+from bench_model_form import written_with  # noqa: E402  (benchmarks/, the script's own folder)
 from suspid import api  # noqa: E402
 from suspid.infra.lock import open_run_dir  # noqa: E402
 from suspid.workflows.elements import localise_problem  # noqa: E402
@@ -292,14 +293,14 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for seed in a.seeds:
         reference = base / f"seed{seed}" / "reference"
-        if not (reference / "truth.json").exists():
+        if not written_with(reference / "truth.json", a.segments):
             t0 = time.perf_counter()
             generate(reference, linear, seed=seed * 2 + 1, n_segments=a.segments, speed_mps=SPEED,
                      chainage_m=10_000.0, instrument_seed=seed)
             print(f"seed {seed}: reference date generated in {time.perf_counter() - t0:.0f} s", flush=True)
         for case in a.cases:
             case_dir = base / f"seed{seed}" / case
-            if not (case_dir / "measurement" / "truth.json").exists():
+            if not written_with(case_dir / "measurement" / "truth.json", a.segments):
                 generate(case_dir / "measurement", degraded(a.generator, case) | linear, seed=seed * 2 + 2,
                          n_segments=a.segments, speed_mps=SPEED, chainage_m=200_000.0, instrument_seed=seed)
             out, wall, widths, verdicts, limits = run_case(config_for(a.generator, case_dir, reference, seed, a.segments,

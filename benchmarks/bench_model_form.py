@@ -116,9 +116,22 @@ def write_config(case: Path, seed: int, objective: str, nuisance: dict[str, list
 
 def prepare(out: Path, seed: int, w_ref: str, segments: int) -> Path:
     case = out / f"seed{seed}-{w_ref}"
-    if not (case / "measurement" / "truth.json").exists():
+    if not written_with(case / "measurement" / "truth.json", segments):
         GEN["generate"](case, {}, GEN["w_refs"][w_ref], seed=seed, n_segments=segments, speed_mps=300.0 / 3.6)
     return case
+
+
+def written_with(truth: Path, segments: int) -> bool:
+    """Whether a date's files (their ``truth.json``) are already written, with ``segments`` segments; exit 2 with
+    one line if they were written with another count (figures over a mix of data sizes would be mixed)."""
+    if not truth.exists():
+        return False
+    written = len(json.loads(truth.read_text())["segments"])
+    if written != segments:
+        print(f"error: {truth.parent} holds {written} segments, not {segments}: use another output folder or "
+              f"--segments {written}", file=sys.stderr)
+        raise SystemExit(2)
+    return True
 
 
 def run_one(cfg: Path) -> tuple[Path, float, str]:
