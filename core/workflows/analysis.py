@@ -10,7 +10,7 @@ in the gradient of J at w_opt (:func:`gradient_noise`).
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from suspid.method.adequacy import band_residuals, frequency_bands, information_
 from suspid.method.identifiability import ModelErrorOptions, Verdict, assess, bias_aware_half_width
 from suspid.method.jacobian import fisher_identifiability, fisher_information
 from suspid.method.noise import bootstrap_refit, reference_paths
+from suspid.method.objective import ObjectiveFunction
 from suspid.optimize.loop import LoopOutcome
 from suspid.optimize.normalize import Normalized
 from suspid.workflows.evaluation import j_of_spectra, objective_on
@@ -86,6 +87,35 @@ def cached_y_sim(problem: Problem, ledger: Ledger, u: np.ndarray, retry_failed: 
     return y
 
 
+def bootstrap_objectives(problem: Problem, n_redraws: int, paired: bool = True, reference: bool = True
+                         ) -> Iterator[tuple[ObjectiveFunction, np.ndarray]]:
+    """The bootstrap replicates of J behind the sampling interval (:func:`gradient_noise`), one at a time.
+
+    Each replicate fits B again on the reference segments drawn with replacement (with ``reference``, the
+    reference date's data in the run and no ``noise.path``), draws v new noise paths from it and resamples
+    the v measured segments (with ``paired`` the simulated ones with the same indices). Draws come from the
+    run's seed, so every caller sees the same replicates.
+
+    :returns: per replicate, its J (an :class:`~suspid.method.objective.ObjectiveFunction` on the
+        resampled measured spectra) and the indices ``(v,)`` to apply to simulated spectra ``(v, ...)``.
+    """
+    config = problem.config
+    rng = named_rng(config.seed, "noise-redraws")
+    ref_rng = named_rng(config.seed, "noise-redraws-reference")  # a stream of its own: the others' draws unchanged
+    ref = problem.reference if reference and config.noise.path is None else {}  # B fitted in this run on them
+    ref_speeds = segment_speeds(problem.reference_segments)
+    paths = reference_paths(problem.noise_model, ref["y_mes0"], ref["y_sim0"]) if ref else None
+    v = len(problem.segments)
+    for _ in range(n_redraws):
+        model = problem.noise_model
+        if ref:
+            model = bootstrap_refit(model, paths, ref_speeds, ref_rng, problem.freqs, problem.channels)
+        b = model.sample(v, rng)
+        i_mes = rng.integers(0, v, v)
+        i_mod = i_mes if paired else rng.integers(0, v, v)
+        yield objective_on(problem, b, problem.y_mes[i_mes], model), i_mod   # this replicate's J, built once
+
+
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
                    paired: bool = True, failed: list[dict[str, Any]] | None = None,
                    retry_failed: bool = False, executor: Executor | None = None, reference: bool = True
@@ -124,7 +154,6 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
 
     :returns: ``(Σ_g (q, q), curvature (q,), σ_J)``, σ_J the scatter of J(w_opt) itself.
     """
-    config = problem.config
     q = problem.q
 
     y_sim_at = lambda u: cached_y_sim(problem, ledger, u, retry_failed)  # noqa: E731
@@ -145,21 +174,8 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     minus, y_minus = map(list, zip(*[y_or_centre(u) for u in np.clip(u_opt - h * np.eye(q), 0.0, 1.0)]))
     plus, minus = np.array(plus), np.array(minus)
     step = np.diag(plus - minus)
-    rng = named_rng(config.seed, "noise-redraws")
-    ref_rng = named_rng(config.seed, "noise-redraws-reference")  # a stream of its own: the others' draws unchanged
-    ref = problem.reference if reference and config.noise.path is None else {}  # B fitted in this run on them
-    ref_speeds = segment_speeds(problem.reference_segments)
-    paths = reference_paths(problem.noise_model, ref["y_mes0"], ref["y_sim0"]) if ref else None
-    v = len(problem.segments)
     grads, j_opt = np.empty((n_redraws, q)), np.empty(n_redraws)
-    for k in range(n_redraws):
-        model = problem.noise_model
-        if ref:
-            model = bootstrap_refit(model, paths, ref_speeds, ref_rng, problem.freqs, problem.channels)
-        b = model.sample(v, rng)
-        i_mes = rng.integers(0, v, v)
-        i_mod = i_mes if paired else rng.integers(0, v, v)
-        fn = objective_on(problem, b, problem.y_mes[i_mes], model)   # this replicate's J, built once
+    for k, (fn, i_mod) in enumerate(bootstrap_objectives(problem, n_redraws, paired, reference)):
         J = lambda y: fn.evaluate(y[i_mod])[0]  # noqa: E731
         grads[k] = [(J(yp) - J(ym)) / step[i] if step[i] > 0 else 0.0  # both sides failed: no gradient
                     for i, (yp, ym) in enumerate(zip(y_plus, y_minus))]
