@@ -28,8 +28,9 @@ Usage (from the repository root)::
 
 The acceptance grid runs at 100 segments of 1 km per date (the default): the paper ("Inverse identification
 of mechanical parameters of high-speed train suspensions submitted to random track irregularities", section 2)
-works with "about one hundred" known track geometry realisations per date. ``--segments 40`` is the small-data sensitivity (the sampling half-width is then
-the largest part of the interval, and fewer components are reported).
+works with "about one hundred" known track geometry realisations per date. ``--segments 40`` is the small-data
+sensitivity (the sampling half-width is then the largest part of the interval, and fewer components are
+reported).
 
 A finished run (its result.json) is kept: running again completes a cut grid;
 ``--summary`` prints the table of the runs finished so far.

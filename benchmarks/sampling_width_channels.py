@@ -31,7 +31,7 @@ import numpy as np
 def replicates(problem, ledger, u: np.ndarray, h: float, n_redraws: int, paired: bool, reference: bool):
     """Per replicate and channel, the α-weighted gradient ``(R, q, n_ch)`` and curvature ``(R, q, n_ch)`` of Ψ at
     w_opt, and the run's own curvature of J ``(q,)`` (central differences over the clipped steps ±h)."""
-    from suspid.workflows.analysis import bootstrap_objectives, cached_y_sim
+    from suspid.workflows.analysis import bootstrap_objectives, cached_y_sim, second_difference
     from suspid.workflows.evaluation import j_of_spectra
 
     q = problem.q
@@ -42,11 +42,9 @@ def replicates(problem, ledger, u: np.ndarray, h: float, n_redraws: int, paired:
     ym = [cached_y_sim(problem, ledger, m) for m in minus]
     hp = np.array([p[i] - u[i] for i, p in enumerate(plus)])
     hm = np.array([u[i] - m[i] for i, m in enumerate(minus)])
-    den = hp * hm * (hp + hm)
 
     def second(f0, fp, fm):   # d²/du² from the three points, (q, ...) arrays
-        shape = (q,) + (1,) * (np.ndim(fp) - 1)
-        return 2 * (hm.reshape(shape) * fp + hp.reshape(shape) * fm - (hp + hm).reshape(shape) * f0) / den.reshape(shape)
+        return second_difference(f0, fp, fm, hp, hm)
 
     c_run = second(j_of_spectra(problem, y0)[0], np.array([j_of_spectra(problem, y)[0] for y in yp]),
                    np.array([j_of_spectra(problem, y)[0] for y in ym]))

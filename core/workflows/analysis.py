@@ -116,6 +116,19 @@ def bootstrap_objectives(problem: Problem, n_redraws: int, paired: bool = True, 
         yield objective_on(problem, b, problem.y_mes[i_mes], model), i_mod   # this replicate's J, built once
 
 
+def second_difference(f0: np.ndarray | float, f_plus: np.ndarray, f_minus: np.ndarray, h_plus: np.ndarray,
+                      h_minus: np.ndarray) -> np.ndarray:
+    """d²f/du_k² from f at u, u + h_plus_k e_k and u - h_minus_k e_k (unequal steps: a box clips them).
+
+    :param f_plus, f_minus: ``(q, ...)``, f at the q points on either side; ``f0`` f at u, broadcast against them.
+    :param h_plus, h_minus: ``(q,)`` the steps, > 0 (a zero step divides by zero: the caller masks it).
+    :returns: ``(q, ...)``.
+    """
+    shape = (-1,) + (1,) * (np.ndim(f_plus) - 1)
+    hp, hm = np.reshape(h_plus, shape), np.reshape(h_minus, shape)
+    return 2 * (hm * f_plus + hp * f_minus - (hp + hm) * f0) / (hp * hm * (hp + hm))
+
+
 def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, n_redraws: int,
                    paired: bool = True, failed: list[dict[str, Any]] | None = None,
                    retry_failed: bool = False, executor: Executor | None = None, reference: bool = True
@@ -185,9 +198,7 @@ def gradient_noise(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float
     Jm = np.array([j_of_spectra(problem, y)[0] for y in y_minus])
     h_plus, h_minus = np.diag(plus) - u_opt, u_opt - np.diag(minus)
     with np.errstate(divide="ignore", invalid="ignore"):  # one-sided at a bound: no curvature there
-        curvature = np.where((h_plus > 0) & (h_minus > 0),
-                             2 * (h_minus * Jp + h_plus * Jm - (h_plus + h_minus) * J0)
-                             / (h_plus * h_minus * (h_plus + h_minus)), np.nan)
+        curvature = np.where((h_plus > 0) & (h_minus > 0), second_difference(J0, Jp, Jm, h_plus, h_minus), np.nan)
     return np.atleast_2d(np.cov(grads, rowvar=False)), curvature, float(np.std(j_opt, ddof=1))
 
 
