@@ -21,8 +21,11 @@ expected one (for a pair, the mean of its two elements: what a change of the
 pair together must match to first order) in % of the kind's admissible
 interval (the paper's error measure), "ok" within 5 %; nothing named in the
 nulls; the verdict (ok / warning / alarm / not assessable) of the named group
-under the config's ``limits:`` (:data:`LIMITS`) against the state of the
-expected value under the same limits, and in the nulls no warning or alarm.
+under the config's ``limits:`` (:data:`LIMITS`, the default precautionary
+decision: an interval across one level gives the more severe state, counted as
+borderline) against the state of the expected value under the same limits, and
+in the nulls no warning or alarm; verdicts milder and more severe than the
+truth's are counted apart.
 The reference (ratio 1) is the acceptance bar: >= 90 % right first, every
 null silent, every verdict right.
 
@@ -203,7 +206,8 @@ def score(generator: str, case: str, out: dict, width: float | None, verdicts: l
                 "verdict": "-", "expected_verdict": want, "verdict_ok": False}
     lo, hi = row["interval"]
     error = 100.0 * (row["value"] - truth) / width if width else float("nan")
-    mine = next((v.verdict for v in verdicts if v.name == row["group"]), "-")
+    named = next((v for v in verdicts if v.name == row["group"]), None)
+    mine = named.verdict if named is not None else "-"
     return {"right": row["group"] == group, "value_ok": bool(abs(error) <= 5.0), "error_percent": error,
             "covered": bool(lo <= truth <= hi), "named": row["group"], "value": row["value"],
             "covered_statistical": bool(min(row.get("interval_statistical", (lo, hi))) <= truth
@@ -213,7 +217,8 @@ def score(generator: str, case: str, out: dict, width: float | None, verdicts: l
             "interval": (lo, hi), "evidence": row["evidence"], "alternatives": [a["group"] for a in row["alternatives"]],
             "dropped": row.get("dropped_channels", []),
             "together": row["separable"] or len(row["members"]) > 1,
-            "verdict": mine, "expected_verdict": want, "verdict_ok": row["group"] == group and mine == want}
+            "verdict": mine, "borderline": bool(named is not None and named.borderline),
+            "expected_verdict": want, "verdict_ok": row["group"] == group and mine == want}
 
 
 SEVERITY = {"ok": 0, "warning": 1, "alarm": 2}
@@ -226,6 +231,13 @@ def milder(row: dict) -> bool:
     if want not in SEVERITY:
         return False
     return got == "-" or (got in SEVERITY and SEVERITY[got] < SEVERITY[want])
+
+
+def harsher(row: dict) -> bool:
+    """A degraded case whose verdict is a more severe state than its truth's (the costly error: an inspection
+    or a replacement that was not due), which the precautionary decision on a borderline interval risks."""
+    want, got = row["expected_verdict"], row["verdict"]
+    return want in SEVERITY and got in SEVERITY and SEVERITY[got] > SEVERITY[want]
 
 
 def kind_of(name: str) -> str:
@@ -339,7 +351,9 @@ def main(argv: list[str] | None = None) -> int:
           f"{sum(r['verdict_ok'] for r in degraded_rows)} of {len(degraded_rows)}, nulls "
           f"{sum(r['verdict_ok'] for r in nulls)} of {len(nulls)}); milder than the truth's state (ok or "
           f"warning for a worse one, nothing named for a degradation): "
-          f"{sum(milder(r) for r in degraded_rows)}; not assessable: "
+          f"{sum(milder(r) for r in degraded_rows)}; more severe than the truth's: "
+          f"{sum(harsher(r) for r in degraded_rows)}; borderline (the interval across one level, the more severe "
+          f"state given): {sum(bool(r.get('borderline')) for r in degraded_rows)}; not assessable: "
           f"{sum(r['verdict'] == 'not assessable' for r in degraded_rows)}")
     print(f"read as losses only (localisation.direction: decrease): right first "
           f"{100 * np.mean([r['right_decrease'] for r in degraded_rows]):.0f} %, nulls silent "
@@ -353,7 +367,8 @@ def main(argv: list[str] | None = None) -> int:
             r = next(r for r in rows if r["case"] == case and r["seed"] == seed)
             v = f"{r['value']:.3g} ({r['change_percent']:+.0f} %), error {r['error_percent']:+.1f} %, " \
                 if "value" in r else ""
-            cells.append(f"{r['named']} {v}verdict {r['verdict']}{'' if r['verdict_ok'] else ' (WRONG: expected ' + r['expected_verdict'] + ')'}")
+            cells.append(f"{r['named']} {v}verdict {r['verdict']}{' (borderline)' if r.get('borderline') else ''}"
+                         f"{'' if r['verdict_ok'] else ' (WRONG: expected ' + r['expected_verdict'] + ')'}")
         print(f"| {case} | " + " | ".join(cells) + " |")
     return 0
 

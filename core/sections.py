@@ -99,7 +99,9 @@ class Limits(Section):
     ``alarm: [-40, 30]`` alarms at 40 % below or 30 % above (either side may be null, a lone number is the
     side of its sign). A change at or beyond a level has that level's state; the alarm lies beyond the warning
     on each side. ``nominal`` (SI) replaces the simulator's nominal value as the verdict's reference;
-    ``label`` the plain-language name of the element in the summary.
+    ``label`` the plain-language name of the element in the summary. ``decision`` says how an interval
+    reaching across one level is decided: ``precautionary`` (the more severe state, marked borderline) or
+    ``strict`` (not assessable).
     """
 
     warning: Levels | None = Field(default=None, description="warning levels, % of nominal: a number or [lower, upper]")
@@ -107,6 +109,9 @@ class Limits(Section):
     nominal: float | None = Field(default=None, description="the nominal value the change is measured from, SI "
                                   "units (default: the simulator's nominal value)")
     label: str | None = Field(default=None, min_length=1, description="plain-language name of the element(s)")
+    decision: Literal["precautionary", "strict"] = Field(
+        default="precautionary", description="an interval reaching across one level: precautionary gives the "
+        "more severe state (borderline), strict gives not assessable")
 
     @field_validator("warning", "alarm", mode="before")
     @classmethod

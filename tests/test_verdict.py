@@ -26,9 +26,9 @@ from suspid.workflows.verdict import judge, rows_of, summary_line, table, verdic
 DAMPER = Limits(warning=-25, alarm=-40)
 
 
-def _judge(change, interval, trust="yes", identifiable=True, limits=DAMPER):
+def _judge(change, interval, trust="yes", identifiable=True, limits=DAMPER, decision="precautionary"):
     return judge(identifiable=identifiable, trust=trust, change=change, interval=interval,
-                 warning=limits.warning, alarm=limits.alarm)
+                 warning=limits.warning, alarm=limits.alarm, decision=decision)
 
 
 def test_a_damper_at_minus_30_percent_with_limits_minus_25_and_minus_40_warns():
@@ -40,11 +40,28 @@ def test_a_damper_at_minus_30_percent_with_limits_minus_25_and_minus_40_warns():
     assert _judge(+30.0, (25.0, 35.0))[0] == "ok"          # a one-sided (lower) limit leaves increases ok
 
 
-def test_an_interval_straddling_a_level_is_not_assessable_and_says_which_level():
-    verdict, rule = _judge(-38.0, (-44.0, -32.0))
+def test_an_interval_across_one_level_gives_the_more_severe_state_marked_borderline():
+    """Precautionary decision (the default): acceptance is shown by the whole interval, not presumed; the value
+    lying on the milder side does not make it milder."""
+    verdict, rule = _judge(-38.0, (-44.0, -32.0))          # value a warning, interval reaching the alarm level
+    assert verdict == "alarm" and rule.startswith("borderline") and "alarm level -40 %" in rule
+    assert "warning level" not in rule
+    verdict, rule = _judge(-24.0, (-28.0, -21.0))          # value ok, interval reaching the warning level
+    assert verdict == "warning" and "warning level -25 %" in rule
+
+
+def test_an_interval_across_one_level_is_not_assessable_with_the_strict_decision():
+    verdict, rule = _judge(-38.0, (-44.0, -32.0), decision="strict")
     assert verdict == "not assessable" and "alarm level -40 %" in rule and "warning" not in rule
-    verdict, rule = _judge(-26.0, (-30.0, -22.0))
+    verdict, rule = _judge(-26.0, (-30.0, -22.0), decision="strict")
     assert verdict == "not assessable" and "warning level -25 %" in rule
+
+
+def test_an_interval_across_two_levels_is_not_assessable_under_either_decision():
+    for decision in ("precautionary", "strict"):
+        verdict, rule = _judge(-30.0, (-45.0, -15.0), decision=decision)
+        assert verdict == "not assessable"
+        assert "warning level -25 %" in rule and "alarm level -40 %" in rule
 
 
 def test_not_trustworthy_or_not_identifiable_is_not_assessable_whatever_the_value():
@@ -95,11 +112,13 @@ def test_rows_from_a_result_kind_level_and_a_localisation_with_group_names():
     assert by["c_sec_y"].verdict == "not assessable" and "model inadequate" in by["c_sec_y"].rule
     assert by["k_sec_z"].verdict == "not assessable" and "flat J" in by["k_sec_z"].rule
     g2 = by["c_yaw[bogie2]"]
-    assert (g2.source, g2.nominal, g2.unit, g2.verdict) == ("localisation", 300e3, "N s/m", "not assessable")
+    assert (g2.source, g2.nominal, g2.unit, g2.verdict) == ("localisation", 300e3, "N s/m", "alarm")
+    assert g2.borderline and "alarm level -40 %" in g2.rule
     assert g2.change_percent == pytest.approx(-38.0) and g2.interval_percent == pytest.approx((-44.0, -32.0))
     assert g2.label == "bogie 2: yaw damper rate per damper" and g2.alternatives == ["c_yaw[bogie1]"]
     assert summary_line(g2).startswith("bogie 2: yaw damper rate per damper (`c_yaw[bogie2]`): -38 % "
-                                       "(interval -44 to -32 %), not assessable: the interval")
+                                       "(interval -44 to -32 %), alarm (borderline): replace (the interval "
+                                       "-44.0 to -32.0 % reaches across the alarm level -40 %)")
     g1 = by["c_yaw[bogie1,left]"]
     assert g1.nominal == 250e3 and g1.change_percent == pytest.approx(-52.0) and g1.verdict == "warning"
     assert g1.label.startswith("bogie 1, left: ")
@@ -149,6 +168,7 @@ def test_an_alarm_line_says_replace():
     ({"c_yaw": {}}, "limits.c_yaw", "give warning and/or alarm levels"),
     ({"c_yaw": {"warning": -25, "nominal": -3.0}}, "limits.c_yaw.nominal", "opposite sign"),
     ({"c_yaw": {"warning": -25, "alarms": -40}}, "limits.c_yaw.alarms", "unknown key"),
+    ({"c_yaw": {"warning": -25, "decision": "cautious"}}, "limits.c_yaw.decision", "precautionary"),
 ])
 def test_bad_limits_are_one_line_errors_naming_the_key(tmp_path, capsys, limits, key, words):
     cfg = tmp_path / "bad.yaml"

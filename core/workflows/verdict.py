@@ -15,8 +15,14 @@ The rules, in order (the first that applies gives the verdict, and its wording i
 1. not identifiable -> **not assessable** (its value is not a finding);
 2. not trustworthy under model error -> **not assessable**;
 3. no nominal value, or no limits for it -> **not assessable**;
-4. the interval reaches across a level (its ends lie in different states) -> **not assessable**, naming the level;
-5. otherwise the state of the whole interval: **ok**, **warning** (at or beyond a warning level) or **alarm**
+4. the interval reaches across two levels (from ok to alarm) -> **not assessable**: the data do not tell the
+   three states apart;
+5. the interval reaches across one level (its ends lie in two adjacent states) -> by the limits' ``decision``:
+   ``precautionary`` (the default) gives the more severe of the two states, marked *borderline*, naming the
+   level: acceptance must be shown, not presumed (the conformity decision rule of ISO 14253-1, where a
+   measurement proves conformity only when its whole uncertainty interval lies inside the specification);
+   ``strict`` gives **not assessable**;
+6. otherwise the state of the whole interval: **ok**, **warning** (at or beyond a warning level) or **alarm**
    (at or beyond an alarm level). Where trust was *not assessed* (the model-error checks did not all run),
    the verdict stands on the sampling interval and the rule says so.
 
@@ -36,13 +42,15 @@ from suspid.interfaces import Parameter
 from suspid.sections import Limits
 from suspid.workflows.trust import trust_word
 
-__all__ = ["VERSION", "STATES", "ACTIONS", "VerdictRow", "verdict_rows", "verdict_block", "rows_of",
+__all__ = ["VERSION", "STATES", "DECISIONS", "ACTIONS", "VerdictRow", "verdict_rows", "verdict_block", "rows_of",
            "zone", "judge", "format_value", "table", "summary_line", "verdict_markdown"]
 
 VERSION = 1
 """Version of ``result.json``'s ``verdict`` block (bumped when a field changes meaning or goes)."""
 
 STATES = ("ok", "warning", "alarm", "not assessable")
+DECISIONS = ("precautionary", "strict")
+"""How an interval reaching across one level is decided (``limits.<name>.decision``; rule 5)."""
 ACTIONS = {"ok": "no action", "warning": "inspect at the next maintenance", "alarm": "replace",
            "not assessable": "no verdict"}
 """What each state asks of the maintenance engineer, as the summary line words it."""
@@ -84,6 +92,7 @@ class VerdictRow:
     w_ref: float | None = None
     error_percent: float | None = None
     alternatives: list[str] = field(default_factory=list)
+    borderline: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able (tuples as lists)."""
@@ -95,7 +104,8 @@ class VerdictRow:
         tup = lambda v: None if v is None else tuple(v)  # noqa: E731
         return cls(**{**data, "interval": tuple(data["interval"]), "interval_percent": tup(data["interval_percent"]),
                       "warning": tup(data["warning"]), "alarm": tup(data["alarm"]),
-                      "alternatives": list(data.get("alternatives", []))})
+                      "alternatives": list(data.get("alternatives", [])),
+                      "borderline": bool(data.get("borderline", False))})
 
     @property
     def summary(self) -> str:
@@ -137,7 +147,7 @@ MISFIT = ("; the interval holds the segments' spread and the misfit the localisa
 
 def judge(*, identifiable: bool, trust: str, change: float | None, interval: tuple[float, float] | None,
           warning: tuple | None, alarm: tuple | None, reasons: Sequence[str] = (),
-          caveat: str = SAMPLING) -> tuple[str, str]:
+          caveat: str = SAMPLING, decision: str = "precautionary") -> tuple[str, str]:
     """``(verdict, rule)`` by the rules of the module docstring.
 
     :param change: the identified change in % of nominal (None: no nominal value).
@@ -145,6 +155,7 @@ def judge(*, identifiable: bool, trust: str, change: float | None, interval: tup
     :param reasons: why the component is not identifiable or not trustworthy (quoted in the rule).
     :param caveat: what the interval holds, appended to a verdict whose trust is not "yes" (:data:`SAMPLING`, or
         :data:`MISFIT` for a localisation whose interval holds its fit's misfit).
+    :param decision: one of :data:`DECISIONS`, for an interval reaching across one level.
     """
     why = f": {'; '.join(reasons)}" if reasons else ""
     if not identifiable:
@@ -155,12 +166,19 @@ def judge(*, identifiable: bool, trust: str, change: float | None, interval: tup
         return "not assessable", "no nominal value to measure the change from"
     if warning is None and alarm is None:
         return "not assessable", "no limits given for it (limits: in the config)"
+    if decision not in DECISIONS:
+        raise ValueError(f"decision must be one of {', '.join(DECISIONS)}, not {decision!r}")
     lo, hi = min(interval), max(interval)
     states = {zone(lo, warning, alarm), zone(change, warning, alarm), zone(hi, warning, alarm)}
-    if len(states) > 1:
-        crossed = _levels_between(lo, hi, warning, alarm)
-        return "not assessable", (f"the interval {lo:+.1f} to {hi:+.1f} % reaches across "
-                                   f"{' and '.join(crossed) or 'a level'}")
+    crossed = _levels_between(lo, hi, warning, alarm)
+    across = f"the interval {lo:+.1f} to {hi:+.1f} % reaches across {' and '.join(crossed) or 'a level'}"
+    if len(states) > 2 or (len(states) > 1 and decision == "strict"):
+        return "not assessable", across
+    if len(states) == 2:
+        state = max(states, key=("ok", "warning", "alarm").index)
+        rule = (f"borderline: {across}; precautionary decision: the more severe state, {state}, until a "
+                f"measurement shows the milder one")
+        return state, rule + (caveat if trust != "yes" else "")
     state = states.pop()
     levels = [f"{s} {', '.join(f'{v:+g} %' for v in lv if v is not None)}"
               for s, lv in (("warning", warning), ("alarm", alarm)) if lv is not None]
@@ -226,18 +244,20 @@ def _row(name: str, value: float, interval: Sequence[float], identifiable: bool,
     nominal = nominal_of(name, parameters, limits)
     lim = limits_for(name, limits)
     warning, alarm = (lim.warning, lim.alarm) if lim is not None else (None, None)
+    decision = lim.decision if lim is not None else "precautionary"
     change = interval_pc = None
     if nominal is not None:
         change = _percent(value, nominal)
         a, b = (_percent(v, nominal) for v in interval)
         interval_pc = (min(a, b), max(a, b))
     verdict, rule = judge(identifiable=identifiable, trust=trust, change=change, interval=interval_pc,
-                          warning=warning, alarm=alarm, reasons=reasons, caveat=caveat)
+                          warning=warning, alarm=alarm, reasons=reasons, caveat=caveat, decision=decision)
     return VerdictRow(name=name, label=label_of(name, parameters, limits), unit=unit, nominal=nominal,
                       value=float(value), interval=(float(interval[0]), float(interval[1])), change_percent=change,
                       interval_percent=interval_pc, identifiable=bool(identifiable), trust=trust,
                       warning=warning, alarm=alarm, verdict=verdict, rule=rule, source=source, w_ref=w_ref,
-                      error_percent=error, alternatives=list(alternatives))
+                      error_percent=error, alternatives=list(alternatives),
+                      borderline=rule.startswith("borderline"))
 
 
 def _group_name(item: Any) -> str:
@@ -351,7 +371,7 @@ def table(rows: Sequence[VerdictRow], *, with_reference: bool = False, with_rule
             if r.w_ref is not None and r.nominal:
                 ref += f" ({_percent(r.w_ref, r.nominal):+.1f} %)"
             row += [ref, "-" if r.error_percent is None else f"{r.error_percent:.2f}"]
-        row += ["yes" if r.identifiable else "no", r.trust, r.verdict]
+        row += ["yes" if r.identifiable else "no", r.trust, r.verdict + (" (borderline)" if r.borderline else "")]
         row += [_levels_text(r), r.rule] if with_rule else []
         cells.append(row)
     return header, cells
@@ -368,7 +388,9 @@ def summary_line(row: VerdictRow, markdown: bool = True) -> str:
     if row.verdict == "not assessable":
         text += f", not assessable: {row.rule}"
     else:
-        text += f", {row.verdict}: {ACTIONS[row.verdict]}"
+        text += f", {row.verdict}{' (borderline)' if row.borderline else ''}: {ACTIONS[row.verdict]}"
+        if row.borderline:
+            text += f" ({row.rule.split('; precautionary')[0].removeprefix('borderline: ')})"
         if row.trust != "yes":
             text += f" (trust under model error {row.trust})"
     if row.alternatives:
@@ -388,6 +410,8 @@ def verdict_markdown(rows: Sequence[VerdictRow], markdown_table, *, with_referen
              markdown_table(header, cells), "",
              "Change and interval in % of the nominal value (the simulator's, or `limits.<name>.nominal`); "
              "levels from the config's `limits:` (warning and alarm, % of nominal). *not assessable*: not "
-             "identifiable, not trustworthy under model error, no limits, or an interval reaching across a "
-             "level (the rule column says which).", ""]
+             "identifiable, not trustworthy under model error, no limits, or an interval reaching across two "
+             "levels (or one, with `decision: strict`); *borderline*: the interval reaches across one level and "
+             "the verdict is the more severe state (`decision: precautionary`, the default); the rule column "
+             "says which.", ""]
     return "\n".join(lines)
