@@ -299,7 +299,9 @@ def test_figures_draw_every_channel_and_the_limits(tmp_path, monkeypatch):
     assert all(len(ax.lines) == 4 and len(ax.collections) == 1 for ax in shown)   # 2 means, 2 quantiles; a band
     files.pyplot().close(fig)
 
-    rows = verdict_rows(_result(w_ref={"c_yaw": 2e5, "c_sec_y": 3e4, "k_sec_z": 3e5}), PARAMETERS,
+    rows = verdict_rows(_result(w_ref={"c_yaw": 2e5, "c_sec_y": 3e4, "k_sec_z": 3e5},   # c_yaw -29 to -23 %: borderline
+                                interval={"c_yaw": [213e3, 231e3], "c_sec_y": [27e3, 31e3], "k_sec_z": [150e3, 250e3]}),
+                        PARAMETERS,
                         {"c_yaw": DAMPER, "c_sec_y": DAMPER, "k_sec_z": Limits(warning=[-15, 15], alarm=[-30, 30])})
     report.figure_verdict(tmp_path / "f2.png", rows)
     ax = figures["f2.png"].axes[0]
@@ -320,7 +322,9 @@ def test_figures_draw_every_channel_and_the_limits(tmp_path, monkeypatch):
         pytest.approx((-57.142857, -28.571429))   # k_sec_z's interval in % of 350 kN/m
     markers = [coll for coll in ax.collections if coll.get_offsets().shape[0] == 1 and not hasattr(coll, "get_segments")]
     assert len(markers) == 6   # a value and a w_ref per parameter
-    assert [t.get_text() for t in ax.texts] == [r.verdict for r in rows]
+    assert [t.get_text() for t in ax.texts] == [r.verdict + ("\n(borderline)" if r.borderline else "")
+                                                for r in rows]
+    assert any(r.borderline for r in rows) and "(borderline)" in " ".join(t.get_text() for t in ax.texts)
     files.pyplot().close(figures["f2.png"])
 
 

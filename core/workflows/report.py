@@ -152,13 +152,14 @@ def figure_verdict(path: Path, rows: Sequence[VerdictRow]) -> Path:
             ax.scatter([i + 0.2], [100 * (r.w_ref / r.nominal - 1)], marker="D", s=28, color="black", zorder=5)
             seen["w_ref"] = plt.Line2D([], [], ls="", marker="D", ms=5, color="black",
                                        label="w_ref (the experiment's truth)")
-        ax.text(i, 1.01, r.verdict, transform=ax.get_xaxis_transform(), ha="center", va="bottom", fontsize=8,
+        ax.text(i, 1.01, r.verdict + ("\n(borderline)" if r.borderline else ""), transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=8,
                 color=VERDICT_COLOURS[r.verdict], fontweight="bold")
     ax.set_xticks(range(len(rows)), [f"{r.name}\n{format_value(r.nominal, r.unit)}" for r in rows], fontsize=8)
     ax.set_xlim(-0.6, len(rows) - 0.4)
     ax.set_ylabel("change from nominal (% of nominal)")
     ax.set_title("Identified parameters against their nominal values and limits (nominal value under each name)",
-                 fontsize=9, pad=18)
+                 fontsize=9, pad=28 if any(r.borderline for r in rows) else 18)
     ax.grid(alpha=0.3, axis="y")
     order = ["nominal", "warning level", "alarm level", *(f"verdict {v}" for v in VERDICT_COLOURS), *STYLE_LABELS,
              "w_ref"]
