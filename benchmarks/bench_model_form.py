@@ -148,13 +148,27 @@ def summarise(cfg: Path) -> dict:
     case = cfg.parent
     res = json.loads((case / "runs" / cfg.stem / "result.json").read_text())
     truth = json.loads((case / "measurement" / "truth.json").read_text())["parameters"]
+    nc = (res.get("model_error") or {}).get("no_change") or {}
+    w_reported = res.get("w_corrected", res["w_opt"])   # the reported value: bias-corrected where the checks correct it
+    intervals = res["interval"]
+    if "reported" not in nc and nc.get("status") == "done" and not nc.get("rejected") \
+            and (res.get("interval_method") or {}).get("widened_by_model_error"):
+        # a run written before the no-change report (suspid.workflows.no_change.reported_correction): the values
+        # reported are w0's and the same intervals are centred there
+        w0 = json.loads((case / "reference" / "truth.json").read_text())["parameters"]
+        intervals = {n: [a + w0[n] - w_reported[n], b + w0[n] - w_reported[n]] for n, (a, b) in intervals.items()}
+        w_reported = {n: w0[n] for n in res["parameters"]}
+    estimate = (((res.get("model_error") or {}).get("correction") or {}).get("w_corrected")
+                or res.get("w_corrected", res["w_opt"]))   # the (corrected) estimate, before any no-change report
     rows = {}
     for n in res["parameters"]:
         lo, hi = res["bounds"][n]
         t = truth[n]
-        iv = res["interval"][n]
-        w = res.get("w_corrected", res["w_opt"])   # the reported value: bias-corrected where the checks correct it
-        rows[n] = {"error": 100 * (w[n] - t) / (hi - lo), "identifiable": res["identifiable"][n],
+        iv = intervals[n]
+        w = w_reported
+        rows[n] = {"error": 100 * (w[n] - t) / (hi - lo), "estimate_error": 100 * (estimate[n] - t) / (hi - lo),
+                   "unchanged": nc.get("status") == "done" and not nc.get("rejected", True),
+                   "identifiable": res["identifiable"][n],
                    "trustworthy": res.get("trustworthy", {}).get(n, True), "in_interval": iv[0] <= t <= iv[1],
                    "in_sampling_interval": res["interval_sampling"][n][0] <= t <= res["interval_sampling"][n][1],
                    "half_width": 50 * (iv[1] - iv[0]) / (hi - lo),
@@ -236,6 +250,11 @@ def main(argv: list[str] | None = None) -> None:
           f"({100 * len(covered) / max(len(reported), 1):.0f} %)")
     print(f"  with w_ref = w0, trustworthy components moving > 3 %: {len(w0_moves)} "
           + ", ".join(f"{c}/{o} {n} {r['error']:+.1f}" for _, c, o, n, r in w0_moves))
+    own = [x for x in reported if x[0] == "w0" and abs(x[4]["estimate_error"]) > 3.0]
+    unchanged = sum(1 for x in all_rows if x[4]["unchanged"] and x[3] == names[0])
+    print(f"    (runs reported as unchanged, w0 not rejected: {unchanged}; the estimates themselves, before that "
+          f"report, moving > 3 %: {len(own)} "
+          + ", ".join(f"{c}/{o} {n} {r['estimate_error']:+.1f}" for _, c, o, n, r in own) + ")")
     print(f"flagged: {len(flagged)}")
     for _, c, o, n, r in flagged:
         print(f"  {c}/{o} {n}: error {r['error']:+.1f} %; " + "; ".join(x[:140] for x in r["reasons"]))

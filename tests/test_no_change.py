@@ -127,3 +127,26 @@ def test_the_corrected_null_is_where_w_opt_lies_when_nothing_changed(damaged):
     assert none.delta_j == plain.delta_j and "against_w0" not in report
     off = opts.model_copy(update={"no_change": False})
     assert no_change_check(problem, ledger, u_opt, off, False, None, None)[0] is None
+
+
+def test_where_w0_is_not_rejected_the_reference_values_are_reported_and_the_interval_holds_the_estimate():
+    """Known answers: the reported shift moves w_opt onto w0 exactly when the test ran and kept w0, and the
+    interval that apply_no_change widened, centred there, still holds the (corrected) estimate; a rejected w0,
+    the 'estimate' choice or a test that did not run leave the correction as it was."""
+    from suspid.workflows.no_change import reported_correction
+
+    u_opt, u0 = np.array([0.55, 0.40, 0.62]), np.array([0.50, 0.50, 0.50])
+    corr = np.array([-0.01, 0.02, 0.0])
+    kept = {"status": "done", "rejected": False}
+    shift = reported_correction(kept, u_opt, corr, u0, "reference")
+    assert np.allclose(u_opt + shift, u0) and kept["reported"].startswith("the reference date's values")
+    assert kept["estimate_minus_w0_percent"] == pytest.approx([4.0, -8.0, 12.0])
+    sd = np.full(3, 0.01)
+    bound = apply_no_change(NoChange(0.1, 0.1, False, 32, 2.0), ["a", "b", "c"], sd, np.zeros(3),
+                            u_opt + corr - u0, 2.0, 0.08, {})
+    half = bias_aware_half_width(sd, bound, 2.0)
+    assert np.all(np.abs(u_opt + corr - u0) <= half + 1e-9)            # centred on w0, it holds the estimate
+    for report, how in (({"status": "done", "rejected": True}, "reference"), (dict(kept), "estimate"),
+                        ({"status": "disabled"}, "reference")):
+        assert reported_correction(report, u_opt, corr, u0, how) is corr
+    assert reported_correction({"status": "done", "rejected": True}, u_opt, None, u0, "reference") is None

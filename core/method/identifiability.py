@@ -125,6 +125,10 @@ class ModelErrorOptions(Section):
         default=True, description="test w = w0 on the measurement date (J(w_opt) - J(w0) against its bootstrap "
         "spread, one simulation at w0); where the data do not reject w0, every interval is widened to hold it "
         "(suspid.workflows.no_change)")
+    no_change_report: Literal["reference", "estimate"] = Field(
+        default="reference", description="where the no-change test does not reject w0: 'reference' reports the "
+        "reference date's values (no change the data show; each interval holds the estimate too, which stays in "
+        "w_opt and the correction's report), 'estimate' reports the (bias-corrected) estimate")
     calibration: CalibrationOptions = Field(default_factory=CalibrationOptions)
     self_check: SelfCheckOptions = Field(default_factory=SelfCheckOptions)
     adequacy: AdequacyOptions = Field(default_factory=AdequacyOptions)

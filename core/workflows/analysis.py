@@ -34,7 +34,7 @@ from suspid.workflows.nuisance import model_parameter_check
 from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import (calibrate_at_reference, calibration_result, linearised_model_error,
                                          model_parameters)
-from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test
+from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test, reported_correction
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import (CHECK_LABELS, BiasSources, checks_report, combine_sources, correction_report,
                                     trust_states)
@@ -246,6 +246,10 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Norm
     phases.done()
     interval_unit = verdict.interval_unit
     correction = trust.get("correction")
+    no_change = trust["report"].get("no_change") or {}
+    if opts.model_error.widen and trust["bias_bound"] is not None and no_change.get("status") == "done":
+        u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))   # w0 not rejected: unchanged
+        correction = reported_correction(no_change, u_opt, correction, u0, opts.model_error.no_change_report)
     u_est = u_opt if correction is None else np.clip(u_opt + correction, 0, 1)   # bias-corrected (linearised)
     if opts.model_error.widen and trust["bias_bound"] is not None:
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)

@@ -20,7 +20,11 @@ standard deviations (the intervals' own level). When it is not rejected, w0
 belongs to what the data support: every component's interval is widened until
 it holds w0's value (the test inverted at w0), and a component whose interval
 then exceeds the precision a finding must have (``max_half_width``) is not
-reported, with the reason.
+reported, with the reason. And what is reported is then the reference date's state
+(``identifiability.model_error.no_change_report: reference``, the default): a change the data do not show is
+not reported as one, while the estimate stays in ``w_opt`` and the interval, centred on w0, still holds it.
+A maintenance engineer reads "nothing changed" instead of values that drift within their intervals from date
+to date; ``estimate`` keeps the estimate as the reported value.
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem, segment_speeds
 
-__all__ = ["NoChange", "no_change_test", "reach_bound", "apply_no_change"]
+__all__ = ["NoChange", "no_change_test", "reach_bound", "apply_no_change", "reported_correction"]
 
 
 @dataclass
@@ -134,3 +138,25 @@ def apply_no_change(test: NoChange | None, names: list[str], sd: np.ndarray, bou
                 f"date (w0 rejected beyond "
                 f"{test.n_sigmas:g}), and w0 lies {100 * abs(distance[k]):.1f} % of the interval away")
     return new
+
+
+def reported_correction(report: dict[str, Any], u_opt: np.ndarray, correction: np.ndarray | None, u0: np.ndarray,
+                        how: str) -> np.ndarray | None:
+    """The shift from w_opt to the reported value ``(q,)`` (normalised), given the no-change test's ``report``
+    (``result.json``'s ``model_error.no_change``): where it ran and did not reject w0 and ``how`` is
+    ``"reference"``, the shift to w0 itself (``u0 - u_opt``), and the report says so (``reported``); otherwise
+    ``correction`` unchanged (None: no correction).
+
+    The interval stays valid: :func:`apply_no_change` widened it to reach from the estimate to w0, so centred on w0
+    it holds the estimate."""
+    if how != "reference" or report.get("status") != "done" or report.get("rejected", True):
+        if report.get("status") == "done":
+            report["reported"] = "the estimate" + (": w0 is rejected" if report.get("rejected") else
+                                                   " (identifiability.model_error.no_change_report: estimate)")
+        return correction
+    u_opt, u0 = np.asarray(u_opt, float), np.asarray(u0, float)
+    before = u_opt if correction is None else np.clip(u_opt + np.asarray(correction, float), 0, 1)
+    report["reported"] = ("the reference date's values: the data do not show a change (w0 not rejected); the "
+                          "intervals, centred on w0, hold the estimate")
+    report["estimate_minus_w0_percent"] = [float(100 * d) for d in before - u0]
+    return u0 - u_opt

@@ -343,6 +343,12 @@ def model_error_section(result: dict[str, Any]) -> str:
                      f"the data do not reject w0 (within {nc['n_sigmas']:g}), so every interval is widened to hold "
                      f"w0's value; a component w0 lies further from than ± {me.get('max_half_width_percent', 8):.0f} "
                      f"% is not reported as a finding.")]
+        if str(nc.get("reported", "")).startswith("the reference date"):
+            out += ["", "**No change shown: the values reported are the reference date's** (the column "
+                        "\"reported\" of the table; `identifiability.model_error.no_change_report: estimate` "
+                        "reports the estimate instead). The estimate lies " + ", ".join(
+                            f"{n} {d:+.1f} %" for n, d in zip(names, nc.get("estimate_minus_w0_percent", [])))
+                    + " of the admissible interval from w0, inside the intervals."]
     bound = me.get("bias_bound_percent")
     corr = me.get("correction")
     if bound and corr:
@@ -429,7 +435,10 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
                 "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
                 trust_cell(result, n), f"{result['sensitivity']['total_sobol'][n]:.3f}"]
         rows.append(row)
-    header = ["parameter", "unit", "w_opt"] + (["bias-corrected"] if "w_corrected" in result else []) \
+    unchanged = str(((result.get("model_error") or {}).get("no_change") or {}).get("reported", "")).startswith(
+        "the reference date")
+    header = ["parameter", "unit", "w_opt"] + ([("reported (unchanged: w0)" if unchanged else "bias-corrected")]
+                                               if "w_corrected" in result else []) \
         + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
         + ["interval", "identifiable", "trustworthy under model error", "total Sobol index"]
     refine = ""
@@ -447,7 +456,8 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
                    "reference date give (the error column is its error); with their posterior spread added in "
                    "quadrature, and the reference-date self-check's bias and half the data groups' spread, "
                    "combined in quadrature, as a bound on the bias (Armstrong and Kolesár's fixed-length interval)")
-    centre = "the bias-corrected value" if "w_corrected" in result else "w_opt"
+    centre = ("w0 (no change shown)" if unchanged else "the bias-corrected value") if "w_corrected" in result \
+        else "w_opt"
     text = f"""# suspid run `{config.name}`
 
 {verdict_markdown(rows_of(result), markdown_table, with_reference="w_ref" in result)}
