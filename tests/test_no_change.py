@@ -150,3 +150,19 @@ def test_where_w0_is_not_rejected_the_reference_values_are_reported_and_the_inte
                         ({"status": "disabled"}, "reference")):
         assert reported_correction(report, u_opt, corr, u0, how) is corr
     assert reported_correction({"status": "done", "rejected": True}, u_opt, None, u0, "reference") is None
+
+
+def test_the_terminal_and_report_line_says_no_change_was_shown_only_when_it_was():
+    from suspid.workflows.report import no_change_line
+
+    nc = {"status": "done", "rejected": False, "z": 1.24, "n_sigmas": 2.0}
+    from suspid.workflows.no_change import reported_correction
+
+    reported_correction(nc, np.array([0.46, 0.5]), None, np.array([0.5, 0.5]), "reference")
+    line = no_change_line({"parameters": ["k_sec_z", "c_yaw"], "model_error": {"no_change": nc}})
+    assert line.startswith("No change shown since the reference date") and "z = 1.2" in line
+    assert "k_sec_z -4.0 %, c_yaw +0.0 %" in line
+    rejected = {"status": "done", "rejected": True, "z": 9.0, "n_sigmas": 2.0}
+    reported_correction(rejected, np.array([0.46, 0.5]), None, np.array([0.5, 0.5]), "reference")
+    assert no_change_line({"parameters": ["k_sec_z", "c_yaw"], "model_error": {"no_change": rejected}}) is None
+    assert no_change_line({"parameters": ["k_sec_z"]}) is None

@@ -254,6 +254,18 @@ def trust_cell(result: dict[str, Any], name: str) -> str:
     return "*not assessed*" if word == "not assessed" else word
 
 
+def no_change_line(result: dict[str, Any]) -> str | None:
+    """One line where the no-change test kept w0 and the values reported are the reference date's (None
+    otherwise): the test's z and how far the estimates lie from w0 (% of the admissible interval)."""
+    nc = (result.get("model_error") or {}).get("no_change") or {}
+    if not str(nc.get("reported", "")).startswith("the reference date"):
+        return None
+    moves = ", ".join(f"{n} {d:+.1f} %" for n, d in zip(result["parameters"], nc.get("estimate_minus_w0_percent", [])))
+    return (f"No change shown since the reference date: the no-change test keeps w0 (z = {nc['z']:.1f}, within "
+            f"{nc['n_sigmas']:g}), so the values reported are the reference date's; the estimates lie {moves} of "
+            f"the admissible interval from them, inside the intervals.")
+
+
 def checks_lines(result: dict[str, Any]) -> list[str]:
     """Which model-error checks ran and which did not, and why (from ``result["model_error"]["checks"]``)."""
     checks = (result.get("model_error") or {}).get("checks")
@@ -461,6 +473,7 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
     text = f"""# suspid run `{config.name}`
 
 {verdict_markdown(rows_of(result), markdown_table, with_reference="w_ref" in result)}
+{(no_change_line(result) or "") + (chr(10) if no_change_line(result) else "")}
 ## Identification
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
