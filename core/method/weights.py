@@ -72,7 +72,7 @@ def efficient_weights_from_moments(V: np.ndarray, c: np.ndarray, criterion: str 
 
     :param V: ``(q, n, n)`` gradient covariance of the n channels along each of the q components (normalised u).
     :param c: ``(q, n)`` mean curvature of each channel along each component.
-    :param criterion: ``trace`` Σ_k var_k (the brief's trace: flat components weigh most) or ``log`` Σ_k log var_k
+    :param criterion: ``trace`` Σ_k var_k (the flattest components weigh most) or ``log`` Σ_k log var_k
         (every component alike, invariant to each component's scale).
     :param shrink: λ in [0, 1]: α = (1 − λ) α* + λ/n, toward equal weights (against fitting the replicates' noise).
     :param keep_share: ρ in [0, 1]: every component keeps at least ρ times its equal-weight share of the

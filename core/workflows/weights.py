@@ -13,7 +13,7 @@ date's data when it is chosen.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from suspid.infra.ledger import Ledger
 from suspid.interfaces import Executor
 from suspid.method.weights import efficient_weights
 
+if TYPE_CHECKING:   # the problem module imports this one inside build_problem
+    from suspid.workflows.problem import Problem
+
 #: the criterion, shrinkage toward equal weights and kept share of each component's curvature used by
 #: ``objective.weights: efficient`` (chosen on three runs of the independent trains: benchmarks/RESULTS.md)
 CRITERION = "trace"
@@ -29,7 +32,7 @@ SHRINK = 0.0
 KEEP_SHARE = 0.75
 
 
-def reference_channel_replicates(problem, ledger: Ledger, h: float, n_redraws: int, paired: bool = True,
+def reference_channel_replicates(problem: "Problem", ledger: Ledger, h: float, n_redraws: int, paired: bool = True,
                                  executor: Executor | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Per replicate, component and channel, the gradient and curvature of Ψ_ch at w0 on the reference date.
 
@@ -74,7 +77,7 @@ def reference_channel_replicates(problem, ledger: Ledger, h: float, n_redraws: i
     return np.array(G), np.array(C), len(points)
 
 
-def reference_efficient_weights(problem, ledger: Ledger, executor: Executor | None = None,
+def reference_efficient_weights(problem: "Problem", ledger: Ledger, executor: Executor | None = None,
                                 criterion: str = CRITERION, shrink: float = SHRINK, keep_share: float = KEEP_SHARE
                                 ) -> tuple[np.ndarray, dict[str, Any]]:
     """α of eq. 5 for ``objective.weights: efficient`` and its record for ``result.json``.
