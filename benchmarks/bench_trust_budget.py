@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> None:
                     print(f"\n# generator {generator}, seed {seed}, {w_ref}, {objective}", flush=True)
                     MF.main([str(a.out / generator), "--generator", generator, "--seeds", seed, "--w-refs", w_ref,
                              "--objectives", objective, "--segments", a.segments, "--jobs", "1",
-                             "--compare-methods"])
+                             "--compare-methods", "--weights", "equal"])   # the setting its figures were measured at
                     cfgs.append(a.out / generator / f"seed{seed}-{w_ref}" / f"{objective}.yaml")
     print("\n# both generators", flush=True)
     done = [c for c in cfgs if (c.parent / "runs" / c.stem / "compare_methods.json").exists()]

@@ -36,6 +36,7 @@ from suspid.infra.seeds import seed_for
 from suspid.method.floor import density_problem
 from suspid.method.identifiability import IdentifiabilityOptions
 from suspid.method.objective import validate_weights
+from suspid.method.weights import EFFICIENT_NEEDS_REFERENCE
 from suspid.method.spectra import SpectraOptions
 from suspid.optimize.design import DesignOptions, default_n_initial
 from suspid.optimize.ego import EGOOptions
@@ -414,6 +415,9 @@ def check_config_plugins(config: Config) -> None:
     check_limits(config, simulator)
     channels = simulator.channels()
     channel_weights(config, channels)
+    if config.objective.weights == "efficient" and (
+            config.noise.path is not None if config.data.source == "experiment" else config.noise.reference is None):
+        raise config.error(EFFICIENT_NEEDS_REFERENCE, "objective.weights")
     figure_channel(config, channels)
     problem = density_problem(config.noise.sensor_noise_density, channels)
     if problem is not None:

@@ -42,10 +42,12 @@ class SimulatorSection(PluginSection):
 
 class ObjectiveSection(PluginSection):
     plugin: str = "overlap"
-    weights: list[float] | dict[str, float] | Literal["reference"] | None = Field(
+    weights: list[float] | dict[str, float] | Literal["reference", "efficient"] | None = Field(
         default=None, description="α_k of eq. 5: a list in channel order or channel -> weight; 'reference': "
         "from the noise model B, down-weighting the channels the model misses most at the reference date; "
-        "default 1/n")
+        "'efficient': estimating-equation weights chosen at the reference date at w0 (2q simulations there) "
+        "to narrow the components' sampling intervals, down-weighting channels whose gradient is noisy or "
+        "whose curvature is small or unstable; default 1/n")
     noise_draws: int = Field(
         default=1, ge=1, le=64, description="J averaged over this many independent draws of the noise paths b_i "
         "(each J of eq. 5 with its own draw, the same draws at every w: common random numbers); the draw of the "

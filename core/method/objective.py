@@ -53,7 +53,7 @@ def validate_weights(weights: Sequence[float] | Mapping[str, float] | None, chan
     n = len(channels)
     if n == 0:
         raise ConfigError("there are no channels to weight", key=key)
-    if weights is None or (isinstance(weights, str) and weights == "reference"):  # set from B: reference_weights
+    if weights is None or (isinstance(weights, str) and weights in ("reference", "efficient")):  # set at the reference date
         return np.full(n, 1.0 / n)
     if isinstance(weights, abc.Mapping):
         unknown = [str(name) for name in weights if str(name) not in channels]

@@ -168,6 +168,7 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
         # a plain simulation's wall time: the evaluations asked one at a time, after the design's batch
         walls = [ev.wall_time_s for ev in ledger.evaluations("ok") if ev.wall_time_s][int(ego.n_initial):]
         out.jacobian = model.summary(float(np.median(walls)) if walls else None)
+    out.objective_weights = problem.weights_record
     floor = problem.noise_model.floor_
     if floor is not None:
         out.noise_floor = {"mode": config.noise.floor if config.noise.path is None else "file",

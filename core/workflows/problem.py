@@ -18,7 +18,7 @@ run ledger, so that a resumed run does not simulate them again.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property, partial
 from pathlib import Path
 from typing import Any, Callable, Collection, Sequence
@@ -39,6 +39,7 @@ from suspid.infra.seeds import seed_for
 from suspid.interfaces import Executor, Objective, Response, Simulator, TrackSegment
 from suspid.method.noise import NoiseModel, fit_noise_model, modelled_spectra
 from suspid.method.objective import ObjectiveFunction, reference_weights
+from suspid.method.weights import EFFICIENT_NEEDS_REFERENCE
 from suspid.method.spectra import SpectraOptions, compute_spectra, grid_lines
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
@@ -107,6 +108,7 @@ class Problem:
     reference_segments: list[TrackSegment] = field(default_factory=list)  # the reference date's track
     w0: dict[str, float] = field(default_factory=dict)  # nominal values of the identified parameters (SI)
     b_more: np.ndarray | None = None
+    weights_record: dict[str, Any] | None = None   # how α was chosen (``objective.weights: efficient``)
 
     @property
     def noise_paths(self) -> np.ndarray:
@@ -335,6 +337,7 @@ def cached_spectra(ledger: Ledger, executor: Executor | None, jobs: Sequence[tup
     return [found[key] for key, _, _ in jobs]
 
 
+
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None,
                   executor: Executor | None = None) -> Problem:
     """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3).
@@ -450,11 +453,22 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     objective = objective_cls(**config.objective.options)
     weights = reference_weights(noise_model) if config.objective.weights == "reference" \
         else channel_weights(config, channels)
-    data_identity = stable_hash("data", array_digest(y_mes, b, *([] if b_more is None else [b_more])),
-                                segments_digest(segments),
-                                config.objective.plugin, config.objective.options, weights.tolist(),
-                                spectra_options.model_dump())
-    return Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
-                   channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
-                   data_identity=data_identity, w_ref=w_ref, reference=reference, noise_model=noise_model,
-                   reference_segments=reference_segments, w0=w0, b_more=b_more)
+
+    def identity(alpha: np.ndarray) -> str:
+        return stable_hash("data", array_digest(y_mes, b, *([] if b_more is None else [b_more])),
+                           segments_digest(segments),
+                           config.objective.plugin, config.objective.options, alpha.tolist(),
+                           spectra_options.model_dump())
+
+    problem = Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
+                      channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
+                      data_identity=identity(weights), w_ref=w_ref, reference=reference, noise_model=noise_model,
+                      reference_segments=reference_segments, w0=w0, b_more=b_more)
+    if config.objective.weights == "efficient":   # α from the reference date at w0, before identifying
+        from suspid.workflows.weights import reference_efficient_weights
+        if not reference:
+            raise config.error(EFFICIENT_NEEDS_REFERENCE, "objective.weights")
+        log(f"reference date: channel weights α at w0 (objective.weights: efficient, {2 * len(names)} simulations)")
+        alpha, record = reference_efficient_weights(problem, ledger, executor)
+        problem = replace(problem, weights=alpha, data_identity=identity(alpha), weights_record=record)
+    return problem

@@ -404,6 +404,15 @@ def search_line(result: dict[str, Any]) -> str:
             f"(budget {result['budget']}, {result['n_initial']} of them a design), stop: `{result['stop_reason']}`")
 
 
+def weights_line(result: dict[str, Any]) -> str:
+    """One line on the channel weights α of eq. 5 when the reference date chose them (else empty)."""
+    rec = result.get("objective_weights")
+    if not rec:
+        return ""
+    alpha = ", ".join(f"{ch} {a:.3f}" for ch, a in rec["alpha"].items())
+    return f"\nChannel weights α ({rec['method']}; {rec['how']}; {rec['n_simulations']} simulations): {alpha}.\n"
+
+
 def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict[str, Any],
                  ei_history: list[float], executor: Executor | None = None, y_opt: np.ndarray | None = None) -> Path:
     """``report.md``: the maintenance verdict first, then the parameter table, the model-error checks,
@@ -479,7 +488,7 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,
 seed {config.seed}. {search_line(result)}{refine},
 J_max = {result['J_max']:.6g}, wall time {result['wall_time_s']:.1f} s.
-{"".join(chr(10) + "Track band: " + n + "." + chr(10) for n in config._notes)}
+{weights_line(result)}{"".join(chr(10) + "Track band: " + n + "." + chr(10) for n in config._notes)}
 {markdown_table(header, rows)}
 
 Components marked **no** (not identifiable, or not trustworthy under model error) are not findings:

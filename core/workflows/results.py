@@ -186,6 +186,8 @@ class IdentificationResult(Analysis):
     :ivar anytime: J and w of every evaluation in order.
     :ivar jacobian: the Jacobians' count and cost (gradient-based optimisers), else None.
     :ivar noise_floor: the noise model's sensor-noise floor per channel, else None.
+    :ivar objective_weights: with ``objective.weights: efficient``, the channel weights α and how the
+        reference date gave them (:func:`suspid.workflows.weights.reference_efficient_weights`), else None.
     :ivar localisation: the element groups localised, when the run localised (else None).
     :ivar nominal: ``name -> nominal value`` (SI) the verdict measures the change from.
     :ivar verdict_block: ``result.json``'s ``verdict`` (version, limits, counts, rows); :attr:`verdict` its rows
@@ -213,6 +215,7 @@ class IdentificationResult(Analysis):
     anytime: Anytime | None = key(omit_none=True, record=Anytime, default=None)
     jacobian: dict[str, Any] | None = key(omit_none=True, default=None)
     noise_floor: dict[str, Any] | None = key(omit_none=True, default=None)
+    objective_weights: dict[str, Any] | None = key(omit_none=True, default=None)
     localisation: dict[str, Any] | None = key(omit_none=True, default=None)
     nominal: dict[str, float | None] = key(default_factory=dict)
     verdict_block: dict[str, Any] | None = key("verdict", omit_none=True, default=None)
