@@ -165,8 +165,7 @@ def summarise(cfg: Path) -> dict:
         lo, hi = res["bounds"][n]
         t = truth[n]
         iv = intervals[n]
-        w = w_reported
-        rows[n] = {"error": 100 * (w[n] - t) / (hi - lo), "estimate_error": 100 * (estimate[n] - t) / (hi - lo),
+        rows[n] = {"error": 100 * (w_reported[n] - t) / (hi - lo), "estimate_error": 100 * (estimate[n] - t) / (hi - lo),
                    "unchanged": nc.get("status") == "done" and not nc.get("rejected", True),
                    "identifiable": res["identifiable"][n],
                    "trustworthy": res.get("trustworthy", {}).get(n, True), "in_interval": iv[0] <= t <= iv[1],

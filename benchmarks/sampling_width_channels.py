@@ -31,8 +31,9 @@ import numpy as np
 def replicates(problem, ledger, u: np.ndarray, h: float, n_redraws: int, paired: bool, reference: bool):
     """Per replicate and channel, the α-weighted gradient ``(R, q, n_ch)`` and curvature ``(R, q, n_ch)`` of Ψ at
     w_opt, and the run's own curvature of J ``(q,)`` (central differences over the clipped steps ±h)."""
-    from suspid.workflows.analysis import bootstrap_objectives, cached_y_sim, second_difference
+    from suspid.workflows.analysis import cached_y_sim, second_difference
     from suspid.workflows.evaluation import j_of_spectra
+    from suspid.workflows.weights import channel_replicates
 
     q = problem.q
     plus = [np.clip(u + h * e, 0, 1) for e in np.eye(q)]
@@ -42,23 +43,13 @@ def replicates(problem, ledger, u: np.ndarray, h: float, n_redraws: int, paired:
     ym = [cached_y_sim(problem, ledger, m) for m in minus]
     hp = np.array([p[i] - u[i] for i, p in enumerate(plus)])
     hm = np.array([u[i] - m[i] for i, m in enumerate(minus)])
-
-    def second(f0, fp, fm):   # d²/du² from the three points, (q, ...) arrays
-        return second_difference(f0, fp, fm, hp, hm)
-
-    c_run = second(j_of_spectra(problem, y0)[0], np.array([j_of_spectra(problem, y)[0] for y in yp]),
-                   np.array([j_of_spectra(problem, y)[0] for y in ym]))
-    G, C = [], []
-    for r, (fn, i) in enumerate(bootstrap_objectives(problem, n_redraws, paired, reference)):
-        a = fn.alpha
-        p0 = a * fn.evaluate(y0[i])[1]
-        pp = np.array([a * fn.evaluate(y[i])[1] for y in yp])
-        pm = np.array([a * fn.evaluate(y[i])[1] for y in ym])
-        G.append((pp - pm) / (hp + hm)[:, None])
-        C.append(second(p0[None, :], pp, pm))
-        print(f"\r  replicate {r + 1}/{n_redraws}", end="", file=sys.stderr, flush=True)
+    c_run = second_difference(j_of_spectra(problem, y0)[0], np.array([j_of_spectra(problem, y)[0] for y in yp]),
+                              np.array([j_of_spectra(problem, y)[0] for y in ym]), hp, hm)
+    G, C = channel_replicates(problem, y0, yp, ym, hp, hm, n_redraws, paired, reference,
+                              lambda r: print(f"\r  replicate {r}/{n_redraws}", end="", file=sys.stderr, flush=True))
     print(file=sys.stderr)
-    return np.array(G), np.array(C), c_run
+    alpha = np.asarray(problem.weights, float)   # J = Σ α_ch Ψ_ch: each channel's part of J's gradient and curvature
+    return G * alpha, C * alpha, c_run
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -347,8 +347,9 @@ def _print_result(result: dict, run_dir: Path) -> None:
         console.print(_verdict.summary_line(r, markdown=False), markup=False, highlight=False)
     for line in _report.checks_lines(result):
         console.print(line.strip(), markup=False, highlight=False)
-    if _report.no_change_line(result):
-        console.print(_report.no_change_line(result), markup=False, highlight=False)
+    unchanged = _report.no_change_line(result)
+    if unchanged:
+        console.print(unchanged, markup=False, highlight=False)
     kept = f" (run {result['run_id']}, kept in {run_dir / 'history' / result['run_id']})" if "run_id" in result else ""
     console.print(f"results: {run_dir / 'result.json'}, report: {run_dir / 'report.md'}{kept}")
 

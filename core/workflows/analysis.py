@@ -246,12 +246,13 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Norm
     phases.done()
     interval_unit = verdict.interval_unit
     correction = trust.get("correction")
+    widen = opts.model_error.widen and trust["bias_bound"] is not None
     no_change = trust["report"].get("no_change") or {}
-    if opts.model_error.widen and trust["bias_bound"] is not None and no_change.get("status") == "done":
+    if widen and no_change.get("status") == "done":
         u0 = problem.to_unit(np.array([problem.w0[n] for n in names], float))   # w0 not rejected: unchanged
         correction = reported_correction(no_change, u_opt, correction, u0, opts.model_error.no_change_report)
     u_est = u_opt if correction is None else np.clip(u_opt + correction, 0, 1)   # bias-corrected (linearised)
-    if opts.model_error.widen and trust["bias_bound"] is not None:
+    if widen:
         half = bias_aware_half_width(sd, trust["bias_bound"], opts.n_sigmas)
         interval_unit = np.stack([np.clip(u_est - half, 0, 1), np.clip(u_est + half, 0, 1)], axis=1)
         imprecise(trust, names, verdict.identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
@@ -282,7 +283,7 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Norm
         interval_method=IntervalMethod(
             sigma_J=sigma_J, n_redraws=opts.n_redraws, step=opts.step, bootstrap=opts.bootstrap,
             bootstrap_reference=bool(opts.bootstrap_reference and problem.reference and config.noise.path is None),
-            widened_by_model_error=bool(opts.model_error.widen and trust["bias_bound"] is not None),
+            widened_by_model_error=bool(widen),
             n_sigmas=opts.n_sigmas, covariance_normalized=verdict.covariance.tolist()),
         sensitivity=Sensitivity(
             total_sobol={n: float(v) for n, v in zip(names, verdict.total_index)},

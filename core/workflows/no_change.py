@@ -40,7 +40,8 @@ from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.workflows.evaluation import j_of_spectra
 from suspid.workflows.problem import Problem, segment_speeds
 
-__all__ = ["NoChange", "no_change_test", "reach_bound", "apply_no_change", "reported_correction"]
+__all__ = ["NoChange", "no_change_test", "reach_bound", "apply_no_change", "reported_correction",
+           "reports_reference"]
 
 
 @dataclass
@@ -140,6 +141,16 @@ def apply_no_change(test: NoChange | None, names: list[str], sd: np.ndarray, bou
     return new
 
 
+REFERENCE_REPORTED = "the reference date's values"
+"""How ``no_change.reported`` begins where the values reported are w0's (:func:`reported_correction`)."""
+
+
+def reports_reference(result: dict[str, Any]) -> bool:
+    """Whether a ``result.json`` reports the reference date's values because the no-change test kept w0."""
+    nc = (result.get("model_error") or {}).get("no_change") or {}
+    return str(nc.get("reported", "")).startswith(REFERENCE_REPORTED)
+
+
 def reported_correction(report: dict[str, Any], u_opt: np.ndarray, correction: np.ndarray | None, u0: np.ndarray,
                         how: str) -> np.ndarray | None:
     """The shift from w_opt to the reported value ``(q,)`` (normalised), given the no-change test's ``report``
@@ -156,7 +167,7 @@ def reported_correction(report: dict[str, Any], u_opt: np.ndarray, correction: n
         return correction
     u_opt, u0 = np.asarray(u_opt, float), np.asarray(u0, float)
     before = u_opt if correction is None else np.clip(u_opt + np.asarray(correction, float), 0, 1)
-    report["reported"] = ("the reference date's values: the data do not show a change (w0 not rejected); the "
+    report["reported"] = (REFERENCE_REPORTED + ": the data do not show a change (w0 not rejected); the "
                           "intervals, centred on w0, hold the estimate")
     report["estimate_minus_w0_percent"] = [float(100 * d) for d in before - u0]
     return u0 - u_opt

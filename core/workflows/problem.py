@@ -337,7 +337,6 @@ def cached_spectra(ledger: Ledger, executor: Executor | None, jobs: Sequence[tup
     return [found[key] for key, _, _ in jobs]
 
 
-
 def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = lambda s: None,
                   executor: Executor | None = None) -> Problem:
     """Data, noise model and objective of a run (paper §2.3, §3.1, §3.3).

@@ -21,6 +21,7 @@ from suspid.optimize.loop import LoopOutcome
 from suspid.workflows.trust import check_labels, trust_word  # trust_word: importers take it from here too
 from suspid.workflows.problem import Problem
 from suspid.workflows.linearised import calibration_markdown
+from suspid.workflows.no_change import reports_reference
 from suspid.workflows.tasks import SpectraTask, run_one
 from suspid.workflows.verdict import VerdictRow, format_value, rows_of, verdict_markdown
 
@@ -254,16 +255,21 @@ def trust_cell(result: dict[str, Any], name: str) -> str:
     return "*not assessed*" if word == "not assessed" else word
 
 
+def _estimates_from_w0(result: dict[str, Any]) -> str:
+    """``k_sec_z -4.1 %, c_yaw +0.0 %``: how far the estimates lie from w0 where no change was shown."""
+    nc = result["model_error"]["no_change"]
+    return ", ".join(f"{n} {d:+.1f} %" for n, d in zip(result["parameters"], nc.get("estimate_minus_w0_percent", [])))
+
+
 def no_change_line(result: dict[str, Any]) -> str | None:
     """One line where the no-change test kept w0 and the values reported are the reference date's (None
     otherwise): the test's z and how far the estimates lie from w0 (% of the admissible interval)."""
-    nc = (result.get("model_error") or {}).get("no_change") or {}
-    if not str(nc.get("reported", "")).startswith("the reference date"):
+    if not reports_reference(result):
         return None
-    moves = ", ".join(f"{n} {d:+.1f} %" for n, d in zip(result["parameters"], nc.get("estimate_minus_w0_percent", [])))
+    nc = result["model_error"]["no_change"]
     return (f"No change shown since the reference date: the no-change test keeps w0 (z = {nc['z']:.1f}, within "
-            f"{nc['n_sigmas']:g}), so the values reported are the reference date's; the estimates lie {moves} of "
-            f"the admissible interval from them, inside the intervals.")
+            f"{nc['n_sigmas']:g}), so the values reported are the reference date's; the estimates lie "
+            f"{_estimates_from_w0(result)} of the admissible interval from them, inside the intervals.")
 
 
 def checks_lines(result: dict[str, Any]) -> list[str]:
@@ -355,11 +361,10 @@ def model_error_section(result: dict[str, Any]) -> str:
                      f"the data do not reject w0 (within {nc['n_sigmas']:g}), so every interval is widened to hold "
                      f"w0's value; a component w0 lies further from than ± {me.get('max_half_width_percent', 8):.0f} "
                      f"% is not reported as a finding.")]
-        if str(nc.get("reported", "")).startswith("the reference date"):
+        if reports_reference(result):
             out += ["", "**No change shown: the values reported are the reference date's** (the column "
                         "\"reported\" of the table; `identifiability.model_error.no_change_report: estimate` "
-                        "reports the estimate instead). The estimate lies " + ", ".join(
-                            f"{n} {d:+.1f} %" for n, d in zip(names, nc.get("estimate_minus_w0_percent", [])))
+                        "reports the estimate instead). The estimate lies " + _estimates_from_w0(result)
                     + " of the admissible interval from w0, inside the intervals."]
     bound = me.get("bias_bound_percent")
     corr = me.get("correction")
@@ -456,8 +461,7 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
                 "**no**: " + "; ".join(result["non_identifiable_reasons"].get(n, [])),
                 trust_cell(result, n), f"{result['sensitivity']['total_sobol'][n]:.3f}"]
         rows.append(row)
-    unchanged = str(((result.get("model_error") or {}).get("no_change") or {}).get("reported", "")).startswith(
-        "the reference date")
+    unchanged = reports_reference(result)
     header = ["parameter", "unit", "w_opt"] + ([("reported (unchanged: w0)" if unchanged else "bias-corrected")]
                                                if "w_corrected" in result else []) \
         + (["w_ref", "error (% of interval)"] if "w_ref" in result else []) \
@@ -482,7 +486,7 @@ def write_report(run_dir: Path, problem: Problem, ego: LoopOutcome, result: dict
     text = f"""# suspid run `{config.name}`
 
 {verdict_markdown(rows_of(result), markdown_table, with_reference="w_ref" in result)}
-{(no_change_line(result) or "") + (chr(10) if no_change_line(result) else "")}
+{no_change_line(result) + chr(10) if unchanged else ""}
 ## Identification
 
 Objective `{config.objective.plugin}`, surrogate `{config.surrogate.plugin}`, simulator `{config.simulator.plugin}`,

@@ -140,6 +140,14 @@ def _levels_between(lo: float, hi: float, warning: tuple | None, alarm: tuple | 
     return out
 
 
+def _across(lo: float, hi: float, warning: tuple | None, alarm: tuple | None) -> str:
+    """``the interval -31.0 to -24.0 % reaches across the warning level -25 %``: the levels between lo and hi."""
+    crossed = _levels_between(lo, hi, warning, alarm)
+    return f"the interval {lo:+.1f} to {hi:+.1f} % reaches across {' and '.join(crossed) or 'a level'}"
+
+
+BORDERLINE = "borderline: "
+"""How the rule of a precautionary verdict on an interval across one level begins (rule 5)."""
 SAMPLING = "; trust under model error not assessed: the verdict rests on the sampling interval"
 MISFIT = ("; the interval holds the segments' spread and the misfit the localisation's fit leaves (model-form "
           "error the channels show)")
@@ -170,13 +178,12 @@ def judge(*, identifiable: bool, trust: str, change: float | None, interval: tup
         raise ValueError(f"decision must be one of {', '.join(DECISIONS)}, not {decision!r}")
     lo, hi = min(interval), max(interval)
     states = {zone(lo, warning, alarm), zone(change, warning, alarm), zone(hi, warning, alarm)}
-    crossed = _levels_between(lo, hi, warning, alarm)
-    across = f"the interval {lo:+.1f} to {hi:+.1f} % reaches across {' and '.join(crossed) or 'a level'}"
+    across = _across(lo, hi, warning, alarm)
     if len(states) > 2 or (len(states) > 1 and decision == "strict"):
         return "not assessable", across
     if len(states) == 2:
         state = max(states, key=("ok", "warning", "alarm").index)
-        rule = (f"borderline: {across}; precautionary decision: the more severe state, {state}, until a "
+        rule = (f"{BORDERLINE}{across}; precautionary decision: the more severe state, {state}, until a "
                 f"measurement shows the milder one")
         return state, rule + (caveat if trust != "yes" else "")
     state = states.pop()
@@ -257,7 +264,7 @@ def _row(name: str, value: float, interval: Sequence[float], identifiable: bool,
                       interval_percent=interval_pc, identifiable=bool(identifiable), trust=trust,
                       warning=warning, alarm=alarm, verdict=verdict, rule=rule, source=source, w_ref=w_ref,
                       error_percent=error, alternatives=list(alternatives),
-                      borderline=rule.startswith("borderline"))
+                      borderline=rule.startswith(BORDERLINE))
 
 
 def _group_name(item: Any) -> str:
@@ -390,7 +397,7 @@ def summary_line(row: VerdictRow, markdown: bool = True) -> str:
     else:
         text += f", {row.verdict}{' (borderline)' if row.borderline else ''}: {ACTIONS[row.verdict]}"
         if row.borderline:
-            text += f" ({row.rule.split('; precautionary')[0].removeprefix('borderline: ')})"
+            text += f" ({_across(lo, hi, row.warning, row.alarm)})"
         if row.trust != "yes":
             text += f" (trust under model error {row.trust})"
     if row.alternatives:

@@ -13,7 +13,7 @@ date's data when it is chosen.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -32,6 +32,32 @@ SHRINK = 0.0
 KEEP_SHARE = 0.75
 
 
+def channel_replicates(problem: "Problem", y0: np.ndarray, y_plus: list[np.ndarray], y_minus: list[np.ndarray],
+                       h_plus: np.ndarray, h_minus: np.ndarray, n_redraws: int, paired: bool = True,
+                       reference: bool = True, progress: Callable[[int], None] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Per bootstrap replicate (:func:`suspid.workflows.analysis.bootstrap_objectives`), component and channel,
+    the gradient and curvature of Ψ_ch (unweighted) from the spectra at u and u ± h_k e_k.
+
+    :param y0: ``(v, n_channels, n_freqs)`` dB at u; :param y_plus, y_minus: q such arrays at u ± h_k e_k.
+    :param h_plus, h_minus: ``(q,)`` the steps actually taken (clipped by the box).
+    :param progress: called with the number of replicates done.
+    :returns: ``(g, c)``, both ``(R, q, n_channels)`` in normalised u.
+    """
+    from suspid.workflows.analysis import bootstrap_objectives, second_difference
+
+    G, C = [], []
+    for r, (fn, i) in enumerate(bootstrap_objectives(problem, n_redraws, paired, reference)):
+        p0 = fn.evaluate(y0[i])[1]
+        pp = np.array([fn.evaluate(y[i])[1] for y in y_plus])
+        pm = np.array([fn.evaluate(y[i])[1] for y in y_minus])
+        G.append((pp - pm) / (h_plus + h_minus)[:, None])
+        C.append(second_difference(p0[None, :], pp, pm, h_plus, h_minus))
+        if progress is not None:
+            progress(r + 1)
+    return np.array(G), np.array(C)
+
+
 def reference_channel_replicates(problem: "Problem", ledger: Ledger, h: float, n_redraws: int, paired: bool = True,
                                  executor: Executor | None = None) -> tuple[np.ndarray, np.ndarray, int]:
     """Per replicate, component and channel, the gradient and curvature of Ψ_ch at w0 on the reference date.
@@ -41,7 +67,7 @@ def reference_channel_replicates(problem: "Problem", ledger: Ledger, h: float, n
     :returns: ``(g, c, n_simulations)``, g and c ``(R, q, n_channels)`` in normalised u (c NaN along a
         component whose ±h point failed or sits on a bound), and the plain simulations w0 ± h took.
     """
-    from suspid.workflows.analysis import bootstrap_objectives, cached_y_sim, second_difference, simulate_missing
+    from suspid.workflows.analysis import cached_y_sim, simulate_missing
 
     names, q, n = problem.names, problem.q, len(problem.channels)
     ref = replace(problem, segments=list(problem.reference_segments), y_mes=problem.reference["y_mes0"],
@@ -67,14 +93,8 @@ def reference_channel_replicates(problem: "Problem", ledger: Ledger, h: float, n
     yp = [y if good else y0 for y, good in zip(yp, ok)]
     ym = [y if good else y0 for y, good in zip(ym, ok)]
     hp_, hm_ = np.where(ok, hp, 1.0), np.where(ok, hm, 1.0)
-    G, C = [], []
-    for fn, i in bootstrap_objectives(ref, n_redraws, paired, reference=True):
-        p0 = fn.evaluate(y0[i])[1]
-        pp = np.array([fn.evaluate(y[i])[1] for y in yp])
-        pm = np.array([fn.evaluate(y[i])[1] for y in ym])
-        G.append((pp - pm) / (hp_ + hm_)[:, None])
-        C.append(np.where(ok[:, None], second_difference(p0[None, :], pp, pm, hp_, hm_), np.nan))
-    return np.array(G), np.array(C), len(points)
+    G, C = channel_replicates(ref, y0, yp, ym, hp_, hm_, n_redraws, paired, reference=True)
+    return G, np.where(ok[None, :, None], C, np.nan), len(points)
 
 
 def reference_efficient_weights(problem: "Problem", ledger: Ledger, executor: Executor | None = None,
