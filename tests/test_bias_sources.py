@@ -6,7 +6,7 @@ import pytest
 from scipy.stats import norm
 
 from suspid.method.identifiability import bias_aware_half_width
-from suspid.workflows.trust import BiasSources, combine_sources, model_spread
+from suspid.workflows.trust import BiasSources, combine_sources, model_spread, transfer_term
 
 LEVEL_2SIGMA = 2 * norm.cdf(2.0) - 1  # 0.9545
 
@@ -90,3 +90,32 @@ def test_the_ends_give_the_slope_and_the_searches_scatter():
     assert np.allclose(G[0], [0.1, -0.05]) and noise[0] == pytest.approx(0.0, abs=1e-12)
     assert np.allclose(G[1], [0.0, 0.0])
     assert noise[1] == pytest.approx(np.sqrt((0.02 ** 2 + 0.02 ** 2) / 2), rel=1e-9)   # two degrees of freedom
+
+
+def test_the_calibrated_shifts_transfer_error_is_one_more_source_in_quadrature():
+    # self-check 0.03 and groups 0.04 (3-4-5), shift 0.24 with transfer_error 0.25: 0.06; no spread, no residual
+    src = _sources([0.03], [0.04], [-0.24], [0.0])
+    bound, correction = combine_sources(np.zeros(1), src, True, 2.0, transfer_error=0.25)
+    assert correction[0] == pytest.approx(-0.24)              # the correction itself is unchanged
+    assert bound[0] == pytest.approx(np.sqrt(0.05 ** 2 + 0.06 ** 2), abs=1e-9)
+    assert transfer_term(src, 0.25)[0] == pytest.approx(0.06)
+    # 0 takes the shift as exact (the rule before), and the uncorrected worst case does not count it twice
+    assert combine_sources(np.zeros(1), src, True, 2.0, transfer_error=0.0)[0][0] == pytest.approx(0.05, abs=1e-9)
+    assert combine_sources(np.zeros(1), src, False, 2.0, transfer_error=0.25)[0][0] == pytest.approx(
+        0.03 + 0.04 + 0.24, abs=1e-9)
+
+
+def test_a_shift_that_misses_its_w_dependence_is_covered_at_the_level():
+    """Monte Carlo: the calibrated model's shift s is right at w0 and wrong at w_opt by e, |e| <= ρ |s| (sign
+    unknown): with transfer_error ρ the corrected estimate's interval holds the truth at its level; without it,
+    not (the same draws)."""
+    rng = np.random.default_rng(5)
+    sd, s, rho = np.array([0.01]), -0.05, 0.25
+    n = 200_000
+    for e in (-rho * abs(s), rho * abs(s)):
+        err = e + sd[0] * rng.standard_normal(n)            # the corrected estimate's error
+        with_ = bias_aware_half_width(sd, combine_sources(sd, _sources(0.0, 0.0, s, 0.0), True, 2.0,
+                                                          transfer_error=rho)[0], 2.0)[0]
+        without = bias_aware_half_width(sd, combine_sources(sd, _sources(0.0, 0.0, s, 0.0), True, 2.0)[0], 2.0)[0]
+        assert np.mean(np.abs(err) <= with_) >= LEVEL_2SIGMA - 0.005
+        assert np.mean(np.abs(err) <= without) < 0.9

@@ -113,7 +113,13 @@ def test_the_default_linearised_checks_cost_less_than_the_identification(two_dat
         assert result["interval_normalized"][n] == pytest.approx([max(u - half, 0.0), min(u + half, 1.0)], abs=1e-9)
         assert me["correction"]["correction_percent"][n] == pytest.approx(
             100 * (u - result["w_opt_normalized"][n]), abs=1e-6) or u in (0.0, 1.0)
-    assert "Bias correction" in (two_dates / "runs" / "two-dates-linearised" / "report.md").read_text()
+    # the calibrated shift's transfer error: transfer_error (default 0.25) x |shift|, in result.json and report.md
+    assert me["transfer_error"] == 0.25
+    for n in result["parameters"]:
+        src = me["bias_sources_percent"][n]
+        assert src["model_parameters_transfer"] == pytest.approx(0.25 * abs(src["model_parameters_shift"]), abs=1e-9)
+    report = (two_dates / "runs" / "two-dates-linearised" / "report.md").read_text()
+    assert "Bias correction" in report and "its transfer error (%)" in report
 
 
 def test_the_shipped_two_date_config_validates_beside_generated_files(tmp_path):

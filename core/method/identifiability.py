@@ -121,6 +121,14 @@ class ModelErrorOptions(Section):
         "at the reference date give, centre the interval there with their posterior spread, and bound the rest "
         "(the self-check's bias, half the groups' spread) in quadrature; false: keep w_opt and add every source as "
         "a worst case (the self-check and the ends of each model parameter's range then flag on their own)")
+    transfer_error: float = Field(
+        default=0.25, ge=0, le=2, description="with correct: the relative error of the calibrated model's shift "
+        "away from the reference date. The noise model absorbs the model's discrepancy at w0, so where nothing "
+        "changed the shift vanishes up to sampling; at w_opt it is an extrapolation of how the discrepancy changes "
+        "with w by model parameters that may only stand in for what the model lacks (a reservoir, a blow-off): "
+        "transfer_error x "
+        "|shift| is a bias of unknown sign in quadrature with the self-check's and the groups' (0: the shift is "
+        "taken as exact)")
     no_change: bool = Field(
         default=True, description="test w = w0 on the measurement date (J(w_opt) - J(w0) against its bootstrap "
         "spread, one simulation at w0); where the data do not reject w0, every interval is widened to hold it "

@@ -37,7 +37,7 @@ from suspid.workflows.linearised import (calibrate_at_reference, calibration_res
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test, reported_correction
 from suspid.workflows.reference import self_check
 from suspid.workflows.trust import (CHECK_LABELS, BiasSources, checks_report, combine_sources, correction_report,
-                                    trust_states)
+                                    transfer_term, trust_states)
 from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
 from suspid.elements import declared_parameters
 
@@ -258,7 +258,8 @@ def analyse(problem: Problem, ledger: Ledger, loop: LoopOutcome, surrogate: Norm
         imprecise(trust, names, verdict.identifiable, half, opts.n_sigmas * sd, opts.model_error.max_half_width)
         trust["report"].update({"bias_bound_percent": {n: float(100 * v) for n, v in zip(names, trust["bias_bound"])},
                                 "half_width_percent": {n: float(100 * v) for n, v in zip(names, half)},
-                                "max_half_width_percent": 100 * opts.model_error.max_half_width})
+                                "max_half_width_percent": 100 * opts.model_error.max_half_width,
+                                "transfer_error": opts.model_error.transfer_error})
     interval_si = problem.from_unit(interval_unit.T).T  # (q, 2): lower and upper ends, SI
     sampling_si = problem.from_unit(verdict.interval_unit.T).T
     units = {p.name: p.unit for p in declared_parameters(problem.simulator)}
@@ -641,16 +642,19 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
                                            reasons, phases, executor)
     ran = ran or checks["nuisance"] == "done"
     bound, correction = combine_sources(np.zeros(q) if sd is None else sd, sources, correct,
-                                        problem.config.identifiability.n_sigmas, sc_opt.correct) if ran else (None, None)
+                                        problem.config.identifiability.n_sigmas, sc_opt.correct,
+                                        options.transfer_error) if ran else (None, None)
     if correction is not None:
         report["correction"] = correction_report(problem, u_opt, correction, sources, sc_opt.correct,
                                                  " (re-identified)")
     if ran:
+        transfer = transfer_term(sources, options.transfer_error if correct else 0.0)
         report["bias_sources_percent"] = {
             n: {"self_check": float(100 * a), "groups_half_spread": float(100 * g),
-                "model_parameters_shift": float(100 * m), "model_parameters_spread": float(100 * v)}
-            for n, a, g, m, v in zip(names, sources.self_check, sources.groups_half, sources.model_shift,
-                                     sources.model_spread)}
+                "model_parameters_shift": float(100 * m), "model_parameters_spread": float(100 * v),
+                "model_parameters_transfer": float(100 * t)}
+            for n, a, g, m, v, t in zip(names, sources.self_check, sources.groups_half, sources.model_shift,
+                                        sources.model_spread, transfer)}
     budget["total"] = int(sum(v for v in budget.values()))
     report["budget"] = budget
     if apply_no_change_test:   # (the linearised checks apply it to their own estimate and bound)

@@ -67,7 +67,7 @@ from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
 from suspid.workflows.reference import local_search
 from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, correction_report,  # noqa: F401
-                                    equivalent_bias_bound, model_spread, trust_states)
+                                    equivalent_bias_bound, model_spread, transfer_term, trust_states)
 from suspid.elements import declared_parameters
 
 __all__ = ["linearised_model_error", "model_parameters", "calibrate_at_reference", "Calibration", "calibration_result",
@@ -588,8 +588,9 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     # mean shift where it is beyond 2 standard errors (self_check.correct: measured on the calibrated model's own
     # spectra where the truth is w0), its standard error added to the spread; what is left of the self-check's
     # shift and half the groups' spread bound the rest, two independent sources of unknown sign in quadrature; the
-    # model parameters' posterior spread adds to the sampling one
-    bound, correction = combine_sources(sd_, sources, correct, n_sigmas, sc_opt.correct)
+    # model parameters' posterior spread adds to the sampling one; the shift's own error away from w0
+    # (transfer_error x |shift|) is a third source of unknown sign
+    bound, correction = combine_sources(sd_, sources, correct, n_sigmas, sc_opt.correct, options.transfer_error)
     if correction is not None:
         report["correction"] = correction_report(problem, u_opt, correction, sources, sc_opt.correct,
                                                  last_step_percent=last_step)
@@ -598,9 +599,11 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                                                       correction)
     budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
     bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
+    transfer = transfer_term(sources, options.transfer_error if correct else 0.0)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
-                                          "model_parameters_spread": float(100 * m)}
-                                      for n, a, s, m in zip(names, bound_known, shift_known, sd_model)}
+                                          "model_parameters_spread": float(100 * m),
+                                          "model_parameters_transfer": float(100 * t)}
+                                      for n, a, s, m, t in zip(names, bound_known, shift_known, sd_model, transfer)}
     budget["total"] = int(sum(v for k, v in budget.items() if isinstance(v, int) and k != "total"))
     budget["wall_time_s"] = round(time.perf_counter() - t_start, 2)
     report["budget"] = budget

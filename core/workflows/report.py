@@ -369,14 +369,24 @@ def model_error_section(result: dict[str, Any]) -> str:
     bound = me.get("bias_bound_percent")
     corr = me.get("correction")
     if bound and corr:
+        sources = me.get("bias_sources_percent") or {}
+        transfer = {n: (sources.get(n) or {}).get("model_parameters_transfer") for n in names}
+        has_transfer = all(v is not None for v in transfer.values())   # (results written before it: absent)
+        rho = me.get("transfer_error")
         out += ["", f"Bias correction: {corr['method']}; the equivalent bound on the remaining bias (the "
-                    f"self-check's bias and half the groups' spread in quadrature, with the model parameters' "
-                    f"posterior spread as one) and the interval's half-width, in % of the interval. A component "
-                    f"wider than ± {me['max_half_width_percent']:.0f} % is not trustworthy.", "",
-                markdown_table(["parameter", "correction (%)", "bias-corrected", "bound on the bias (%)",
-                                "half-width (%)"],
-                               [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}",
-                                 f"{bound[n]:.1f}", f"{me['half_width_percent'][n]:.1f}"] for n in names])]
+                    f"self-check's bias and half the groups' spread"
+                    + (f", and the calibrated shift's own error away from the reference date ("
+                       f"{rho if rho is not None else '?'} × its size: where nothing changed the shift "
+                       f"vanishes up to sampling; at w_opt it is extrapolated)" if has_transfer else "")
+                    + " in quadrature, with the model parameters' posterior spread as one) and the interval's "
+                    f"half-width, in % of the interval. A component wider than ± {me['max_half_width_percent']:.0f} % "
+                    f"is not trustworthy.", "",
+                markdown_table(["parameter", "correction (%)", "bias-corrected"]
+                               + (["its transfer error (%)"] if has_transfer else [])
+                               + ["bound on the bias (%)", "half-width (%)"],
+                               [[n, f"{corr['correction_percent'][n]:+.1f}", f"{corr['w_corrected'][n]:.4g}"]
+                                + ([f"{transfer[n]:.1f}"] if has_transfer else [])
+                                + [f"{bound[n]:.1f}", f"{me['half_width_percent'][n]:.1f}"] for n in names])]
     elif bound:
         out += ["", f"Bound on the bias of w_opt (the self-check's |bias| + half the groups' spread + the model "
                     f"parameters' |shift| at their calibrated values, their signs unknown, with the model parameters' "

@@ -17,8 +17,8 @@ import numpy as np
 from suspid.method.identifiability import bias_aware_half_width, bias_bound_for_half_width
 
 __all__ = ["REQUIRED_CHECKS", "CHECK_LABELS", "LINEARISED_LABELS", "BiasSources", "check_labels", "checks_report",
-           "combine_sources", "correction_report", "equivalent_bias_bound", "model_spread", "trust_states",
-           "trust_word"]
+           "combine_sources", "correction_report", "equivalent_bias_bound", "model_spread", "transfer_term",
+           "trust_states", "trust_word"]
 
 REQUIRED_CHECKS = ("self_check", "adequacy", "groups")
 """The checks that must all have run for a component to be called trustworthy: the reference-date self-check
@@ -145,7 +145,8 @@ class BiasSources:
 
 
 def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigmas: float,
-                    correct_self_check: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+                    correct_self_check: bool = False, transfer_error: float = 0.0
+                    ) -> tuple[np.ndarray, np.ndarray | None]:
     """The bias bound of w_opt's interval from its sources (:class:`BiasSources`), and the correction.
 
     - ``correct`` (the default): the model parameters' shift is a known bias and is corrected (the estimate
@@ -154,6 +155,11 @@ def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigma
       the sampling one in quadrature (:func:`equivalent_bias_bound`). With ``correct_self_check``, the
       self-check's significant bias (:meth:`BiasSources.significant_self_check`) is corrected too, and its
       standard error, a random error of that correction, adds to the model parameters' spread in quadrature.
+      ``transfer_error`` ρ: where nothing changed the corrected shift vanishes up to sampling (the noise model
+      absorbs the discrepancy at w0); at w_opt it is an extrapolation by model parameters that may stand in for
+      physics the model lacks, whose effect changes with w otherwise (a w-dependent discrepancy, Brynjarsdóttir
+      and O'Hagan, "Learning about physical parameters: the importance of model discrepancy", Inverse Problems
+      2014): ρ |model_shift| (:func:`transfer_term`) is one more bias of unknown sign in the quadrature.
     - otherwise: w_opt is kept and every source is added as a worst case, |self_check| + groups_half +
       |model_shift|, with the same spread.
 
@@ -166,12 +172,19 @@ def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigma
     if correct:
         fix = sources.significant_self_check() if correct_self_check else np.zeros_like(sc)
         se = np.zeros_like(sc) if sources.self_check_se is None else np.asarray(sources.self_check_se, float)
-        known = np.hypot(sc - fix, gh) + np.abs(sources.residual)
+        known = np.sqrt((sc - fix) ** 2 + gh ** 2 + transfer_term(sources, transfer_error) ** 2) \
+            + np.abs(sources.residual)
         spread = np.hypot(np.nan_to_num(np.asarray(sources.model_spread, float)), np.where(fix != 0, se, 0.0))
         return (equivalent_bias_bound(sd, known, spread, n_sigmas),
                 np.asarray(sources.model_shift, float) - fix)
     known = np.abs(sc) + gh + np.abs(sources.model_shift)
     return equivalent_bias_bound(sd, known, sources.model_spread, n_sigmas), None
+
+
+def transfer_term(sources: BiasSources, transfer_error: float) -> np.ndarray:
+    """``(q,)`` the bound on the calibrated shift's own error away from the reference date, ρ |model_shift|
+    (fractions of the admissible interval; :func:`combine_sources`)."""
+    return float(transfer_error) * np.abs(np.nan_to_num(np.asarray(sources.model_shift, float)))
 
 
 def correction_report(problem: Any, u_opt: np.ndarray, correction: np.ndarray, sources: BiasSources,
