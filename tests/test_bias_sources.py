@@ -119,3 +119,10 @@ def test_a_shift_that_misses_its_w_dependence_is_covered_at_the_level():
         without = bias_aware_half_width(sd, combine_sources(sd, _sources(0.0, 0.0, s, 0.0), True, 2.0)[0], 2.0)[0]
         assert np.mean(np.abs(err) <= with_) >= LEVEL_2SIGMA - 0.005
         assert np.mean(np.abs(err) <= without) < 0.9
+
+
+def test_the_calibrated_shift_averages_over_distinct_path_draws_the_first_the_checks_own():
+    from suspid.workflows.linearised import correction_draws
+    draws = correction_draws(8)
+    assert draws[0] == "nuisance" and len(set(draws)) == 8
+    assert correction_draws(1) == ["nuisance"]

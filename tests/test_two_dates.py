@@ -120,6 +120,12 @@ def test_the_default_linearised_checks_cost_less_than_the_identification(two_dat
         assert src["model_parameters_transfer"] == pytest.approx(0.25 * abs(src["model_parameters_shift"]), abs=1e-9)
     report = (two_dates / "runs" / "two-dates-linearised" / "report.md").read_text()
     assert "Bias correction" in report and "its transfer error (%)" in report
+    # the calibrated shift averaged over 8 draws of the noise paths; their Monte Carlo error is in the spread
+    nu = me["nuisance"]
+    assert nu["shift_draws"] == 8
+    for n in result["parameters"]:
+        se = nu["shift_standard_error_percent"][n]
+        assert 0.0 <= se <= me["bias_sources_percent"][n]["model_parameters_spread"] + 1e-9
 
 
 def test_the_shipped_two_date_config_validates_beside_generated_files(tmp_path):

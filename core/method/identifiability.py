@@ -129,6 +129,11 @@ class ModelErrorOptions(Section):
         "transfer_error x "
         "|shift| is a bias of unknown sign in quadrature with the self-check's and the groups' (0: the shift is "
         "taken as exact)")
+    correction_draws: int = Field(
+        default=8, ge=1, le=64, description="linearised method: draws of the noise paths the calibrated shift is "
+        "averaged over (each draw's calibrated and nominal searches share its paths); one draw moves J's maximiser "
+        "by about 1 % of the interval on the likelihood, and their Monte Carlo standard error widens the interval. "
+        "No simulation")
     no_change: bool = Field(
         default=True, description="test w = w0 on the measurement date (J(w_opt) - J(w0) against its bootstrap "
         "spread, one simulation at w0); where the data do not reject w0, every interval is widened to hold it "

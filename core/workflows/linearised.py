@@ -296,13 +296,19 @@ def _curvature(J: Callable[[np.ndarray], float], q: int, h_u: float) -> tuple[np
     return H, g
 
 
+def correction_draws(n: int) -> list[str]:
+    """The names of the ``n`` noise-path draws (RNG streams of the config seed) the calibrated shift averages over;
+    the first is the one the other linearised checks use."""
+    return ["nuisance"] + [f"nuisance-{i}" for i in range(1, int(n))]
+
+
 def search_point(problem: Problem, jac: DateJacobian, y_sim0: np.ndarray, u_opt: np.ndarray, initial_step: float,
-                 max_evaluations: int) -> np.ndarray:
+                 max_evaluations: int, rng_name: str = "nuisance") -> np.ndarray:
     """The maximiser of J on the spectra ``jac.y + jac.du (u - u_opt)`` (linearised at u_opt), B fitted on the
-    reference date's ``y_sim0``, by the self-check's local search from u_opt: ``(q,)`` its u − u_opt. No
-    simulation. A search, not a Newton step: J (the overlap's kernel densities) has a sharp maximum whose
-    curvature at u_opt says little about where it lies."""
-    fn = _objective_at_reference(problem, y_sim0, "nuisance")
+    reference date's ``y_sim0`` with the noise paths of the stream ``rng_name``, by the self-check's local search
+    from u_opt: ``(q,)`` its u − u_opt. No simulation. A search, not a Newton step: J (the overlap's kernel
+    densities) has a sharp maximum whose curvature at u_opt says little about where it lies."""
+    fn = _objective_at_reference(problem, y_sim0, rng_name)
     u_opt = np.asarray(u_opt, float)
 
     def neg_j(u: np.ndarray) -> float:
@@ -507,6 +513,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                     f"{100 * ad.max_spread:.0f} %)")
 
     shift_known = np.zeros(q)
+    shift_se = np.zeros(q)       # the Monte Carlo standard error of the calibrated shift over the path draws
     last_step = np.zeros(q)      # the correction's last linearised step (its remaining error)
     sd_model = np.zeros(q)
     if not theta.names:
@@ -544,18 +551,26 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             ref_hat = jac0_cal
             budget["jacobians_at_calibrated"] = 0 if at_hat.cached else at_hat.n_simulations
             step, n_eval = options.self_check.initial_step, options.nuisance.max_evaluations or 20 * q
-            base = search_point(problem, jac_opt, jac0.y, u_opt, step, n_eval)
-            shift_known = search_point(problem, at_hat, ref_hat.y, u_opt, step, n_eval) - base
-            if correct and np.abs(shift_known).max() > REFINE_SHIFT:
-                # a large shift leaves the linearisation at w_opt: linearise again where it lands and search again
-                # (one Jacobian more); the last step's size bounds what the linearisation still misses
-                u1 = np.clip(np.asarray(u_opt, float) + shift_known, 0, 1)
+            # each draw of the noise paths moves J's maximiser (the likelihood's by about 1 % of the interval): the
+            # calibrated and the nominal searches share each draw's paths, and their differences are averaged
+            draws = correction_draws(options.correction_draws)
+            base = np.array([search_point(problem, jac_opt, jac0.y, u_opt, step, n_eval, r) for r in draws])
+            cal_r = np.array([search_point(problem, at_hat, ref_hat.y, u_opt, step, n_eval, r) for r in draws])
+            if correct and np.abs((cal_r - base).mean(axis=0)).max() > REFINE_SHIFT:
+                # a large shift leaves the linearisation at w_opt: linearise again where the calibrated searches
+                # land and search again (one Jacobian more); what that moved bounds what the linearisation misses
+                u1 = np.clip(np.asarray(u_opt, float) + cal_r.mean(axis=0), 0, 1)
                 at_1 = date_jacobian(problem, ledger, problem.segments, problem.w_of(problem.from_unit(u1)) | w_hat,
                                      names, theta, executor)
                 budget["jacobians_at_calibrated"] += 0 if at_1.cached else at_1.n_simulations
-                last_step = search_point(problem, at_1, ref_hat.y, u1, step, n_eval)
-                shift_known = u1 + last_step - np.asarray(u_opt, float) - base
-        sd_model = model_spread(Gz, cov)
+                cal_1 = np.array([u1 - np.asarray(u_opt, float) + search_point(problem, at_1, ref_hat.y, u1, step,
+                                                                               n_eval, r) for r in draws])
+                last_step = (cal_1 - cal_r).mean(axis=0)
+                cal_r = cal_1
+            shift_known = (cal_r - base).mean(axis=0)
+            shift_se = ((cal_r - base).std(axis=0, ddof=1) / np.sqrt(len(draws)) if len(draws) > 1
+                        else np.zeros(q))
+        sd_model = np.hypot(model_spread(Gz, cov), shift_se)   # the draws' Monte Carlo error is random too
         report["nuisance"] = {
             "status": "done", "linearised": True, "n_simulations": 0, "max_shift_percent": 100 * options.nuisance.max_shift,
             "parameters": {n: {"range": [float(theta.theta_of(np.eye(p)[j] * lo_t[j])[j]),
@@ -567,6 +582,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "sensitivity_percent_per_range": {n: {tn: (None if not np.isfinite(G[k, j]) else float(100 * G[k, j]))
                                                   for j, tn in enumerate(theta.names)} for k, n in enumerate(names)},
             "shift_percent": {n: float(100 * v) for n, v in zip(names, shift_known)},
+            "shift_draws": len(correction_draws(options.correction_draws)),
+            "shift_standard_error_percent": {n: float(100 * v) for n, v in zip(names, shift_se)},
             "spread_percent": {n: float(100 * v) for n, v in zip(names, sd_model)},
             "w_opt_calibrated": {n: float(v) for n, v in
                                  zip(names, problem.from_unit(np.clip(u_opt + shift_known, 0, 1)))}}
