@@ -514,6 +514,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
 
     shift_known = np.zeros(q)
     shift_se = np.zeros(q)       # the Monte Carlo standard error of the calibrated shift over the path draws
+    n_draws = 0                  # the path draws it was searched on (0: no calibrated model, G times t instead)
     last_step = np.zeros(q)      # the correction's last linearised step (its remaining error)
     sd_model = np.zeros(q)
     if not theta.names:
@@ -554,6 +555,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             # each draw of the noise paths moves J's maximiser (the likelihood's by about 1 % of the interval): the
             # calibrated and the nominal searches share each draw's paths, and their differences are averaged
             draws = correction_draws(options.correction_draws)
+            n_draws = len(draws)
             base = np.array([search_point(problem, jac_opt, jac0.y, u_opt, step, n_eval, r) for r in draws])
             cal_r = np.array([search_point(problem, at_hat, ref_hat.y, u_opt, step, n_eval, r) for r in draws])
             if correct and np.abs((cal_r - base).mean(axis=0)).max() > REFINE_SHIFT:
@@ -582,7 +584,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             "sensitivity_percent_per_range": {n: {tn: (None if not np.isfinite(G[k, j]) else float(100 * G[k, j]))
                                                   for j, tn in enumerate(theta.names)} for k, n in enumerate(names)},
             "shift_percent": {n: float(100 * v) for n, v in zip(names, shift_known)},
-            "shift_draws": len(correction_draws(options.correction_draws)),
+            "shift_draws": n_draws,
             "shift_standard_error_percent": {n: float(100 * v) for n, v in zip(names, shift_se)},
             "spread_percent": {n: float(100 * v) for n, v in zip(names, sd_model)},
             "w_opt_calibrated": {n: float(v) for n, v in
