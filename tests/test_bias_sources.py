@@ -99,6 +99,7 @@ def test_the_calibrated_shifts_transfer_error_is_one_more_source_in_quadrature()
     assert correction[0] == pytest.approx(-0.24)              # the correction itself is unchanged
     assert bound[0] == pytest.approx(np.sqrt(0.05 ** 2 + 0.06 ** 2), abs=1e-9)
     assert transfer_term(src, 0.25)[0] == pytest.approx(0.06)
+    assert transfer_term(src, 0.25, correct=False)[0] == 0.0
     # 0 takes the shift as exact (the rule before), and the uncorrected worst case does not count it twice
     assert combine_sources(np.zeros(1), src, True, 2.0, transfer_error=0.0)[0][0] == pytest.approx(0.05, abs=1e-9)
     assert combine_sources(np.zeros(1), src, False, 2.0, transfer_error=0.25)[0][0] == pytest.approx(

@@ -126,9 +126,8 @@ class ModelErrorOptions(Section):
         "away from the reference date. The noise model absorbs the model's discrepancy at w0, so where nothing "
         "changed the shift vanishes up to sampling; at w_opt it is an extrapolation of how the discrepancy changes "
         "with w by model parameters that may only stand in for what the model lacks (a reservoir, a blow-off): "
-        "transfer_error x "
-        "|shift| is a bias of unknown sign in quadrature with the self-check's and the groups' (0: the shift is "
-        "taken as exact)")
+        "transfer_error x |shift| is a bias of unknown sign in quadrature with the self-check's and the groups' "
+        "(0: the shift is taken as exact)")
     correction_draws: int = Field(
         default=8, ge=1, le=64, description="linearised method: draws of the noise paths the calibrated shift is "
         "averaged over (each draw's calibrated and nominal searches share its paths); one draw moves J's maximiser "

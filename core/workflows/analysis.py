@@ -648,7 +648,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         report["correction"] = correction_report(problem, u_opt, correction, sources, sc_opt.correct,
                                                  " (re-identified)")
     if ran:
-        transfer = transfer_term(sources, options.transfer_error if correct else 0.0)
+        transfer = transfer_term(sources, options.transfer_error, correct)
         report["bias_sources_percent"] = {
             n: {"self_check": float(100 * a), "groups_half_spread": float(100 * g),
                 "model_parameters_shift": float(100 * m), "model_parameters_spread": float(100 * v),

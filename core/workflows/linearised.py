@@ -558,7 +558,8 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
             n_draws = len(draws)
             base = np.array([search_point(problem, jac_opt, jac0.y, u_opt, step, n_eval, r) for r in draws])
             cal_r = np.array([search_point(problem, at_hat, ref_hat.y, u_opt, step, n_eval, r) for r in draws])
-            if correct and np.abs((cal_r - base).mean(axis=0)).max() > REFINE_SHIFT:
+            diffs = cal_r - base      # (draws, q): each draw's calibrated minus nominal maximiser
+            if correct and np.abs(diffs.mean(axis=0)).max() > REFINE_SHIFT:
                 # a large shift leaves the linearisation at w_opt: linearise again where the calibrated searches
                 # land and search again (one Jacobian more); what that moved bounds what the linearisation misses
                 u1 = np.clip(np.asarray(u_opt, float) + cal_r.mean(axis=0), 0, 1)
@@ -568,10 +569,9 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                 cal_1 = np.array([u1 - np.asarray(u_opt, float) + search_point(problem, at_1, ref_hat.y, u1, step,
                                                                                n_eval, r) for r in draws])
                 last_step = (cal_1 - cal_r).mean(axis=0)
-                cal_r = cal_1
-            shift_known = (cal_r - base).mean(axis=0)
-            shift_se = ((cal_r - base).std(axis=0, ddof=1) / np.sqrt(len(draws)) if len(draws) > 1
-                        else np.zeros(q))
+                diffs = cal_1 - base
+            shift_known = diffs.mean(axis=0)
+            shift_se = diffs.std(axis=0, ddof=1) / np.sqrt(n_draws) if n_draws > 1 else np.zeros(q)
         sd_model = np.hypot(model_spread(Gz, cov), shift_se)   # the draws' Monte Carlo error is random too
         report["nuisance"] = {
             "status": "done", "linearised": True, "n_simulations": 0, "max_shift_percent": 100 * options.nuisance.max_shift,
@@ -618,7 +618,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
                                                       correction)
     budget["no_change"] = int(report["no_change"].get("n_simulations", 0))
     bound = apply_no_change(no_change, names, sd_, bound, u_est - u0, n_sigmas, options.max_half_width, reasons)
-    transfer = transfer_term(sources, options.transfer_error if correct else 0.0)
+    transfer = transfer_term(sources, options.transfer_error, correct)
     report["bias_sources_percent"] = {n: {"self_check_and_groups": float(100 * a), "model_parameters_shift": float(100 * s),
                                           "model_parameters_spread": float(100 * m),
                                           "model_parameters_transfer": float(100 * t)}

@@ -181,10 +181,12 @@ def combine_sources(sd: np.ndarray, sources: BiasSources, correct: bool, n_sigma
     return equivalent_bias_bound(sd, known, sources.model_spread, n_sigmas), None
 
 
-def transfer_term(sources: BiasSources, transfer_error: float) -> np.ndarray:
+def transfer_term(sources: BiasSources, transfer_error: float, correct: bool = True) -> np.ndarray:
     """``(q,)`` the bound on the calibrated shift's own error away from the reference date, ρ |model_shift|
-    (fractions of the admissible interval; :func:`combine_sources`)."""
-    return float(transfer_error) * np.abs(np.nan_to_num(np.asarray(sources.model_shift, float)))
+    (fractions of the admissible interval; :func:`combine_sources`); zeros uncorrected (``correct`` false),
+    where the whole shift is already a worst case."""
+    rho = float(transfer_error) if correct else 0.0
+    return rho * np.abs(np.nan_to_num(np.asarray(sources.model_shift, float)))
 
 
 def correction_report(problem: Any, u_opt: np.ndarray, correction: np.ndarray, sources: BiasSources,
