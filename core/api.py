@@ -26,6 +26,7 @@ from suspid.config import Config, build_simulator, identified_bounds, load_confi
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
+from suspid.data.plausibility import refused, speed_doubts
 from suspid.errors import ConfigError
 from suspid.indicators.recordings import config_indicators
 from suspid.interfaces import TrackSegment
@@ -200,10 +201,10 @@ def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[st
     cfg = load_config(config, overrides)
     sim = build_simulator(cfg)
     known = {p.name for p in sim.parameters()}
-    unknown = sorted(set(w or {}) - known)
-    if unknown:
-        raise cfg.error(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}",
-                        "parameters")
+    for name in w or {}:   # the values are the caller's, not the config's: the error names w, not a line
+        if name not in known:
+            raise ConfigError(f"unknown parameter '{name}' for simulator '{cfg.simulator.plugin}'; known: "
+                              f"{', '.join(sorted(known))}", key=f"w.{name}")
     out = Path(out_dir) if out_dir is not None else cfg.run_dir() / "simulation"
     return _simulate.write_simulation(sim, segments(cfg), dict(w or {}), out,
                                       lambda rs: compute_spectra(rs, cfg.spectra))
@@ -245,6 +246,10 @@ def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float
     :param out_dir: where ``modes.json`` goes (default: the run directory; the folder is created).
     """
     cfg = load_config(config, overrides)
+    if speed_mps is not None:   # judged as a track file's speed is (suspid.data.plausibility)
+        refusal = refused(speed_doubts(speed_mps), accept=cfg.data.accept)
+        if refusal is not None:
+            raise ConfigError(refusal, key="speed_mps")
     out = Path(out_dir) if out_dir is not None else cfg.run_dir()
     out.mkdir(parents=True, exist_ok=True)
     return _simulate.modes_report(build_simulator(cfg), speed_mps, out, w)

@@ -13,6 +13,7 @@ import importlib.util
 import sqlite3
 import sys
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 from typing import List, Optional
@@ -162,12 +163,24 @@ def _parse_params(items: list[str] | None) -> dict[str, float]:
     for item in items or []:
         name, sep, value = item.partition("=")
         if not sep or not name:
-            raise ConfigError(f"--param expects name=value, got '{item}'")
+            raise ConfigError("expected name=value", option=f"--param {item}")
         try:
             out[name] = float(value)
         except ValueError:
-            raise ConfigError(f"--param {name}: '{value}' is not a number") from None
+            raise ConfigError(f"'{value}' is not a number", option=f"--param {item}") from None
     return out
+
+
+@contextmanager
+def _options_named(options: dict[str, str]):
+    """Inside, an API error about one of its arguments (``ConfigError.key``: ``w.c_yaw``, ``speed_mps``) names
+    the command-line option the value came from (``options``: key -> ``--param c_yaw=1``), not a config line."""
+    try:
+        yield
+    except ConfigError as exc:
+        if exc.key in options and exc.file is None:
+            raise ConfigError(exc.detail, option=options[exc.key]) from None
+        raise
 
 
 @app.command()
@@ -176,7 +189,9 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
              param: Optional[List[str]] = typer.Option(None, "--param", help="name=value in SI units (repeatable); "
                                                        "other parameters nominal.")) -> None:
     """Simulate the nominal (or given) parameters on the configured segments; writes simulation.h5 and a PNG."""
-    path = api.simulate(config, set_ or [], w=_parse_params(param), out_dir=out)
+    w = _parse_params(param)
+    with _options_named({f"w.{item.partition('=')[0]}": f"--param {item}" for item in param or []}):
+        path = api.simulate(config, set_ or [], w=w, out_dir=out)
     console.print(f"wrote {path} and {path.parent / 'spectra.png'}")
 
 
@@ -199,7 +214,9 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
-    report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6, out_dir=out)
+    with _options_named({"speed_mps": f"--speed-kmh {speed_kmh:g}" if speed_kmh is not None else ""}):
+        report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6,
+                           out_dir=out)
     console.print(_simulate.format_modes(report, max_hz), markup=False, highlight=False)
     where = out if out is not None else api.load_config(config, set_ or []).run_dir()
     console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")

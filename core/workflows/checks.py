@@ -56,12 +56,26 @@ def check_noise_model(config: Config, channels: list[str]) -> None:
         return
     if path.is_dir():
         raise config.error(f"{path} is a directory; expected a noise_model.npz written by a run", "noise.path")
-    model = NoiseModel.load(path)
+    try:
+        model = NoiseModel.load(path)     # the message names the file; the prefix, the config's key
+    except DataError as exc:
+        raise config.error(str(exc), "noise.path") from None
     freqs = frequency_grid(config.spectra)[0]
     try:
         model.check_grid(freqs, channels)
     except DataError as exc:
-        raise DataError(f"noise model {path}: {exc}") from None
+        raise config.error(f"noise model {path}: {exc}", "noise.path") from None
+
+
+NO_PARAMETERS = "no parameters to identify; name them under parameters: (bounds default to the simulator's; " \
+                "`suspid parameters {file}` lists them)"
+
+
+def check_identified(config: Config) -> None:
+    """A run identifies parameters the config names: a config without ``parameters:`` is refused rather than run
+    on the simulator's default set, which the user did not choose (``suspid parameters`` lists them)."""
+    if not config.parameters:
+        raise config.error(NO_PARAMETERS.format(file=config.file), "parameters")
 
 
 def track_speeds(config: Config) -> np.ndarray:
@@ -137,6 +151,7 @@ def dry_run(config: Config) -> int:
     :returns: the number of measured segments read (0 for a numerical experiment).
     :raises SuspidError: the first problem, in one line.
     """
+    check_identified(config)
     check_output_dir(config)
     apply_track_band(config)
     simulator = build_simulator(config)
