@@ -20,9 +20,11 @@ from typing import List, Optional
 
 import click
 import typer
+from rich import box
 from rich.console import Console
-from rich.markup import escape  # element groups (c_yaw[bogie1]) are not markup
+from rich.measure import Measurement
 from rich.table import Table
+from rich.text import Text  # cells as Text: element groups (c_yaw[bogie1]) are not markup
 
 import suspid
 from suspid import registry
@@ -342,28 +344,57 @@ def _log(quiet: bool):
     return (lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]"))
 
 
+_STYLE = {"no": "red", "not assessed": "yellow", "not identifiable": "dim", "warning": "yellow",
+          "warning (borderline)": "yellow", "alarm": "bold red", "alarm (borderline)": "bold red",
+          "not assessable": "dim"}
+"""Styles of the verdict table's trust and verdict cells."""
+
+
+def _verdict_table(rows, with_reference: bool, with_nominal: bool) -> Table:
+    """The verdict table (verdict first; :func:`suspid.workflows.verdict.terminal_table`) as a rich table
+    without vertical rules: every column's content on one line, nothing truncated."""
+    header, cells = _verdict.terminal_table(rows, with_reference=with_reference, with_nominal=with_nominal)
+    table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False, collapse_padding=True)
+    for col in header:
+        table.add_column(Text(col), no_wrap=True)
+    for row in cells:
+        table.add_row(*[Text(c, style=_STYLE.get(c, "")) if h in ("trust", "verdict") else Text(c)
+                        for h, c in zip(header, row)])
+    return table
+
+
+def _print_verdicts(result: dict) -> None:
+    """The verdict table at the console's width: with the nominal values where they fit, without them where
+    they do not, else (below about 100 columns for the quickstart) a few lines per parameter."""
+    rows = _verdict.rows_of(result)
+    if not rows:
+        return
+    for with_nominal in (True, False):
+        table = _verdict_table(rows, "w_ref" in result, with_nominal)
+        natural = Measurement.get(console, console.options.update_width(10_000), table).maximum  # unclamped
+        if natural <= console.width:
+            console.print(table)
+            return
+    for line in _verdict.vertical_lines(rows):
+        console.print(line, markup=False, highlight=False)
+
+
 def _print_result(result: dict, run_dir: Path) -> None:
     stop = result["stop_reason"]
     if result.get("refine_stop_reason"):
         stop += f", then {result['n_refine_iterations']} refinement steps: {result['refine_stop_reason']}"
     if not console.is_terminal:
         console.width = 200  # keep rows whole when piped
-    table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
-                        f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
-    rows = _verdict.rows_of(result)
-    header, cells = _verdict.table(rows, with_reference="w_ref" in result)
-    for col in header:
-        table.add_column(col)
-    style = {"no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]", "warning": "[yellow]warning[/yellow]",
-             "alarm": "[bold red]alarm[/bold red]", "not assessable": "[dim]not assessable[/dim]"}
-    for row in cells:
-        table.add_row(*[style.get(c, escape(c)) if h in ("identifiable", "trustworthy", "verdict") else escape(c)
-                        for h, c in zip(header, row)])
-    console.print(table)
-    for r in rows:
+    n, new = result["n_simulator_calls"], result.get("n_simulator_calls_this_session")
+    reused = ", none new: all reused from the ledger" if new == 0 and n else ""
+    console.print(f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, {n} simulations{reused}, "
+                  f"{result['wall_time_s']:.0f} s)", markup=False, highlight=False)
+    _print_verdicts(result)
+    for r in _verdict.rows_of(result):
         console.print(_verdict.summary_line(r, markdown=False), markup=False, highlight=False)
-    for line in _report.checks_lines(result):
-        console.print(line.strip(), markup=False, highlight=False)
+    checks = _report.checks_line(result)
+    if checks:
+        console.print(checks, markup=False, highlight=False)
     unchanged = _report.no_change_line(result)
     if unchanged:
         console.print(unchanged, markup=False, highlight=False)

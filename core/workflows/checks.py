@@ -68,14 +68,15 @@ def check_noise_model(config: Config, channels: list[str]) -> None:
 
 
 NO_PARAMETERS = "no parameters to identify; name them under parameters: (bounds default to the simulator's; " \
-                "`suspid parameters {file}` lists them)"
+                "`suspid parameters{file}` lists them)"
 
 
 def check_identified(config: Config) -> None:
     """A run identifies parameters the config names: a config without ``parameters:`` is refused rather than run
     on the simulator's default set, which the user did not choose (``suspid parameters`` lists them)."""
     if not config.parameters:
-        raise config.error(NO_PARAMETERS.format(file=config.file), "parameters")
+        where = f" {config.source_file}" if config.source_file is not None else ""
+        raise config.error(NO_PARAMETERS.format(file=where), "parameters")
 
 
 def track_speeds(config: Config) -> np.ndarray:
