@@ -22,14 +22,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, Union
 
+from suspid import registry
 from suspid.config import Config, build_simulator, identified_bounds, load_config as _load, override_arguments
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
 from suspid.data.plausibility import refused, speed_doubts
-from suspid.errors import ConfigError
-from suspid.indicators.recordings import config_indicators
-from suspid.interfaces import TrackSegment
+from suspid.errors import ConfigError, UnknownPluginError
+from suspid.indicators.recordings import config_indicators, write_indicator_files
+from suspid.interfaces import ElementSimulator, TrackSegment
 from suspid.method.spectra import compute_spectra
 from suspid.workflows import diagnose as _diagnose
 from suspid.workflows import identify as _identify
@@ -190,6 +191,60 @@ def segments(config: ConfigSource, overrides: Overrides = None) -> list[TrackSeg
     return read_track(cfg.data.track_file, strict=cfg.data.strict, accept=cfg.data.accept)
 
 
+@dataclass(frozen=True)
+class ParameterInfo:
+    """One parameter of a simulator, as ``suspid parameters`` lists it (SI units).
+
+    :ivar lower, upper: the simulator's admissible interval C_w; :ivar domain: where the parameter is physical.
+    :ivar elements: for a simulator with suspension elements, the groups ``kind[tags]`` of the elements this
+        parameter sets (empty otherwise).
+    :ivar identified: ``(lower, upper)`` the config identifies it within, None when it does not.
+    """
+
+    name: str
+    description: str
+    unit: str
+    nominal: float
+    lower: float
+    upper: float
+    domain: tuple[float, float]
+    elements: tuple[str, ...]
+    identified: tuple[float, float] | None
+
+
+def parameters(config: ConfigSource | None = None, overrides: Overrides = None, *,
+               simulator: str | None = None) -> list[ParameterInfo]:
+    """A simulator's parameters (``suspid parameters``): description, unit, nominal value, bounds, physical
+    domain, the elements each sets, and which the config identifies within which bounds.
+
+    :param config: the config whose simulator (with its options: a preset, ``vehicle:`` overrides) is listed;
+        None lists ``simulator`` built with its default options.
+    :param simulator: a registered simulator's name (default ``exudyn-train``), without a config.
+    :raises ConfigError: both a config and ``simulator`` given, or an unknown simulator.
+    """
+    if config is not None and simulator is not None:
+        raise ConfigError("give a config or a simulator's name, not both (the config names its simulator)",
+                          key="simulator")
+    identified: dict[str, tuple[float, float]] = {}
+    if config is not None:
+        cfg = load_config(config, overrides)
+        sim = build_simulator(cfg)
+        if cfg.parameters:
+            identified = identified_bounds(cfg, sim)
+    else:
+        name = simulator or "exudyn-train"
+        try:
+            sim = registry.get("simulator", name)()
+        except UnknownPluginError as exc:
+            raise ConfigError(str(exc), key="simulator") from None
+    by_kind: dict[str, list[str]] = {}
+    for e in sim.elements() if isinstance(sim, ElementSimulator) else []:
+        by_kind.setdefault(e.kind, []).append(f"{e.kind}[{','.join(e.tags)}]")
+    return [ParameterInfo(p.name, p.description, p.unit, float(p.nominal), float(p.lower), float(p.upper),
+                          (float(p.domain[0]), float(p.domain[1])), tuple(by_kind.get(p.name, ())),
+                          identified.get(p.name)) for p in sim.parameters()]
+
+
 def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[str, float] | None = None,
              out_dir: str | Path | None = None) -> Path:
     """Simulate ``w`` (other parameters nominal) on the configured segments (``suspid simulate``).
@@ -287,16 +342,27 @@ def fleet_import(database: str | Path, folders: Sequence[str | Path], *, fleet: 
                                 log=log or (lambda s: None))
 
 
-def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None):
+def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None,
+               out_dir: str | Path | None = None):
     """EN 14363 bogie-frame instability and EN 12299 mean comfort of the config's recordings, per segment and
     per run (``suspid indicators``; ``docs/fleet.md``); stored when the config has a ``fleet.database``.
 
+    Each value's ``detail`` holds what it was judged against: ``warning_level`` and ``alarm_level``, and for the
+    instability the limit's inputs ``bogie_mass_kg`` and ``f0_hz`` (the band's hunting frequency, with
+    ``hunting_hz_source``).
+
+    :param out_dir: also write ``indicators.json`` and ``indicators.csv`` there
+        (:func:`suspid.indicators.recordings.write_indicator_files`: the date, the levels, the limit's inputs).
     :returns: (the list of :class:`suspid.indicators.IndicatorValue`, the database record or None).
     """
     cfg = load_config(config, overrides)
     if cfg.fleet is not None and cfg.fleet.database is not None:
-        return _fleet().run_indicators(cfg, log=log or (lambda s: None))
-    return config_indicators(cfg), None
+        values, rec = _fleet().run_indicators(cfg, log=log or (lambda s: None))
+    else:
+        values, rec = config_indicators(cfg, hunting_hz=cfg.fleet.hunting_hz if cfg.fleet else None), None
+    if out_dir is not None:
+        write_indicator_files(out_dir, cfg, values)
+    return values, rec
 
 
 def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ack: bool = False,

@@ -8,8 +8,10 @@ has none, says that the output folder keeps the previous ingest).
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import importlib.util
+import json
 import sqlite3
 import sys
 import warnings
@@ -52,8 +54,9 @@ _report = _lazy("suspid.workflows.report")
 _simulate = _lazy("suspid.workflows.simulate")
 _verdict = _lazy("suspid.workflows.verdict")
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Identify train suspension parameters from on-track accelerations.")
+# rich_markup_mode=None: click's plain help, whose metavars are words (:data:`METAVARS`), not typer's <list[str]>
 console = Console(soft_wrap=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
@@ -273,7 +276,8 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
                       f"{r.config_path})", markup=False, highlight=False)
 
 
-fleet_app = typer.Typer(no_args_is_help=True, help="The fleet's monitoring database (docs/fleet.md).")
+fleet_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                        help="The fleet's monitoring database (docs/fleet.md).")
 app.add_typer(fleet_app, name="fleet")
 
 
@@ -314,19 +318,82 @@ def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-
         api.dashboard(out.database, port=port, log=_log(False))
 
 
+def _levels(v) -> str:
+    """``4.52 / 5.65``: the warning and alarm levels an indicator value was judged against."""
+    w, a = v.detail.get("warning_level"), v.detail.get("alarm_level")
+    return "no bogie mass" if a is None else f"{w:.3g} / {a:.3g}"
+
+
 @app.command()
-def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
+def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+               out: Optional[Path] = typer.Option(None, "--out", metavar="DIR",
+                                                  help="Also write indicators.json and indicators.csv there.")
+               ) -> None:
     """EN 14363 bogie-frame instability and EN 12299 comfort of the config's recordings, per segment and run."""
-    values, rec = api.indicators(config, set_ or [])
+    values, rec = api.indicators(config, set_ or [], out_dir=out)
+    if not console.is_terminal:
+        console.width = 200  # keep rows whole when piped
     table = Table(title="indicators")
-    for col in ("indicator", "segment", "value", "limit", "verdict"):
+    for col in ("indicator", "segment", "value", "warning / alarm", "f0", "verdict"):
         table.add_column(col)
     for v in values:
-        table.add_row(v.name, v.segment or "[b]run[/b]", f"{v.value:.3g} {v.unit}",
-                      "-" if v.limit is None else f"{v.limit:.3g}", v.verdict)
+        f0 = v.detail.get("f0_hz")
+        table.add_row(v.name, v.segment or "[b]run[/b]", f"{v.value:.3g}" + ("" if v.unit == "-" else f" {v.unit}"),
+                      _levels(v), "-" if f0 is None else f"{f0:.2f} Hz", v.verdict)
     console.print(table)
+    inst = next((v for v in values if v.detail.get("bogie_mass_kg") is not None), None)
+    if inst is not None:
+        console.print(f"EN 14363 limit (12 - m_b / 5) / 2 = {inst.detail['alarm_level']:.3g} m/s^2 from the bogie "
+                      f"mass m_b = {inst.detail['bogie_mass_kg']:g} kg; band f0 +- 2 Hz, f0: "
+                      f"{inst.detail['hunting_hz_source']} (fleet.hunting_hz sets it); EN 12299 N_MV: warning from "
+                      f"2 (medium), alarm from 4 (uncomfortable)", markup=False, highlight=False)
+    if out is not None:
+        console.print(f"wrote {out / 'indicators.json'} and {out / 'indicators.csv'}", markup=False, highlight=False)
     if rec is not None:
         console.print(f"recorded as run {rec.run_id} in the monitoring database", markup=False)
+
+
+def _elements_text(groups: tuple[str, ...]) -> str:
+    """``4 at bogie1/bogie2, left/right``: how many elements a parameter sets, and where they sit."""
+    if not groups:
+        return "-"
+    tags = [g[g.index("[") + 1:-1].split(",") for g in groups]
+    places = [list(dict.fromkeys(t[i] for t in tags if len(t) > i)) for i in range(max(map(len, tags)))]
+    return f"{len(groups)} at " + ", ".join("/".join(p) for p in places)
+
+
+@app.command("parameters")
+def parameters_(config: Optional[Path] = typer.Argument(None, show_default=False,
+                                                        help="YAML config: its simulator, and what it identifies."),
+                set_: Optional[List[str]] = SetOpt,
+                simulator: Optional[str] = typer.Option(None, "--simulator", metavar="NAME",
+                                                        help="A simulator's registered name, without a config "
+                                                             "(default: exudyn-train; `suspid plugins` lists them)."),
+                as_json: bool = typer.Option(False, "--json", help="JSON on stdout (every field, the descriptions "
+                                                                   "with their sources)."),
+                identified_only: bool = typer.Option(False, "--identified", help="Only the parameters the config "
+                                                                                 "identifies.")) -> None:
+    """A simulator's parameters: description, unit, nominal value, bounds, the elements each sets; with a config,
+    the ones it identifies and within which bounds (SI units)."""
+    with _options_named({"simulator": f"--simulator {simulator}"}):
+        rows = api.parameters(config, set_ or [], simulator=simulator)
+    if identified_only:
+        rows = [p for p in rows if p.identified is not None]
+    if as_json:
+        print(json.dumps([dataclasses.asdict(p) for p in rows], indent=2))
+        return
+    if not console.is_terminal:
+        console.width = 200  # keep rows whole when piped
+    table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
+    for col in ("parameter", "description", "unit", "nominal", "bounds", "elements",
+                *(["identified within"] if config else [])):
+        table.add_column(Text(col), no_wrap=col != "description")
+    for p in rows:
+        ident = [] if config is None else ["-" if p.identified is None else
+                                           f"{p.identified[0]:.6g} to {p.identified[1]:.6g}"]
+        table.add_row(*map(Text, [p.name, _verdict.short_description(p.description), p.unit, f"{p.nominal:.6g}",
+                                  f"{p.lower:.6g} to {p.upper:.6g}", _elements_text(p.elements), *ident]))
+    console.print(table)
 
 
 @app.command()
@@ -460,6 +527,46 @@ def _click_exceptions() -> dict[str, tuple[type, ...]]:
 _CLICK = _click_exceptions()
 
 
+METAVARS = {"set_": "KEY=VALUE", "param": "NAME=VALUE", "out": "DIR", "db": "PATH|URL", "host": "ADDRESS",
+            "port": "PORT", "speed_kmh": "KM/H", "max_hz": "HZ", "n_points": "N", "fleet": "NAME",
+            "trainset": "NAME", "vehicle": "NAME", "date": "YYYY-MM-DD", "mileage_km": "KM", "km_per_day": "KM",
+            "simulator": "NAME", "config": "CONFIG", "ingest_file": "INGEST.yaml", "plan": "PLAN.yaml",
+            "folders": "FOLDER"}
+"""Help metavars in words (``--set KEY=VALUE``, ``--out DIR``), by parameter name; others by type (N, NUMBER,
+TEXT, PATH); a flag takes none."""
+_TYPE_WORDS = {"integer": "N", "float": "NUMBER", "text": "TEXT", "path": "PATH"}
+
+
+def _command() -> click.Command:
+    """The click command of :data:`app` with the help's metavars in words a user knows (:data:`METAVARS`)
+    instead of typer's Python types (``<list[str]>``, ``<bool>``)."""
+    command = typer.main.get_command(app)
+
+    def name(cmd) -> None:
+        for p in cmd.params:
+            if isinstance(p, click.Argument) or getattr(p, "param_type_name", "") == "argument":
+                # the name says what it is (CONFIG, FOLDER...); typer would add its Python type (<list[Path]>)
+                # and braces in the usage line: both set on the instance, typer's classes are left as they are
+                p.display_type_rich = lambda ctx=None: None
+                p.metavar = shown = p.metavar or METAVARS.get(p.name, p.name.upper())
+                p._usage_display_name = lambda shown=shown, p=p: (shown if p.required else f"[{shown}]") + (
+                    "..." if p.nargs != 1 else "")
+                continue
+            if p.metavar is not None:
+                continue
+            if getattr(p, "is_flag", False):
+                p.metavar = ""
+            elif p.name in METAVARS:
+                p.metavar = METAVARS[p.name]
+            elif getattr(p.type, "name", "") in _TYPE_WORDS:
+                p.metavar = _TYPE_WORDS[p.type.name]
+        for sub in getattr(cmd, "commands", {}).values():
+            name(sub)
+
+    name(command)
+    return command
+
+
 _interrupted_note: str | None = None
 """What an interrupted command keeps, set by a command without a ledger (``ingest``); else :func:`_kept`."""
 
@@ -486,7 +593,7 @@ def main(argv: list[str] | None = None) -> int:
     interrupted = False
     try:
         # Without standalone mode, typer catches Ctrl-C itself and *returns* 130 instead of raising.
-        returned = app(args=argv, prog_name="suspid", standalone_mode=False)
+        returned = _command()(args=argv, prog_name="suspid", standalone_mode=False)
         code = returned if isinstance(returned, int) else 0
         interrupted = code == 130
     except _CLICK["Exit"] as exc:

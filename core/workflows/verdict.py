@@ -215,9 +215,10 @@ def nominal_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[s
     return float(p.nominal)
 
 
-def _short(description: str) -> str:
+def short_description(description: str) -> str:
     """The head of a parameter description: up to its first ``;`` or ``(`` (the rest is its source)."""
     return re.split(r"[;(]", description, maxsplit=1)[0].strip()
+
 
 
 def _qualifiers(name: str) -> str:
@@ -235,10 +236,10 @@ def label_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[str
     if own is not None and own.label:
         return own.label
     if name in parameters and parameters[name].description:
-        return _short(parameters[name].description)
+        return short_description(parameters[name].description)
     kind = limits.get(kind_of(name))
     base = kind.label if kind is not None and kind.label else (
-        _short(parameters[kind_of(name)].description) if kind_of(name) in parameters
+        short_description(parameters[kind_of(name)].description) if kind_of(name) in parameters
         and parameters[kind_of(name)].description else kind_of(name))
     where = _qualifiers(name)
     return f"{where}: {base}" if where else base
