@@ -18,6 +18,7 @@ and what was expected, before any simulation.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, Union
@@ -28,7 +29,7 @@ from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
 from suspid.data.plausibility import refused, speed_doubts
-from suspid.errors import ConfigError, UnknownPluginError
+from suspid.errors import ConfigError, DataWarning, UnknownPluginError
 from suspid.indicators.recordings import config_indicators, write_indicator_files
 from suspid.interfaces import ElementSimulator, TrackSegment
 from suspid.method.spectra import compute_spectra
@@ -38,7 +39,7 @@ from suspid.workflows import monitor as _monitor
 from suspid.workflows import simulate as _simulate
 from suspid.workflows import study as _study
 from suspid.workflows.identify import IdentificationResult
-from suspid.workflows.checks import dry_run
+from suspid.workflows.checks import data_shortfalls, dry_run
 from suspid.workflows.problem import synthetic_track
 
 ConfigSource = Union[str, Path, Mapping[str, Any], Config]
@@ -109,6 +110,8 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
     """
     cfg = load_config(config, overrides)
     n = dry_run(cfg)
+    for shortfall in data_shortfalls(cfg):   # what the run will not assess for want of data
+        warnings.warn(shortfall, DataWarning, stacklevel=2)
     source, extra = _source(config), _override_list(overrides)  # as study and monitor will reload them
     if cfg.study is not None:
         _study.study_variants(source, extra, cfg)
@@ -320,10 +323,15 @@ def ingest(ingest_file: str | Path | Mapping[str, Any], overrides: Overrides = N
     :param out_dir: default ``output.dir`` of the file, else ``ingested/<recording stem>/`` beside it.
     :returns: a :class:`suspid.data.ingest.IngestResult`: the track and accelerations written (the
         ``data.track_file`` and ``data.measurements`` of a measured-data config), the offset and its
-        confidence, the segments, the warnings; ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
+        confidence, the segments, the warnings (and, for two dates, ``config_warnings``: what a run of the
+        two-date config will not assess for want of data); ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
     :raises suspid.errors.SuspidError: a config or data problem, in one line.
     """
-    return _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))
+    result = _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))
+    if result.config_path is not None:   # what a run of the two-date config will not assess, said now
+        result.config_warnings = data_shortfalls(load_config(result.config_path),
+                                                 n_reference=len(result.reference.segments))
+    return result
 
 
 def fleet_import(database: str | Path, folders: Sequence[str | Path], *, fleet: str, trainset: str,

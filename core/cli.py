@@ -272,6 +272,8 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
                       f"{res.peak_ratio:.2f}); data.track_file: {res.track_path}, data.measurements: "
                       f"{res.measurements_path}; report: {res.out_dir / 'ingest.md'}", markup=False, highlight=False)
     if r.config_path is not None:
+        for w in r.config_warnings:
+            print(f"warning: {w}", file=sys.stderr)
         console.print(f"two-date config: {r.config_path} (suspid validate {r.config_path}; suspid run "
                       f"{r.config_path})", markup=False, highlight=False)
 
