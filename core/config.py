@@ -281,8 +281,8 @@ def from_option(exc: ConfigError, options: Mapping[tuple, str]) -> ConfigError:
         return exc
     parts = tuple(exc.key.split("."))
     for path, option in options.items():
-        if parts[:len(path)] == path:
-            return ConfigError(exc.detail, option=option)
+        if parts[:len(path)] == path:    # the key inside a value the option set (--set a={b: 1}) is named too
+            return ConfigError(exc.detail, option=option if len(parts) == len(path) else f"{option}, key '{exc.key}'")
     return exc
 
 

@@ -144,7 +144,7 @@ def test_debug_shows_traceback(tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["no-such-command"], "No such command 'no-such-command'"),
     (["run", "--no-such-option", "x.yaml"], "No such option: --no-such-option"),
-    (["run"], "Missing argument 'config'"),
+    (["run"], "Missing argument 'CONFIG'"),
 ])
 def test_command_line_mistakes_are_usage_errors_with_exit_2(args, words):
     """A mistyped command, option or a missing argument: click's usage message and exit 2, never "internal error"."""

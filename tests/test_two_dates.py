@@ -239,7 +239,9 @@ def test_with_a_noise_model_file_no_component_is_called_trustworthy(two_dates, c
     assert report.count("| *not assessed* |") == 2 and "| yes | yes |" not in report
     header = next(line for line in out.splitlines() if line.startswith("verdict "))
     assert "trust" in header
-    assert out.count("not assessed") >= 2 and "Model-error checks not run" in out   # one line: report.md has each
+    checks_line = [line for line in out.splitlines() if line.startswith("Model-error checks")]   # report.md: each
+    assert out.count("not assessed") >= 2 and len(checks_line) == 1 and "noise.path" in checks_line[0]
+    assert checks_line[0].endswith(": trust is not assessed (report.md lists the checks)"), checks_line
 
 
 def test_too_few_reference_segments_are_said_by_validate_and_named_by_the_run(two_dates, capsys):
@@ -253,7 +255,7 @@ def test_too_few_reference_segments_are_said_by_validate_and_named_by_the_run(tw
         for f in sorted((two_dates / "reference" / kind).glob("*.csv"))[:5]:
             shutil.copy(f, few / kind / f.name)
     limits = {"c_yaw": {"warning": -25, "alarm": -40}, "c_sec_y": {"warning": -25, "alarm": -40}}
-    cfg = _config(two_dates, "linearised", limits=limits,
+    cfg = _config(two_dates, "linearised", name="few", limits=limits,
                   noise={"reference": {"measurements": "few/accelerations", "track_file": "few/track"}})
     cfg = cfg.rename(two_dates / "few.yaml")
     capsys.readouterr()
@@ -263,7 +265,7 @@ def test_too_few_reference_segments_are_said_by_validate_and_named_by_the_run(tw
                    f"reference-date self-check needs 8, so trust will be 'not assessed' (record more kilometres at "
                    f"constant speed on the reference date, or cut shorter segments)"]
     assert _cli("run", str(cfg), "--quiet") == 0
-    result = json.loads((two_dates / "runs" / "two-dates" / "result.json").read_text())
+    result = json.loads((two_dates / "runs" / "few" / "result.json").read_text())
     assert result["model_error"]["checks"]["self_check"]["status"] == (
         "not run: the reference date has 5 segments, the self-check needs 8 (record more kilometres at constant "
         "speed on the reference date, or cut shorter segments)")
