@@ -13,10 +13,11 @@ import pytest
 from fleet_fixtures import db_url, pg_server  # noqa: F401 - fixtures
 from suspid.errors import ConfigError
 from suspid.fleet import queries
-from suspid.fleet.alarms import ELEMENT_LEVELS, Hysteresis, acknowledge, element_margin, replay
+from suspid.fleet.alarms import ELEMENT_LEVELS, AcknowledgementError, Hysteresis, acknowledge, element_margin, replay
 from suspid.fleet.db import database_url, open_database
 from suspid.fleet.record import VehicleKey, record_result
 from suspid.fleet.trends import fit_trend
+from suspid.fleet.users import add_user
 from suspid.indicators.standard import IndicatorValue
 
 DOMAIN = {"c_yaw[bogie1]": [225e3, 375e3], "c_sec_z": [15e3, 25e3]}
@@ -73,9 +74,10 @@ def test_alarm_raised_escalated_acknowledged_and_audited(db_url, tmp_path):
             _record(db, i, v, tmp_path)
         (alarm,) = queries.alarms(db, state="raised")
         assert (alarm["source"], alarm["level"], alarm["raised_on"]) == ("c_yaw[bogie1]", "alarm", "2026-01-31")
+        add_user(db, "j.doe", "a long enough password")
         with db.session() as s:
             acknowledge(s, alarm["id"], "j.doe", "damper ordered")
-        with pytest.raises(ConfigError, match="no alarm with id"), db.session() as s:
+        with pytest.raises(AcknowledgementError, match="no alarm with id"), db.session() as s:
             acknowledge(s, 999, "j.doe")
         (acked,) = queries.alarms(db, state="raised")
         assert acked["acked_by"] == "j.doe" and acked["ack_comment"] == "damper ordered" and acked["acked_at"]
