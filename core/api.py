@@ -66,6 +66,17 @@ def _fleet():
     return fleet_api
 
 
+def _dashboard():
+    """:mod:`suspid.dashboard.server` (Flask, Flask-WTF, SQLAlchemy: the ``fleet`` extra), without the workflows
+    that :func:`_fleet` brings: the dashboard's commands start in about a second."""
+    try:
+        from suspid.dashboard import server
+    except ImportError as exc:
+        raise ConfigError(f"the dashboard needs the fleet extra ({exc.name} is missing): "
+                          f"pip install 'suspid[fleet]'") from None
+    return server
+
+
 def _source(config: ConfigSource) -> str | Path | Mapping[str, Any]:
     """What the workflows reload variants and dates from: a path or a mapping."""
     if isinstance(config, Config):
@@ -304,9 +315,7 @@ def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050
     :raises suspid.errors.ConfigError: a missing database, a port in use, an address this machine lacks,
         ``allow_ack`` without any user.
     """
-    _fleet()
-    from suspid.dashboard.server import serve   # Flask: the fleet extra, checked just above
-    serve(database, host=host, port=port, allow_ack=allow_ack, create=create, log=log or (lambda s: None),
+    _dashboard().serve(database, host=host, port=port, allow_ack=allow_ack, create=create, log=log or (lambda s: None),
           warn=warn)
 
 
@@ -317,11 +326,9 @@ def fleet_user(action: str, database: str | Path, name: str | None = None, passw
     :param database: an existing monitoring database (a missing SQLite file is an error).
     :returns: the :class:`suspid.fleet.users.UserInfo` added, None for ``remove``, the list for ``list``.
     """
-    _fleet()
-    from suspid.dashboard.server import open_dashboard_database
-    from suspid.fleet import users
+    from suspid.fleet import users   # the fleet extra: _dashboard() has checked it
 
-    db = open_dashboard_database(database)
+    db = _dashboard().open_dashboard_database(database)
     try:
         if action == "add":
             return users.add_user(db, name or "", password or "")

@@ -365,7 +365,7 @@ def user_remove(name: str = typer.Argument(..., help="The user's name.", show_de
 def user_list(db: str = DbOpt) -> None:
     """The users who may acknowledge alarms (and those removed)."""
     for u in api.fleet_user("list", db):
-        console.print(f"{u.name}\t{'active' if u.active else 'removed'}\tadded {u.created_at} UTC", markup=False)
+        print(f"{u.name}\t{'active' if u.active else 'removed'}\tadded {u.created_at} UTC")
 
 
 def _log(quiet: bool):

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleet_fixtures import db_url, pg_server  # noqa: F401 - fixtures
+from fleet_fixtures import db_url, demo_fleet, pg_server  # noqa: F401 - fixtures
 from suspid.errors import ConfigError
 from suspid.fleet import queries
 from suspid.fleet.alarms import ELEMENT_LEVELS, AcknowledgementError, Hysteresis, acknowledge, element_margin, replay
@@ -232,13 +232,7 @@ def test_cli_indicators_recorded_into_the_configured_database(tmp_path):
 
 
 @pytest.mark.long   # the demo fleet: 4 trainsets x 6 dates, several minutes on 2 cores
-def test_demo_fleet_shows_warning_then_alarm_and_forecasts_contain_the_true_crossings(tmp_path):
-    import shutil
-
-    from suspid.fleet.demo import run_demo
-
-    plan = tmp_path / "fleet-demo.yaml"
-    shutil.copy(Path(__file__).resolve().parents[1] / "configs" / "fleet-demo.yaml", plan)
-    out = run_demo(plan)
+def test_demo_fleet_shows_warning_then_alarm_and_forecasts_contain_the_true_crossings(demo_fleet):
+    out = demo_fleet
     assert {c.element_group for c in out.checks} == {"c_yaw", "k_sec_z"}
     assert all(c.holds for c in out.checks), (out.out_dir / "fleet-demo.md").read_text()

@@ -74,6 +74,13 @@ def mileage(km: float | None) -> str:
     return "mileage not recorded" if km is None else f"{number(round(km), 12)} km"
 
 
+def abscissa(x: float | None, kind: str) -> str:
+    """A trend abscissa: mileage (``134 315 km``) or days since the first date (``day 74``)."""
+    if x is None:
+        return "not known"
+    return mileage(x) if kind == "mileage_km" else f"day {x:.0f}"
+
+
 def age(days: int) -> str:
     """``170 days ago``, ``today``, ``1 day ago``, ``in 3 days`` (a date after today)."""
     if days == 0:
@@ -107,10 +114,10 @@ def row_value(row: dict[str, Any]) -> dict[str, str]:
         else:
             head, detail = value, "no limit"
         return {"head": head, "interval": "", "detail": detail}
-    units = f"{quantity(row['value'], row['unit'])} {interval(row['interval_low'], row['interval_high'], row['unit'], row['value'])}"
+    span = interval(row["interval_low"], row["interval_high"], row["unit"], row["value"])
     if row["percent"] is None:
-        return {"head": quantity(row["value"], row["unit"]), "interval": interval(
-            row["interval_low"], row["interval_high"], row["unit"], row["value"]),
-            "detail": "% of nominal not known (no nominal value recorded)"}
+        return {"head": quantity(row["value"], row["unit"]), "interval": span,
+                "detail": "% of nominal not known (no nominal value recorded)"}
     return {"head": f"{percent(row['percent'])} of nominal",
-            "interval": f"[{percent(row['percent_low'])}, {percent(row['percent_high'])}]", "detail": units}
+            "interval": f"[{percent(row['percent_low'])}, {percent(row['percent_high'])}]",
+            "detail": f"{quantity(row['value'], row['unit'])} {span}"}

@@ -137,7 +137,8 @@ def replay(points: Sequence[tuple[dt.date, int, float | None]], levels: Hysteres
 
 
 def _audit(session: Session, action: str, alarm: Alarm | None, detail: str, actor: str = SYSTEM_ACTOR) -> None:
-    session.add(AuditEntry(at=dt.datetime.now(dt.timezone.utc).replace(tzinfo=None, microsecond=0), actor=actor, action=action,
+    now = dt.datetime.now(dt.timezone.utc).replace(tzinfo=None, microsecond=0)
+    session.add(AuditEntry(at=now, actor=actor, action=action,
                            alarm_id=None if alarm is None else alarm.id, detail=detail))
 
 

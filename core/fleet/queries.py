@@ -118,8 +118,8 @@ def trends_of(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Trend]]:
                       acceptable_low=pts[-1]["acceptable_low"], acceptable_high=pts[-1]["acceptable_high"],
                       abscissa="mileage_km" if use_km else "days")
         calendar = dates_from_mileage(t, dates, [p["mileage_km"] for p in pts])
-        out.append(({"fleet": fleet, "trainset": trainset, "vehicle": vehicle, "element_group": group, "points": pts, "x": x,
-                     "calendar": calendar}, t))
+        out.append(({"fleet": fleet, "trainset": trainset, "vehicle": vehicle, "element_group": group,
+                     "points": pts, "x": x, "calendar": calendar}, t))
     return out
 
 
