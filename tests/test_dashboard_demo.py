@@ -23,6 +23,8 @@ pytest.importorskip("selenium")
 from selenium import webdriver  # noqa: E402
 from selenium.webdriver.chrome.service import Service  # noqa: E402
 from selenium.webdriver.common.by import By  # noqa: E402
+from selenium.webdriver.support import expected_conditions as EC  # noqa: E402
+from selenium.webdriver.support.ui import WebDriverWait  # noqa: E402
 from werkzeug.serving import make_server  # noqa: E402
 
 from fleet_fixtures import demo_fleet  # noqa: E402,F401 - fixture
@@ -36,12 +38,26 @@ TODAY = dt.date(2026, 12, 1)       # the demo's dates are January to June 2026
 DATE = re.compile(r"\d{4}-\d\d-\d\d")
 
 
+USERS = {"m.martin": "correct horse battery", "j.doe": "staple battery horse"}
+
+
+def make_app(db):
+    """The demo's dashboard with acknowledgements allowed for two users of its database."""
+    from suspid.fleet.users import add_user, list_users
+
+    known = {u.name for u in list_users(db)}
+    for name, password in USERS.items():
+        if name not in known:
+            add_user(db, name, password)
+    return create_app(db, allow_ack=True, today=lambda: TODAY)
+
+
 @pytest.fixture(scope="module")
 def served(demo_fleet):
     if not (Path(CHROMIUM).exists() and Path(CHROMEDRIVER).exists()):
         pytest.skip("chromium and chromium-driver are not installed (apt-get install chromium chromium-driver)")
     db = open_database(demo_fleet.database)
-    server = make_server("127.0.0.1", 0, create_app(db, today=lambda: TODAY), threaded=True)
+    server = make_server("127.0.0.1", 0, make_app(db), threaded=True)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     options = webdriver.ChromeOptions()
     options.binary_location = CHROMIUM
@@ -124,7 +140,24 @@ def test_the_element_page_says_why_and_the_trend_shows_no_trend(served, tmp_path
     driver.get(base + "/trainset/TS01")
     assert "per 1 000 km" in driver.find_element(By.CSS_SELECTOR, "p.slope").text
     _shot(driver, "demo-trainset", tmp_path)
+    for user, comment in (("m.martin", "damper replacement booked"), ("j.doe", "damper replaced, to be re-measured")):
+        driver.get(base + "/login")
+        driver.find_element(By.ID, "name").send_keys(user)
+        driver.find_element(By.ID, "password").send_keys(USERS[user])
+        driver.find_element(By.ID, "login").click()
+        WebDriverWait(driver, 20).until(EC.presence_of_element_located((By.ID, "who")))
+        row = next(tr for tr in driver.find_elements(By.CSS_SELECTOR, "#alarms tr[data-alarm]")
+                   if "TS01" in tr.text and "c_yaw" in tr.text)
+        alarm = row.get_attribute("data-alarm")
+        driver.find_element(By.ID, f"comment-{alarm}").send_keys(comment)
+        driver.find_element(By.ID, f"ack-{alarm}").click()
+        WebDriverWait(driver, 20).until(EC.presence_of_element_located((By.ID, "message")))
+        assert f"acknowledged by {user} at " in driver.find_element(By.ID, "message").text
+        driver.find_element(By.ID, "logout").click()
+        WebDriverWait(driver, 20).until(EC.presence_of_element_located((By.ID, "login-link")))
     driver.get(base + "/alarms")
+    acks = driver.find_element(By.ID, f"acks-{alarm}").text
+    assert "m.martin at " in acks and "damper replacement booked" in acks and "j.doe at " in acks   # both kept
     _shot(driver, "demo-alarms", tmp_path)
     driver.get(base + "/trainset/TS01")
     driver.find_element(By.PARTIAL_LINK_TEXT, "run ").click()

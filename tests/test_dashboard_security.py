@@ -61,9 +61,18 @@ ROUTES = {
 """Every route of the dashboard (method, rule)."""
 
 
-def test_every_route_is_listed(app):
+def test_every_route_is_listed_and_hostile_requests_reach_each(app):
     found = {(m, r.rule) for r in app.url_map.iter_rules() for m in r.methods - {"HEAD", "OPTIONS"}}
     assert found == ROUTES
+    adapter = app.url_map.bind("localhost")
+    reached = set()
+    for method, path, *_ in HOSTILE:
+        try:
+            rule, _ = adapter.match(path.split("?", 1)[0], method=method, return_rule=True)
+            reached.add((method, rule.rule))
+        except Exception:  # noqa: BLE001 - a path no route matches (404/405 by design)
+            pass
+    assert reached == ROUTES
 
 
 HOSTILE = [
@@ -111,6 +120,14 @@ HOSTILE = [
     ("DELETE", "/alarms/1/ack", 405, "DELETE is not allowed"),
     ("GET", "/logout", 405, "GET is not allowed"),
     ("GET", "/nothing/here", 404, "nothing at /nothing/here"),
+    ("GET", "/", 200, "Fleet overview"),
+    ("GET", "/alarms", 200, "Log in"),
+    ("GET", "/login?next=http://evil.example", 200, "Log in to acknowledge alarms"),
+    ("GET", "/static/dashboard.css", 200, "font-family"),
+    ("POST", "/login", 400, "security token"),
+    ("POST", "/logout", 400, "security token"),
+    ("POST", "/alarms/1/ack", 400, "security token"),
+    ("POST", "/alarms/99999999999/ack", 404, "ids go up to"),
 ]
 
 
