@@ -76,13 +76,35 @@ def element_kind(group: str) -> str:
     return group.split("[", 1)[0]
 
 
+def _reasons(result: Mapping[str, Any], key: str, name: str) -> str:
+    """``result[key][name]`` (a reason or a list of reasons) as one text, "" when there is none."""
+    found = (result.get(key) or {}).get(name) or ""
+    return "; ".join(map(str, found)) if isinstance(found, (list, tuple)) else str(found)
+
+
+def not_assessable_reason(result: Mapping[str, Any], name: str, status: str) -> str | None:
+    """Why an element's verdict is ``not assessable`` (None for the other verdicts), from the run's own reasons."""
+    if status == "not-identifiable":
+        return "not identifiable: " + (_reasons(result, "non_identifiable_reasons", name) or
+                                       "the measurements do not determine it")
+    if status == "not-trustworthy":
+        return "not trustworthy under model error: " + (_reasons(result, "untrustworthy_reasons", name) or
+                                                        "a model-error check flags it")
+    if status == "unmonitored":
+        return "no acceptable domain given for it (monitor.acceptable, or fleet.acceptable of a suspid run)"
+    return None
+
+
 def element_rows(result: Mapping[str, Any], acceptable: Mapping[str, Sequence[float | None]]) -> list[dict[str, Any]]:
-    """The element values of one ``result.json`` with their verdicts and trust (module docstring)."""
+    """The element values of one ``result.json`` with their verdicts, trust, nominal values, plain-language
+    labels and the reasons behind a ``not assessable`` verdict and a ``not assessed`` trust (module docstring)."""
     rows = []
     trust = result.get("trustworthy") or {}
+    labels = {r.get("name"): r.get("label") for r in (result.get("verdict") or {}).get("rows", [])}
     for n in result["parameters"]:
         domain = acceptable.get(n)
         status = status_of(result["interval"][n], domain, bool(result["identifiable"][n]), trust.get(n))
+        nominal = (result.get("nominal") or {}).get(n)
         rows.append({"element_group": n, "kind": element_kind(n), "unit": result.get("units", {}).get(n, ""),
                      "value": float(result["w_opt"][n]), "interval_low": float(result["interval"][n][0]),
                      "interval_high": float(result["interval"][n][1]),
@@ -90,7 +112,11 @@ def element_rows(result: Mapping[str, Any], acceptable: Mapping[str, Sequence[fl
                      "acceptable_high": None if domain is None else domain[1],
                      "identifiable": bool(result["identifiable"][n]), "trust": trust_word(trust.get(n)),
                      "verdict": VERDICT_OF_STATUS[status],
-                     "w_ref": (result.get("w_ref") or {}).get(n)})
+                     "w_ref": (result.get("w_ref") or {}).get(n),
+                     "nominal": None if nominal is None else float(nominal), "label": labels.get(n),
+                     "reason": not_assessable_reason(result, n, status),
+                     "trust_reason": (_reasons(result, "not_assessed_reasons", n) or None)
+                     if trust_word(trust.get(n)) == "not assessed" else None})
     return rows
 
 
