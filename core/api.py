@@ -303,7 +303,23 @@ def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050
     """
     _fleet()
     from suspid.dashboard.app import serve   # Flask: the fleet extra, checked just above
-    serve(database, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
+    from suspid.fleet.db import open_database
+
+    # Read-only unless acknowledgements are allowed: the dashboard creates, migrates and writes nothing
+    db = open_database(database, read_only=not allow_ack, log=log)
+    serve(db, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
+
+
+def fleet_upgrade(database: str | Path, *, log: Log | None = None) -> None:
+    """Bring a monitoring database's schema to this suspid's newest revision (``suspid fleet upgrade``).
+
+    A PostgreSQL database is upgraded in one transaction (back it up first: ``pg_dump``); an SQLite one
+    is copied beside itself first (``FILE.schema-REV.bak``). Recording upgrades SQLite by itself.
+    """
+    _fleet()
+    from suspid.fleet.db import upgrade_database   # the fleet extra, checked just above
+
+    upgrade_database(database, log=log or (lambda s: None))
 
 
 def fleet_demo(plan: str | Path, *, log: Log | None = None):
