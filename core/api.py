@@ -339,6 +339,18 @@ def fleet_user(action: str, database: str | Path, name: str | None = None, passw
         db.dispose()
 
 
+def fleet_upgrade(database: str | Path, *, log: Log | None = None) -> None:
+    """Bring a monitoring database's schema to this suspid's newest revision (``suspid fleet upgrade``).
+
+    A PostgreSQL database is upgraded in one transaction (back it up first: ``pg_dump``); an SQLite one
+    is copied beside itself first (``FILE.schema-REV.bak``). Recording upgrades SQLite by itself.
+    """
+    _fleet()
+    from suspid.fleet.db import upgrade_database   # the fleet extra, checked just above
+
+    upgrade_database(database, log=log or (lambda s: None))
+
+
 def fleet_demo(plan: str | Path, *, log: Log | None = None):
     """Monitor the demo fleet of a fleet plan into its database and check its degrading elements
     (``suspid fleet demo``; :mod:`suspid.fleet.demo`).

@@ -283,6 +283,14 @@ def fleet_import(folders: List[Path] = typer.Argument(..., help="monitor or run 
     console.print(f"{out.n_created} runs recorded, {len(out.runs) - out.n_created} already there", markup=False)
 
 
+@fleet_app.command("upgrade")
+def fleet_upgrade(db: str = typer.Option(..., "--db", help="SQLite path or database URL (postgresql://...)."),
+                  quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Upgrade a monitoring database's schema to this suspid's (back a PostgreSQL one up first: pg_dump)."""
+    api.fleet_upgrade(db, log=_log(quiet))
+    console.print("the database's schema is this suspid's newest", markup=False)
+
+
 @fleet_app.command("demo")
 def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-demo.yaml).", show_default=False),
                serve: bool = typer.Option(True, "--serve/--no-serve", help="Start the dashboard afterwards."),

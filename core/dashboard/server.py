@@ -30,8 +30,11 @@ Log = Callable[[str], None]
 LOOPBACK_NAMES = ["127.0.0.1", "localhost", "::1", "[::1]"]
 
 
-def open_dashboard_database(url_or_path: str | Path, *, create: bool = False, option: str = "--db") -> Database:
+def open_dashboard_database(url_or_path: str | Path, *, create: bool = False, option: str = "--db",
+                            read_only: bool = False) -> Database:
     """Open an existing monitoring database; a missing SQLite file is an error unless ``create``.
+
+    :param read_only: create, migrate and write nothing (the dashboard without acknowledgements).
 
     :raises ConfigError: the SQLite file does not exist (without ``create``), or its folder does not.
     """
@@ -44,7 +47,7 @@ def open_dashboard_database(url_or_path: str | Path, *, create: bool = False, op
                                   f"make a new, empty one)")
             if not path.parent.is_dir():
                 raise ConfigError(f"{option} {path}: folder {path.parent} does not exist")
-    return open_database(url)
+    return open_database(url, read_only=read_only)
 
 
 def is_loopback(host: str) -> bool:
@@ -100,7 +103,8 @@ def serve(db: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ac
     :raises ConfigError: a missing database, ``allow_ack`` without users, a port in use, a bad address.
     """
     warn = warn or log
-    database = open_dashboard_database(db, create=create)
+    # read-only unless acknowledgements are allowed (or a new database is made): nothing is written then
+    database = open_dashboard_database(db, create=create, read_only=not (allow_ack or create))
     try:
         if allow_ack and not has_users(database):
             raise ConfigError("--allow-ack: no user may acknowledge yet; add one with "
