@@ -10,6 +10,13 @@ calls, the stop reasons and the anytime history (J and w of every evaluation, in
     python benchmarks/check_loop_identity.py --compare before.json     # on the new code: exit 1 on a difference
 
 ``--only NAME ...`` runs some cases. Every run is serial unless the case says otherwise.
+
+Floats are compared to a relative tolerance (``--rtol``, default 1e-9: far above the last bits, far below
+any change of a result); integers and strings exactly. The record names the machine that wrote it (processor,
+BLAS kernel): on another processor the same code can differ beyond that, because the loop branches on J's
+values (which EI maximum wins, which point is best) and another BLAS kernel gives them other last bits. A
+comparison across machines says so: a difference there is machine-bound, not a change of the loop; record
+both sides on one machine to test a change.
 """
 
 from __future__ import annotations
@@ -17,7 +24,9 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import os
+import platform
 import signal
 import subprocess
 import sys
@@ -111,6 +120,37 @@ def _kill_midway(path: Path, out: Path, n_evaluations: int) -> int:
     return n
 
 
+def machine() -> dict:
+    """The processor and BLAS kernel this process computes with."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    kernel = None
+    try:
+        from threadpoolctl import threadpool_info
+        kernel = next((i.get("architecture") for i in threadpool_info() if i.get("internal_api") == "openblas"), None)
+    except ImportError:
+        pass
+    return {"processor": model, "machine": platform.machine(), "blas_kernel": kernel,
+            "OPENBLAS_CORETYPE": os.environ.get("OPENBLAS_CORETYPE")}
+
+
+def differs(a, b, rtol: float) -> bool:
+    """Whether two recorded values differ: floats beyond ``rtol`` (relative, and absolute near 0), the rest exactly."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return set(a) != set(b) or any(differs(a[k], b[k], rtol) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) != len(b) or any(differs(x, y, rtol) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, (int, float)) or isinstance(b, float) and isinstance(a, (int, float)):
+        return not math.isclose(a, b, rel_tol=rtol, abs_tol=rtol)
+    return a != b
+
+
 def run_case(name: str, cfg: dict, tmp: Path) -> dict:
     import suspid
     out = tmp / name
@@ -135,6 +175,7 @@ def main() -> int:
     g.add_argument("--record", type=Path)
     g.add_argument("--compare", type=Path)
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance of float comparisons (1e-9)")
     args = ap.parse_args()
     all_cases = cases()
     names = args.only or list(all_cases)
@@ -144,7 +185,7 @@ def main() -> int:
             rows[name] = run_case(name, all_cases[name], Path(tmp))
             if args.record:
                 previous = json.loads(args.record.read_text()) if args.record.exists() else {}
-                args.record.write_text(json.dumps({**previous, name: rows[name]}, indent=1))
+                args.record.write_text(json.dumps({**previous, "_machine": machine(), name: rows[name]}, indent=1))
             print(f"{name}: J_max {rows[name]['J_max']:.10g}, {rows[name]['n_simulator_calls']} calls, "
                   f"{rows[name]['stop_reason']}, {rows[name]['seconds']} s"
                   + (f", killed after {rows[name]['killed_after_evaluations']} evaluations, "
@@ -153,11 +194,15 @@ def main() -> int:
     if args.record:
         return 0
     before = json.loads(args.compare.read_text())
+    recorded, here = before.get("_machine"), machine()
     bad = 0
     for name, row in rows.items():
-        diff = [k for k in KEYS if row.get(k) != before.get(name, {}).get(k)]
-        print(f"{name}: {'same' if not diff else 'DIFFERS in ' + ', '.join(diff)}")
+        diff = [k for k in KEYS if differs(row.get(k), before.get(name, {}).get(k), args.rtol)]
+        print(f"{name}: {f'same (rtol {args.rtol:g})' if not diff else 'DIFFERS in ' + ', '.join(diff)}")
         bad += bool(diff)
+    if recorded != here:
+        print(f"note: recorded on {recorded or 'an unrecorded machine'}, compared on {here}: a difference can be "
+              f"machine-bound (module docstring); record both sides on one machine to test a change")
     return 1 if bad else 0
 
 

@@ -69,6 +69,17 @@ def _fleet():
     return fleet_api
 
 
+def _dashboard():
+    """:mod:`suspid.dashboard.server` (Flask, Flask-WTF, SQLAlchemy: the ``fleet`` extra), without the workflows
+    that :func:`_fleet` brings: the dashboard's commands start in about a second."""
+    try:
+        from suspid.dashboard import server
+    except ImportError as exc:
+        raise ConfigError(f"the dashboard needs the fleet extra ({exc.name} is missing): "
+                          f"pip install 'suspid[fleet]'") from None
+    return server
+
+
 def _source(config: ConfigSource) -> str | Path | Mapping[str, Any]:
     """What the workflows reload variants and dates from: a path or a mapping."""
     if isinstance(config, Config):
@@ -374,15 +385,49 @@ def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | 
 
 
 def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ack: bool = False,
-              log: Log | None = None) -> None:
+              create: bool = False, log: Log | None = None, warn: Log | None = None) -> None:
     """Serve the fleet dashboard over the monitoring database until interrupted (``suspid dashboard``).
 
-    :param host: address to bind; the default serves this machine only.
-    :param allow_ack: let users acknowledge alarms (each acknowledgement is logged and audited).
+    :param host: address to bind; the default serves this machine only (another address is said in ``warn``).
+    :param allow_ack: let the database's users (``suspid fleet user add``) log in and acknowledge alarms.
+    :param create: make the SQLite database when it does not exist (else a missing file is an error).
+    :raises suspid.errors.ConfigError: a missing database, a port in use, an address this machine lacks,
+        ``allow_ack`` without any user.
+    """
+    _dashboard().serve(database, host=host, port=port, allow_ack=allow_ack, create=create, log=log or (lambda s: None),
+          warn=warn)
+
+
+def fleet_user(action: str, database: str | Path, name: str | None = None, password: str | None = None):
+    """Users who may acknowledge alarms on the dashboard (``suspid fleet user add|remove|list``).
+
+    :param action: ``add`` (needs ``name`` and ``password``), ``remove`` (needs ``name``) or ``list``.
+    :param database: an existing monitoring database (a missing SQLite file is an error).
+    :returns: the :class:`suspid.fleet.users.UserInfo` added, None for ``remove``, the list for ``list``.
+    """
+    from suspid.fleet import users   # the fleet extra: _dashboard() has checked it
+
+    db = _dashboard().open_dashboard_database(database)
+    try:
+        if action == "add":
+            return users.add_user(db, name or "", password or "")
+        if action == "remove":
+            return users.remove_user(db, name or "")
+        return users.list_users(db)
+    finally:
+        db.dispose()
+
+
+def fleet_upgrade(database: str | Path, *, log: Log | None = None) -> None:
+    """Bring a monitoring database's schema to this suspid's newest revision (``suspid fleet upgrade``).
+
+    A PostgreSQL database is upgraded in one transaction (back it up first: ``pg_dump``); an SQLite one
+    is copied beside itself first (``FILE.schema-REV.bak``). Recording upgrades SQLite by itself.
     """
     _fleet()
-    from suspid.dashboard.app import serve   # Flask: the fleet extra, checked just above
-    serve(database, host=host, port=port, allow_ack=allow_ack, log=log or (lambda s: None))
+    from suspid.fleet.db import upgrade_database   # the fleet extra, checked just above
+
+    upgrade_database(database, log=log or (lambda s: None))
 
 
 def fleet_demo(plan: str | Path, *, log: Log | None = None):

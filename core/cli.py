@@ -308,6 +308,14 @@ def fleet_import(folders: List[Path] = typer.Argument(..., help="monitor or run 
     console.print(f"{out.n_created} runs recorded, {len(out.runs) - out.n_created} already there", markup=False)
 
 
+@fleet_app.command("upgrade")
+def fleet_upgrade(db: str = typer.Option(..., "--db", help="SQLite path or database URL (postgresql://...)."),
+                  quiet: bool = typer.Option(False, "--quiet", help="No progress lines.")) -> None:
+    """Upgrade a monitoring database's schema to this suspid's (back a PostgreSQL one up first: pg_dump)."""
+    api.fleet_upgrade(db, log=_log(quiet))
+    console.print("the database's schema is this suspid's newest", markup=False)
+
+
 @fleet_app.command("demo")
 def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-demo.yaml).", show_default=False),
                serve: bool = typer.Option(True, "--serve/--no-serve", help="Start the dashboard afterwards."),
@@ -402,10 +410,58 @@ def parameters_(config: Optional[Path] = typer.Argument(None, show_default=False
 def dashboard(db: str = typer.Option(..., "--db", help="SQLite path or database URL (postgresql://...)."),
               host: str = typer.Option("127.0.0.1", "--host", help="Address to bind (default: this machine only)."),
               port: int = typer.Option(8050, "--port"),
-              allow_ack: bool = typer.Option(False, "--allow-ack", help="Allow acknowledging alarms (logged).")
+              allow_ack: bool = typer.Option(False, "--allow-ack", help="Let the database's users (suspid fleet user "
+                                                                        "add) log in and acknowledge alarms."),
+              create: bool = typer.Option(False, "--create", help="Make the SQLite database if it does not exist.")
               ) -> None:
     """Serve the fleet dashboard: overview, trainset trends and forecasts, runs, alarms, CSV/JSON export."""
-    api.dashboard(db, host=host, port=port, allow_ack=allow_ack, log=_log(False))
+    api.dashboard(db, host=host, port=port, allow_ack=allow_ack, create=create, log=_log(False),
+                  warn=lambda s: print(s, file=sys.stderr))
+
+
+user_app = typer.Typer(no_args_is_help=True, help="Users who may acknowledge alarms on the dashboard.")
+fleet_app.add_typer(user_app, name="user")
+DbOpt = typer.Option(..., "--db", help="The monitoring database (SQLite path or database URL).")
+
+
+def _read_password(name: str, from_stdin: bool) -> str:
+    """The new user's password: one line of standard input (``--password-stdin``, or input that is not a
+    terminal), else typed twice without echo."""
+    import getpass
+
+    if from_stdin or not sys.stdin.isatty():
+        return sys.stdin.readline().rstrip("\r\n")
+    first = getpass.getpass(f"password for {name}: ")
+    if getpass.getpass("again: ") != first:
+        raise ConfigError(f"user {name}: the two passwords differ; nothing was changed")
+    return first
+
+
+@user_app.command("add")
+def user_add(name: str = typer.Argument(..., help="The user's name.", show_default=False), db: str = DbOpt,
+             password_stdin: bool = typer.Option(False, "--password-stdin",
+                                                 help="Read the password from standard input (one line).")) -> None:
+    """Add a user who may acknowledge alarms (the password is asked without echo, or read from stdin)."""
+    from suspid.fleet.users import check_name
+
+    check_name(name)
+    api.fleet_user("add", db, name, _read_password(name, password_stdin))
+    console.print(f"user {name} added: may log in to a dashboard started with --allow-ack", markup=False)
+
+
+@user_app.command("remove")
+def user_remove(name: str = typer.Argument(..., help="The user's name.", show_default=False),
+                db: str = DbOpt) -> None:
+    """Take away a user's right to acknowledge (their past acknowledgements keep their name)."""
+    api.fleet_user("remove", db, name)
+    console.print(f"user {name} removed", markup=False)
+
+
+@user_app.command("list")
+def user_list(db: str = DbOpt) -> None:
+    """The users who may acknowledge alarms (and those removed)."""
+    for u in api.fleet_user("list", db):
+        print(f"{u.name}\t{'active' if u.active else 'removed'}\tadded {u.created_at} UTC")
 
 
 def _log(quiet: bool):

@@ -35,3 +35,19 @@ def db_url(request, tmp_path):
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'fleet.sqlite'}"
     return request.getfixturevalue("pg_server").fresh_database(f"t{os.getpid()}_{next(_counter)}")
+
+
+@pytest.fixture(scope="session")
+def demo_fleet(tmp_path_factory):
+    """The demo fleet (``configs/fleet-demo.yaml``: 4 trainsets x 6 dates) monitored once per session into an
+    SQLite database of its own (about two minutes on 2 cores): a :class:`suspid.fleet.demo.DemoResult`."""
+    import shutil
+    from pathlib import Path
+
+    from suspid.fleet.demo import run_demo
+    from suspid.infra.threads import single_blas_thread
+
+    plan = tmp_path_factory.mktemp("demo") / "fleet-demo.yaml"
+    shutil.copy(Path(__file__).resolve().parents[1] / "configs" / "fleet-demo.yaml", plan)
+    with single_blas_thread():
+        return run_demo(plan)

@@ -54,11 +54,19 @@ class PostgresServer:
             shutil.chown(self.root, self.user)
             os.chmod(self.root, 0o700)
         self._run("initdb", "-D", str(data), "-A", "trust", "-U", "suspid", "--no-sync", "-E", "UTF8")
-        self._run("pg_ctl", "-D", str(data), "-l", str(self.root / "log"), "-w", "-t", "60", "-o",
-                  f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=60",
-                  "start")
+        self.start_again()
         self._run("createdb", "-h", "127.0.0.1", "-p", str(self.port), "-U", "suspid", "suspid")
         return self.url
+
+    def start_again(self) -> None:
+        """Start the server on its data folder (after :meth:`kill`: PostgreSQL's crash recovery runs)."""
+        self._run("pg_ctl", "-D", str(self.root / "data"), "-l", str(self.root / "log"), "-w", "-t", "60", "-o",
+                  f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off -c max_connections=60",
+                  "start")
+
+    def kill(self) -> None:
+        """Stop the server at once, as a crash would (``pg_ctl -m immediate``: no shutdown checkpoint)."""
+        self._run("pg_ctl", "-D", str(self.root / "data"), "-m", "immediate", "-w", "stop")
 
     @property
     def url(self) -> str:

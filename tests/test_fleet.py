@@ -10,13 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fleet_fixtures import db_url, pg_server  # noqa: F401 - fixtures
+from fleet_fixtures import db_url, demo_fleet, pg_server  # noqa: F401 - fixtures
 from suspid.errors import ConfigError
 from suspid.fleet import queries
-from suspid.fleet.alarms import ELEMENT_LEVELS, Hysteresis, acknowledge, element_margin, replay
+from suspid.fleet.alarms import ELEMENT_LEVELS, AcknowledgementError, Hysteresis, acknowledge, element_margin, replay
 from suspid.fleet.db import database_url, open_database
 from suspid.fleet.record import VehicleKey, record_result
 from suspid.fleet.trends import fit_trend
+from suspid.fleet.users import add_user
 from suspid.indicators.standard import IndicatorValue
 
 DOMAIN = {"c_yaw[bogie1]": [225e3, 375e3], "c_sec_z": [15e3, 25e3]}
@@ -73,9 +74,10 @@ def test_alarm_raised_escalated_acknowledged_and_audited(db_url, tmp_path):
             _record(db, i, v, tmp_path)
         (alarm,) = queries.alarms(db, state="raised")
         assert (alarm["source"], alarm["level"], alarm["raised_on"]) == ("c_yaw[bogie1]", "alarm", "2026-01-31")
+        add_user(db, "j.doe", "a long enough password")
         with db.session() as s:
             acknowledge(s, alarm["id"], "j.doe", "damper ordered")
-        with pytest.raises(ConfigError, match="no alarm with id"), db.session() as s:
+        with pytest.raises(AcknowledgementError, match="no alarm with id"), db.session() as s:
             acknowledge(s, 999, "j.doe")
         (acked,) = queries.alarms(db, state="raised")
         assert acked["acked_by"] == "j.doe" and acked["ack_comment"] == "damper ordered" and acked["acked_at"]
@@ -230,13 +232,7 @@ def test_cli_indicators_recorded_into_the_configured_database(tmp_path):
 
 
 @pytest.mark.long   # the demo fleet: 4 trainsets x 6 dates, several minutes on 2 cores
-def test_demo_fleet_shows_warning_then_alarm_and_forecasts_contain_the_true_crossings(tmp_path):
-    import shutil
-
-    from suspid.fleet.demo import run_demo
-
-    plan = tmp_path / "fleet-demo.yaml"
-    shutil.copy(Path(__file__).resolve().parents[1] / "configs" / "fleet-demo.yaml", plan)
-    out = run_demo(plan)
+def test_demo_fleet_shows_warning_then_alarm_and_forecasts_contain_the_true_crossings(demo_fleet):
+    out = demo_fleet
     assert {c.element_group for c in out.checks} == {"c_yaw", "k_sec_z"}
     assert all(c.holds for c in out.checks), (out.out_dir / "fleet-demo.md").read_text()

@@ -19,8 +19,12 @@ supports neither raises nor clears an alarm.
 The state is replayed from the whole history in date order whenever a run is
 recorded (:func:`update_alarms`), so runs imported out of order or by writers
 finishing together give the same alarms. A new episode (raised after a clear)
-or an escalation resets the acknowledgement; acknowledging (:func:`acknowledge`)
-stores who, when and a comment. Every change is one :class:`AuditEntry`.
+or an escalation resets the acknowledgement of the alarm's current episode.
+Acknowledging (:func:`acknowledge`) is for a raised alarm only and for a user
+of the database (:mod:`suspid.fleet.users`); each acknowledgement is a row of
+its own (:class:`~suspid.fleet.schema.Acknowledgement`: who, when, the comment,
+the episode and level), so a second one never replaces the first. Every change
+is one :class:`AuditEntry`.
 """
 
 from __future__ import annotations
@@ -33,10 +37,17 @@ from typing import Sequence
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from suspid.errors import ConfigError
-from suspid.fleet.schema import Alarm, AuditEntry, ElementValue, Indicator, Run
+from suspid.errors import SuspidError
+from suspid.fleet.schema import Acknowledgement, Alarm, AuditEntry, Indicator, Run, User
+from suspid.indicators.standard import COMFORT, COMFORT_ALARM, COMFORT_WARNING
 
 SYSTEM_ACTOR = "suspid"
+MAX_COMMENT = 2000
+"""Longest acknowledgement comment (characters)."""
+
+
+class AcknowledgementError(SuspidError):
+    """An acknowledgement that cannot be made: no such alarm, a cleared alarm, an unknown user, a long comment."""
 
 
 @dataclass(frozen=True)
@@ -56,6 +67,11 @@ two half-widths (one half-width deeper than where the warning was raised)."""
 INDICATOR_LEVELS = Hysteresis(warning_above=0.8, alarm_above=1.0, clear_below=0.7)
 """Indicator margins are value / limit: warning above 80 % of the standard's limit, alarm above it, cleared
 below 70 %."""
+COMFORT_LEVELS = Hysteresis(warning_above=COMFORT_WARNING, alarm_above=COMFORT_ALARM,
+                            clear_below=0.875 * COMFORT_WARNING)
+"""EN 12299 mean comfort has no single limit: its margin is N_MV itself, warning from 2 (medium), alarm from 4
+(uncomfortable), the verdict's levels; cleared below 1.75, the same 7/8 of the warning level as the instability's
+70 % against 80 %."""
 
 
 def element_margin(value: float, low: float, high: float, acceptable_low: float | None,
@@ -76,11 +92,18 @@ def element_margin(value: float, low: float, high: float, acceptable_low: float 
     return max(sides)
 
 
-def indicator_margin(value: float, limit: float | None) -> float | None:
-    """Indicator value / limit; None without a limit."""
+def indicator_margin(value: float, limit: float | None, name: str = "") -> float | None:
+    """Indicator value / limit (EN 12299 comfort: N_MV itself, see :data:`COMFORT_LEVELS`); None without a limit."""
+    if name == COMFORT:
+        return float(value)
     if limit is None or not limit > 0:
         return None
     return value / limit
+
+
+def indicator_levels(name: str) -> Hysteresis:
+    """The hysteresis of an indicator's alarm."""
+    return COMFORT_LEVELS if name == COMFORT else INDICATOR_LEVELS
 
 
 @dataclass
@@ -114,7 +137,8 @@ def replay(points: Sequence[tuple[dt.date, int, float | None]], levels: Hysteres
 
 
 def _audit(session: Session, action: str, alarm: Alarm | None, detail: str, actor: str = SYSTEM_ACTOR) -> None:
-    session.add(AuditEntry(at=dt.datetime.now(dt.timezone.utc).replace(tzinfo=None), actor=actor, action=action,
+    now = dt.datetime.now(dt.timezone.utc).replace(tzinfo=None, microsecond=0)
+    session.add(AuditEntry(at=now, actor=actor, action=action,
                            alarm_id=None if alarm is None else alarm.id, detail=detail))
 
 
@@ -164,26 +188,41 @@ def update_alarms(session: Session, fleet: str, trainset: str, vehicle: str) -> 
             by_source.setdefault(("element", v.element_group), []).append((run.date, run.id, m))
         for ind in run.indicators:
             if ind.segment is None:   # the run's value, not each segment's
-                m = None if ind.verdict == "not assessable" else indicator_margin(ind.value, ind.limit)
+                m = None if ind.verdict == "not assessable" else indicator_margin(ind.value, ind.limit, ind.name)
                 by_source.setdefault(("indicator", ind.name), []).append((run.date, run.id, m))
     for (what, source), points in sorted(by_source.items()):
-        levels = ELEMENT_LEVELS if what == "element" else INDICATOR_LEVELS
+        levels = ELEMENT_LEVELS if what == "element" else indicator_levels(source)
         _apply(session, (fleet, trainset, vehicle), source, replay(points, levels))
 
 
-def acknowledge(session: Session, alarm_id: int, who: str, comment: str = "") -> Alarm:
-    """Acknowledge an alarm: who, when (UTC) and a comment, with an audit entry.
+def acknowledge(session: Session, alarm_id: int, user: str, comment: str = "") -> Acknowledgement:
+    """Acknowledge a raised alarm as ``user``: a new :class:`Acknowledgement` (who, when in UTC, the comment, the
+    episode and level), the alarm's current acknowledgement, and an audit entry.
 
-    :raises ConfigError: no such alarm, or an empty name.
+    ``user`` must be an active user of the database; the dashboard has checked the password before.
+
+    :raises AcknowledgementError: no such alarm, a cleared alarm, an unknown or removed user, a comment longer
+        than :data:`MAX_COMMENT`.
     """
-    who = (who or "").strip()
-    if not who:
-        raise ConfigError("acknowledgement: give the name of who acknowledges")
+    found = session.scalar(select(User).where(User.name == user))
+    if found is None or not found.active:
+        raise AcknowledgementError(f"acknowledgement: '{user}' is not a user who may acknowledge "
+                                   f"(suspid fleet user add NAME)")
+    if len(comment) > MAX_COMMENT:
+        raise AcknowledgementError(f"acknowledgement: the comment has {len(comment)} characters; at most "
+                                   f"{MAX_COMMENT}")
     alarm = session.get(Alarm, alarm_id)
     if alarm is None:
-        raise ConfigError(f"acknowledgement: no alarm with id {alarm_id}")
-    alarm.acked_by, alarm.ack_comment = who, comment
-    alarm.acked_at = dt.datetime.now(dt.timezone.utc).replace(tzinfo=None)
-    _audit(session, "acknowledged", alarm, f"{alarm.trainset}/{alarm.vehicle} {alarm.source} ({alarm.level}): "
-           f"{comment}", actor=who)
-    return alarm
+        raise AcknowledgementError(f"acknowledgement: no alarm with id {alarm_id}")
+    where = f"{alarm.trainset}/{alarm.vehicle} {alarm.source}"
+    if alarm.state != "raised":
+        raise AcknowledgementError(f"acknowledgement: alarm {alarm_id} ({where}) was cleared on {alarm.cleared_on}: "
+                                   f"only a raised alarm can be acknowledged")
+    now = dt.datetime.now(dt.timezone.utc).replace(tzinfo=None, microsecond=0)
+    ack = Acknowledgement(alarm_id=alarm.id, user_name=found.name, at=now, comment=comment,
+                          raised_on=alarm.raised_on, level=alarm.level)
+    session.add(ack)
+    alarm.acked_by, alarm.ack_comment, alarm.acked_at = found.name, comment, now
+    _audit(session, "acknowledged", alarm, f"{where} ({alarm.level}): {comment}", actor=found.name)
+    session.flush()
+    return ack

@@ -9,15 +9,16 @@ or the campaign's own ``mileage_km``) and the indicators of its recordings.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from suspid.config import Config, build_simulator, identified_bounds, load_config
-from suspid.errors import ConfigError
+from suspid.errors import ConfigError, DataError
 from suspid.fleet.db import Database, database_url, open_database
-from suspid.fleet.record import (ImportResult, RecordedRun, VehicleKey, import_folders, is_recorded, mileage_at,
-                                  record_result)
+from suspid.fleet.record import (ImportResult, RecordedRun, RunRecord, VehicleKey, import_folders, is_recorded,
+                                  mileage_at, record_result, record_results)
 from suspid.indicators.recordings import config_indicators
 from suspid.indicators.standard import IndicatorValue
 
@@ -68,49 +69,75 @@ def _indicators(config: Config, log: Log) -> list[IndicatorValue]:
     return config_indicators(config, hunting_hz=config.fleet.hunting_hz)
 
 
+def _open(config: Config, url: str, log: Log) -> Database:
+    return open_database(url, wait_s=config.fleet.wait_s, log=log)
+
+
+@contextlib.contextmanager
+def _keeping(run_dir: Path) -> Iterator[None]:
+    """A fault of the database after a run: its line, and that the run's own results are kept for a rerun."""
+    try:
+        yield
+    except DataError as exc:
+        raise DataError(f"{exc}; nothing was recorded; the run's results are kept in {run_dir}: the same command "
+                        f"records them, once, when the database is usable") from None
+
+
 def record_identification(config: Config, result: Any, *, log: Log = lambda s: None) -> RecordedRun | None:
-    """Record a finished ``suspid run`` (an :class:`~suspid.workflows.identify.IdentificationResult`)."""
+    """Record a finished ``suspid run`` (an :class:`~suspid.workflows.identify.IdentificationResult`).
+
+    :raises DataError: a fault of the database (one line; ``result.json`` and the ledger are kept, and the
+        same command records the run once).
+    """
     url = database_location(config)
     if url is None:
         return None
-    db = open_database(url)
-    try:
-        acceptable = {n: list(v) for n, v in config.fleet.acceptable.items()}
-        rec = record_result(db, _key(config), config.fleet.date or dt.date.today(), result.to_dict(),
-                            result.run_dir, mileage_km=config.fleet.mileage_km, kind="run",
-                            acceptable=acceptable, indicators=_indicators(config, log))
-        log(f"recorded in the monitoring database as run {rec.run_id}")
-        return rec
-    finally:
-        db.dispose()
+    with _keeping(result.run_dir):
+        db = _open(config, url, log)
+        try:
+            acceptable = {n: list(v) for n, v in config.fleet.acceptable.items()}
+            rec = record_result(db, _key(config), config.fleet.date or dt.date.today(), result.to_dict(),
+                                result.run_dir, mileage_km=config.fleet.mileage_km, kind="run",
+                                acceptable=acceptable, indicators=_indicators(config, log))
+        finally:
+            db.dispose()
+    log(f"recorded in the monitoring database as run {rec.run_id}" + ("" if rec.created else " (already there)"))
+    return rec
 
 
 def record_monitor(config: Config, plans: Sequence[Any], result: Any, *, log: Log = lambda s: None
                    ) -> list[RecordedRun]:
-    """Record every date of a finished monitor (``plans``: its :class:`~suspid.workflows.monitor.DatePlan`)."""
+    """Record every date of a finished monitor (``plans``: its :class:`~suspid.workflows.monitor.DatePlan`),
+    all dates in one transaction.
+
+    :raises DataError: as :func:`record_identification`; then no date is recorded.
+    """
     url = database_location(config)
     if url is None:
         return []
-    db = open_database(url)
     acceptable = {n: list(v) for n, v in config.monitor.acceptable.items()}
     campaign_km = {c.date: c.mileage_km for c in config.monitor.campaigns}
     first = plans[0].date
-    out = []
-    try:
-        for plan in plans:
-            km = campaign_km.get(plan.date)
-            if km is None:
-                km = mileage_at(plan.date, first, config.fleet.mileage_km, config.fleet.km_per_day)
-            res = result.dates[plan.date.isoformat()]
-            data = res.to_dict()
-            new = not is_recorded(db, res.run_dir, str(data.get("run_id") or ""))   # a resumed monitor
-            out.append(record_result(db, _key(config), plan.date, data, res.run_dir, mileage_km=km,
-                                     kind="monitor-date", acceptable=acceptable,
-                                     indicators=_indicators(plan.config, log) if new else ()))
-        log(f"recorded {len(out)} dates of {config.fleet.trainset} in the monitoring database")
-        return out
-    finally:
-        db.dispose()
+    with _keeping(result.monitor_dir):
+        db = _open(config, url, log)
+        try:
+            records = []
+            for plan in plans:
+                km = campaign_km.get(plan.date)
+                if km is None:
+                    km = mileage_at(plan.date, first, config.fleet.mileage_km, config.fleet.km_per_day)
+                res = result.dates[plan.date.isoformat()]
+                data = res.to_dict()
+                new = not is_recorded(db, res.run_dir, str(data.get("run_id") or ""))   # a resumed monitor
+                records.append(RunRecord(_key(config), plan.date, data, res.run_dir, km, "monitor-date", acceptable,
+                                         _indicators(plan.config, log) if new else ()))
+            out = record_results(db, records)
+        finally:
+            db.dispose()
+    n_new = sum(r.created for r in out)
+    log(f"recorded {n_new} dates of {config.fleet.trainset} in the monitoring database"
+        + (f" ({len(out) - n_new} already there)" if n_new < len(out) else ""))
+    return out
 
 
 def import_runs(database: str | Path, folders: Sequence[str | Path], *, fleet: str, trainset: str,
@@ -121,7 +148,7 @@ def import_runs(database: str | Path, folders: Sequence[str | Path], *, fleet: s
     :param indicators: also compute each run's indicators from its ``config.yaml`` (re-simulating a numerical
         experiment's recordings, reading measured ones).
     """
-    db = open_database(database)
+    db = open_database(database, log=log)
 
     def of(run_dir: Path) -> list[IndicatorValue]:
         cfg_file = Path(run_dir) / "config.yaml"
@@ -142,7 +169,7 @@ def run_indicators(config: Config, *, log: Log = lambda s: None) -> tuple[list[I
     url = database_location(config)
     if url is None:
         return values, None
-    db = open_database(url)
+    db = _open(config, url, log)
     try:
         result = {"name": config.name, "parameters": [], "run_id": "indicators"}
         rec = record_result(db, _key(config), config.fleet.date or dt.date.today(), result, config.run_dir(),

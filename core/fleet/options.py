@@ -14,8 +14,11 @@
       hunting_hz: null              # EN 14363 band centre; default: the spectral peak of the bogie frame
       acceptable:                   # acceptable domains of a `suspid run`'s verdicts (a monitor uses its own)
         c_yaw: [225.0e3, 375.0e3]   # SI units, null for an open side
+      wait_s: 60                    # how long a finished run waits for a database server that cannot be reached
 
 Without a ``fleet:`` section (or without ``database``) nothing is recorded.
+``wait_s`` says how a run records, not what it computes: it is left out of
+the resolved config, hence of the run id (changing it is the same run).
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ from pydantic import Field
 from suspid.options import Section
 
 NAME = r"^[A-Za-z0-9_.\-]+$"
+DEFAULT_WAIT_S = 60.0
+"""How long a writer waits for a database server that cannot be reached, s: a server's restart fits in it,
+a wrong address is not waited for much longer than the run's own last step."""
 
 
 class FleetSection(Section):
@@ -42,3 +48,5 @@ class FleetSection(Section):
     indicators: bool = True
     hunting_hz: float | None = Field(default=None, gt=0.0)
     acceptable: dict[str, tuple[float | None, float | None]] = Field(default_factory=dict)
+    wait_s: float = Field(default=DEFAULT_WAIT_S, ge=0.0, exclude=True,
+                          description="how long to wait for a database server that cannot be reached, s")

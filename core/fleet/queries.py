@@ -13,7 +13,7 @@ from typing import Any
 from sqlalchemy import select
 
 from suspid.fleet.db import Database
-from suspid.fleet.schema import Alarm, AuditEntry, ElementValue, Indicator, Run
+from suspid.fleet.schema import Acknowledgement, Alarm, AuditEntry, ElementValue, Indicator, Run
 from suspid.fleet.trends import Trend, dates_from_mileage, fit_trend
 
 
@@ -55,17 +55,22 @@ def trainsets(db: Database) -> list[str]:
         return sorted(set(s.scalars(select(Run.trainset))))
 
 
-def history(db: Database, trainset: str, *, fleet: str | None = None) -> list[dict[str, Any]]:
-    """Every element value of a trainset, in date order (one row per run and element group)."""
+def history(db: Database, trainset: str | None, *, fleet: str | None = None) -> list[dict[str, Any]]:
+    """Every element value of a trainset (of every trainset: None), in date order (one row per run and element
+    group)."""
     with db.read() as s:
-        q = select(Run, ElementValue).join(ElementValue).where(Run.trainset == trainset)
+        q = select(Run, ElementValue).join(ElementValue)
+        if trainset is not None:
+            q = q.where(Run.trainset == trainset)
         if fleet:
             q = q.where(Run.fleet == fleet)
         return [{"run_id": r.id, "fleet": r.fleet, "trainset": r.trainset, "vehicle": r.vehicle,
                  "date": r.date.isoformat(), "mileage_km": r.mileage_km, "element_group": v.element_group,
                  "value": v.value, "interval_low": v.interval_low, "interval_high": v.interval_high,
                  "acceptable_low": v.acceptable_low, "acceptable_high": v.acceptable_high, "unit": v.unit,
-                 "identifiable": v.identifiable, "trust": v.trust, "verdict": v.verdict, "w_ref": v.w_ref}
+                 "identifiable": v.identifiable, "trust": v.trust, "verdict": v.verdict, "w_ref": v.w_ref,
+                 "kind": v.kind, "nominal": v.nominal, "label": v.label, "reason": v.reason,
+                 "trust_reason": v.trust_reason}
                 for r, v in s.execute(q.order_by(Run.date, Run.id, ElementValue.element_group))]
 
 
@@ -80,7 +85,8 @@ def indicators(db: Database, trainset: str | None = None, run_id: int | None = N
             q = q.where(Run.id == run_id)
         if per_run:
             q = q.where(Indicator.segment.is_(None))
-        return [{"run_id": r.id, "trainset": r.trainset, "vehicle": r.vehicle, "date": r.date.isoformat(),
+        return [{"run_id": r.id, "fleet": r.fleet, "trainset": r.trainset, "vehicle": r.vehicle,
+                 "date": r.date.isoformat(), "mileage_km": r.mileage_km,
                  "name": i.name, "segment": i.segment, "channel": i.channel, "value": i.value, "limit": i.limit,
                  "unit": i.unit, "verdict": i.verdict}
                 for r, i in s.execute(q.order_by(Run.date, Run.id, Indicator.name, Indicator.id))]
@@ -89,14 +95,20 @@ def indicators(db: Database, trainset: str | None = None, run_id: int | None = N
 def trends(db: Database, trainset: str, *, fleet: str | None = None) -> list[tuple[dict[str, Any], Trend]]:
     """The trend of every (vehicle, element group) of a trainset, with its points (:mod:`suspid.fleet.trends`).
 
-    The abscissa is the mileage when every point has one, else the days since the first date.
+    The abscissa is the mileage when every point has one, else the days since the first date. Each info dict
+    has the vehicle, the element group, the points (:func:`history` rows), their abscissae ``x`` and the
+    vehicle's ``calendar`` (:class:`~suspid.fleet.trends.Calendar`, abscissa <-> date).
     """
-    rows = history(db, trainset, fleet=fleet)
-    groups: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    return trends_of(history(db, trainset, fleet=fleet))
+
+
+def trends_of(rows: list[dict[str, Any]]) -> list[tuple[dict[str, Any], Trend]]:
+    """:func:`trends` of :func:`history` rows (of one trainset or several), by (fleet, trainset, vehicle, group)."""
+    groups: dict[tuple[str, str, str, str], list[dict[str, Any]]] = {}
     for r in rows:
-        groups.setdefault((r["vehicle"], r["element_group"]), []).append(r)
+        groups.setdefault((r["fleet"], r["trainset"], r["vehicle"], r["element_group"]), []).append(r)
     out = []
-    for (vehicle, group), pts in sorted(groups.items()):
+    for (fleet, trainset, vehicle, group), pts in sorted(groups.items()):
         dates = [dt.date.fromisoformat(p["date"]) for p in pts]
         use_km = all(p["mileage_km"] is not None for p in pts)
         x = [p["mileage_km"] if use_km else (d - min(dates)).days for p, d in zip(pts, dates)]
@@ -105,8 +117,9 @@ def trends(db: Database, trainset: str, *, fleet: str | None = None) -> list[tup
                       [p["identifiable"] and p["trust"] != "no" for p in pts],
                       acceptable_low=pts[-1]["acceptable_low"], acceptable_high=pts[-1]["acceptable_high"],
                       abscissa="mileage_km" if use_km else "days")
-        dates_from_mileage(t, dates, [p["mileage_km"] for p in pts])
-        out.append(({"vehicle": vehicle, "element_group": group, "points": pts, "x": x}, t))
+        calendar = dates_from_mileage(t, dates, [p["mileage_km"] for p in pts])
+        out.append(({"fleet": fleet, "trainset": trainset, "vehicle": vehicle, "element_group": group,
+                     "points": pts, "x": x, "calendar": calendar}, t))
     return out
 
 
@@ -125,10 +138,22 @@ def alarms(db: Database, *, state: str | None = None, trainset: str | None = Non
                 for a in s.scalars(q.order_by(Alarm.raised_on.desc(), Alarm.id))]
 
 
+def acknowledgements(db: Database, alarm_id: int | None = None) -> list[dict[str, Any]]:
+    """Every acknowledgement (of one alarm with ``alarm_id``), oldest first: who, when (UTC), comment, the
+    episode (``raised_on``) and level acknowledged."""
+    with db.read() as s:
+        q = select(Acknowledgement)
+        if alarm_id is not None:
+            q = q.where(Acknowledgement.alarm_id == alarm_id)
+        return [{"id": a.id, "alarm_id": a.alarm_id, "user": a.user_name, "at": _iso(a.at), "comment": a.comment,
+                 "raised_on": _iso(a.raised_on), "level": a.level}
+                for a in s.scalars(q.order_by(Acknowledgement.at, Acknowledgement.id))]
+
+
 def audit(db: Database, limit: int = 200) -> list[dict[str, Any]]:
     """The newest audit entries."""
     with db.read() as s:
-        return [{"id": e.id, "at": e.at.isoformat(timespec="seconds"), "actor": e.actor, "action": e.action,
+        return [{"id": e.id, "at": _iso(e.at), "actor": e.actor, "action": e.action,
                  "alarm_id": e.alarm_id, "detail": e.detail}
                 for e in s.scalars(select(AuditEntry).order_by(AuditEntry.id.desc()).limit(limit))]
 
@@ -145,7 +170,10 @@ def run_info(db: Database, run_id: int) -> dict[str, Any] | None:
                 "figure2_path": r.figure2_path,
                 "values": [{"element_group": v.element_group, "value": v.value, "interval_low": v.interval_low,
                             "interval_high": v.interval_high, "unit": v.unit, "identifiable": v.identifiable,
-                            "trust": v.trust, "verdict": v.verdict} for v in r.values]}
+                            "trust": v.trust, "verdict": v.verdict, "nominal": v.nominal, "label": v.label,
+                            "kind": v.kind, "reason": v.reason, "trust_reason": v.trust_reason,
+                            "acceptable_low": v.acceptable_low, "acceptable_high": v.acceptable_high}
+                           for v in r.values]}
 
 
 def count_runs(db: Database) -> int:
@@ -154,4 +182,9 @@ def count_runs(db: Database) -> int:
 
 
 def _iso(v: dt.date | dt.datetime | None) -> str | None:
-    return None if v is None else v.isoformat()
+    """A date as ``YYYY-MM-DD``; a time (UTC) as ``YYYY-MM-DD HH:MM:SS``, without microseconds."""
+    if v is None:
+        return None
+    if isinstance(v, dt.datetime):
+        return v.isoformat(sep=" ", timespec="seconds")
+    return v.isoformat()

@@ -7,11 +7,12 @@ acceptable domains (``monitor.acceptable``) by the monitor's status rule
 warning, ``out-of-domain`` -> alarm, and ``not-identifiable``,
 ``not-trustworthy`` or ``unmonitored`` -> not assessable. Trust is the run's
 (yes / no / not assessed). Recording a run already in the database (same run
-folder and config hash) changes nothing, so an import can be repeated. Each run
-is written in one transaction together with the replay of its vehicle's
-alarms (:func:`suspid.fleet.alarms.update_alarms`); on PostgreSQL a
-transaction-scoped advisory lock per vehicle serialises writers of the same
-vehicle, SQLite serialises all writers.
+folder and config hash) changes nothing, so an import can be repeated and an
+interrupted recording completed without doubling anything. Each run (each
+monitor, all its dates) is written in one transaction together with the
+replay of its vehicle's alarms (:func:`suspid.fleet.alarms.update_alarms`);
+on PostgreSQL a transaction-scoped advisory lock per vehicle serialises
+writers of the same vehicle, SQLite serialises all writers.
 """
 
 from __future__ import annotations
@@ -76,13 +77,35 @@ def element_kind(group: str) -> str:
     return group.split("[", 1)[0]
 
 
+def _reasons(result: Mapping[str, Any], key: str, name: str) -> str:
+    """``result[key][name]`` (a reason or a list of reasons) as one text, "" when there is none."""
+    found = (result.get(key) or {}).get(name) or ""
+    return "; ".join(map(str, found)) if isinstance(found, (list, tuple)) else str(found)
+
+
+def not_assessable_reason(result: Mapping[str, Any], name: str, status: str) -> str | None:
+    """Why an element's verdict is ``not assessable`` (None for the other verdicts), from the run's own reasons."""
+    if status == "not-identifiable":
+        return "not identifiable: " + (_reasons(result, "non_identifiable_reasons", name) or
+                                       "the measurements do not determine it")
+    if status == "not-trustworthy":
+        return "not trustworthy under model error: " + (_reasons(result, "untrustworthy_reasons", name) or
+                                                        "a model-error check flags it")
+    if status == "unmonitored":
+        return "no acceptable domain given for it (monitor.acceptable, or fleet.acceptable of a suspid run)"
+    return None
+
+
 def element_rows(result: Mapping[str, Any], acceptable: Mapping[str, Sequence[float | None]]) -> list[dict[str, Any]]:
-    """The element values of one ``result.json`` with their verdicts and trust (module docstring)."""
+    """The element values of one ``result.json`` with their verdicts, trust, nominal values, plain-language
+    labels and the reasons behind a ``not assessable`` verdict and a ``not assessed`` trust (module docstring)."""
     rows = []
     trust = result.get("trustworthy") or {}
+    labels = {r.get("name"): r.get("label") for r in (result.get("verdict") or {}).get("rows", [])}
     for n in result["parameters"]:
         domain = acceptable.get(n)
         status = status_of(result["interval"][n], domain, bool(result["identifiable"][n]), trust.get(n))
+        nominal = (result.get("nominal") or {}).get(n)
         rows.append({"element_group": n, "kind": element_kind(n), "unit": result.get("units", {}).get(n, ""),
                      "value": float(result["w_opt"][n]), "interval_low": float(result["interval"][n][0]),
                      "interval_high": float(result["interval"][n][1]),
@@ -90,7 +113,11 @@ def element_rows(result: Mapping[str, Any], acceptable: Mapping[str, Sequence[fl
                      "acceptable_high": None if domain is None else domain[1],
                      "identifiable": bool(result["identifiable"][n]), "trust": trust_word(trust.get(n)),
                      "verdict": VERDICT_OF_STATUS[status],
-                     "w_ref": (result.get("w_ref") or {}).get(n)})
+                     "w_ref": (result.get("w_ref") or {}).get(n),
+                     "nominal": None if nominal is None else float(nominal), "label": labels.get(n),
+                     "reason": not_assessable_reason(result, n, status),
+                     "trust_reason": (_reasons(result, "not_assessed_reasons", n) or None)
+                     if trust_word(trust.get(n)) == "not assessed" else None})
     return rows
 
 
@@ -104,6 +131,64 @@ def _figure(run_dir: Path, name: str) -> str | None:
     return str(run_dir / name) if (run_dir / name).is_file() else None
 
 
+@dataclass
+class RunRecord:
+    """One identification to record (the arguments of :func:`record_result`)."""
+
+    key: VehicleKey
+    date: dt.date
+    result: Mapping[str, Any]
+    run_dir: Path
+    mileage_km: float | None = None
+    kind: str = "run"
+    acceptable: Mapping[str, Sequence[float | None]] | None = None
+    indicators: Sequence[IndicatorValue] = ()
+
+
+def _add(session: Session, rec: RunRecord) -> RecordedRun:
+    """Add one run (unless its run folder and run id are there already) and replay its vehicle's alarms."""
+    run_dir, key = Path(rec.run_dir).resolve(), rec.key
+    config_hash = str(rec.result.get("run_id") or "")
+    found = session.scalar(select(Run).where(Run.run_dir == str(run_dir), Run.config_hash == config_hash))
+    if found is not None:
+        if (found.fleet, found.trainset, found.vehicle) != (key.fleet, key.trainset, key.vehicle):
+            raise DataError(f"{run_dir}: run {config_hash} is recorded already for {found.fleet}/{found.trainset}/"
+                            f"{found.vehicle} (database run {found.id}), not for {key.fleet}/{key.trainset}/"
+                            f"{key.vehicle}; nothing was recorded")
+        return RecordedRun(found.id, False, len(found.values), len(found.indicators), found.date, run_dir)
+    rows = element_rows(rec.result, rec.acceptable or {})
+    run = Run(fleet=key.fleet, trainset=key.trainset, vehicle=key.vehicle, date=rec.date,
+              mileage_km=rec.mileage_km, kind=rec.kind, name=str(rec.result.get("name", run_dir.name)),
+              config_hash=config_hash, run_dir=str(run_dir), report_path=_figure(run_dir, "report.md"),
+              figure1_path=_figure(run_dir, "figure1_spectra.png"),
+              figure2_path=_figure(run_dir, "figure2_parameters.png"),
+              recorded_at=dt.datetime.now(dt.timezone.utc).replace(tzinfo=None))
+    run.values = [ElementValue(**r) for r in rows]
+    run.indicators = [Indicator(name=i.name, segment=i.segment, channel=i.channel, value=float(i.value),
+                                limit=i.limit, unit=i.unit, verdict=i.verdict, detail=json.dumps(i.detail))
+                      for i in rec.indicators]
+    session.add(run)
+    session.flush()
+    update_alarms(session, key.fleet, key.trainset, key.vehicle)
+    return RecordedRun(run.id, True, len(rows), len(rec.indicators), rec.date, run_dir)
+
+
+def record_results(db: Database, records: Sequence[RunRecord]) -> list[RecordedRun]:
+    """Record several runs (a monitor's dates) in one transaction: all of them or, after a fault, none.
+
+    Each run is keyed by its run folder and run id (``result.json``'s ``run_id``,
+    the digest of its config): recording it again changes nothing, so a
+    recording interrupted by any fault is completed by doing it again, and
+    never doubled (:meth:`suspid.fleet.db.Database.write` retries passing faults).
+    """
+    def work(session: Session) -> list[RecordedRun]:
+        for key in sorted({r.key for r in records}, key=lambda k: (k.fleet, k.trainset, k.vehicle)):
+            _lock_vehicle(session, key)      # in one order: two writers of the same vehicles cannot deadlock
+        return [_add(session, r) for r in records]
+
+    return db.write(work)
+
+
 def record_result(db: Database, key: VehicleKey, date: dt.date, result: Mapping[str, Any], run_dir: Path, *,
                   mileage_km: float | None = None, kind: str = "run",
                   acceptable: Mapping[str, Sequence[float | None]] | None = None,
@@ -113,39 +198,17 @@ def record_result(db: Database, key: VehicleKey, date: dt.date, result: Mapping[
     :param run_dir: the run's folder (``report.md``, ``figure1_spectra.png``, ``figure2_parameters.png``).
     :param kind: ``run`` (``suspid run``) or ``monitor-date``.
     :param acceptable: acceptable domain per element group (SI units); without one: not assessable.
+    :raises DataError: the run folder is recorded for another vehicle, or a fault of the database.
     """
-    run_dir = Path(run_dir).resolve()
-    rows = element_rows(result, acceptable or {})
-    config_hash = str(result.get("run_id") or "")
-
-    def work(session: Session) -> RecordedRun:
-        _lock_vehicle(session, key)
-        found = session.scalar(select(Run).where(Run.run_dir == str(run_dir), Run.config_hash == config_hash))
-        if found is not None:
-            return RecordedRun(found.id, False, len(found.values), len(found.indicators), found.date, run_dir)
-        run = Run(fleet=key.fleet, trainset=key.trainset, vehicle=key.vehicle, date=date, mileage_km=mileage_km,
-                  kind=kind, name=str(result.get("name", run_dir.name)), config_hash=config_hash,
-                  run_dir=str(run_dir), report_path=_figure(run_dir, "report.md"),
-                  figure1_path=_figure(run_dir, "figure1_spectra.png"),
-                  figure2_path=_figure(run_dir, "figure2_parameters.png"),
-                  recorded_at=dt.datetime.now(dt.timezone.utc).replace(tzinfo=None))
-        run.values = [ElementValue(**r) for r in rows]
-        run.indicators = [Indicator(name=i.name, segment=i.segment, channel=i.channel, value=float(i.value),
-                                    limit=i.limit, unit=i.unit, verdict=i.verdict, detail=json.dumps(i.detail))
-                          for i in indicators]
-        session.add(run)
-        session.flush()
-        update_alarms(session, key.fleet, key.trainset, key.vehicle)
-        return RecordedRun(run.id, True, len(rows), len(indicators), date, run_dir)
-
-    return db.write(work)
+    return record_results(db, [RunRecord(key, date, result, Path(run_dir), mileage_km, kind, acceptable,
+                                         indicators)])[0]
 
 
 def is_recorded(db: Database, run_dir: Path, config_hash: str) -> bool:
     """Whether the run of ``run_dir`` with ``config_hash`` is in the database (its indicators need no computing)."""
-    with db.session() as session:
-        return session.scalar(select(Run.id).where(Run.run_dir == str(Path(run_dir).resolve()),
-                                                   Run.config_hash == str(config_hash))) is not None
+    return db.query(lambda session: session.scalar(
+        select(Run.id).where(Run.run_dir == str(Path(run_dir).resolve()), Run.config_hash == str(config_hash)))
+        is not None)
 
 
 def _read_json(path: Path) -> dict[str, Any]:

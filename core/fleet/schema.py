@@ -7,7 +7,9 @@ Each run has its identified element values (:class:`ElementValue`) and the
 standard indicators computed from its recordings (:class:`Indicator`).
 :class:`Alarm` holds the alarm state of one (trainset, vehicle, element group
 or indicator) with its acknowledgement; :class:`AuditEntry` records every
-change of an alarm (raised, cleared, acknowledged) with who and when.
+change of an alarm (raised, cleared, acknowledged) with who and when;
+:class:`Acknowledgement` keeps every acknowledgement (who, when, comment) and
+:class:`User` who may acknowledge (a Werkzeug password hash).
 
 Element groups are named as the identified parameters: the kind-level name
 (``c_yaw``) or an element-group name (``c_yaw[bogie1]``); ``kind`` is the part
@@ -79,6 +81,10 @@ class ElementValue(Base):
     trust: Mapped[str] = mapped_column(String(20))
     verdict: Mapped[str] = mapped_column(String(20))
     w_ref: Mapped[float | None] = mapped_column(Float, nullable=True)
+    nominal: Mapped[float | None] = mapped_column(Float, nullable=True)          # SI, None when unknown
+    label: Mapped[str | None] = mapped_column(String(300), nullable=True)        # the element in plain words
+    reason: Mapped[str | None] = mapped_column(Text, nullable=True)              # why "not assessable"
+    trust_reason: Mapped[str | None] = mapped_column(Text, nullable=True)        # why trust is "not assessed"
 
     run: Mapped[Run] = relationship(back_populates="values")
 
@@ -122,6 +128,34 @@ class Alarm(Base):
     acked_by: Mapped[str | None] = mapped_column(String(100), nullable=True)
     acked_at: Mapped[dt.datetime | None] = mapped_column(DateTime, nullable=True)
     ack_comment: Mapped[str | None] = mapped_column(Text, nullable=True)
+
+
+class Acknowledgement(Base):
+    """One acknowledgement of an alarm: who (a user of :class:`User`), when (UTC), the comment, and the episode
+    (``raised_on``) and level it acknowledged. Acknowledgements are only ever added."""
+
+    __tablename__ = "acknowledgements"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    alarm_id: Mapped[int] = mapped_column(ForeignKey("alarms.id"), index=True)
+    user_name: Mapped[str] = mapped_column(String(100))
+    at: Mapped[dt.datetime] = mapped_column(DateTime)
+    comment: Mapped[str] = mapped_column(Text, default="")
+    raised_on: Mapped[dt.date | None] = mapped_column(Date, nullable=True)
+    level: Mapped[str] = mapped_column(String(20))
+
+
+class User(Base):
+    """Someone who may acknowledge alarms on the dashboard: a name and a Werkzeug password hash (never the
+    password). ``active`` False: removed, kept so that the acknowledgements they made still name them."""
+
+    __tablename__ = "users"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(100), unique=True)
+    password_hash: Mapped[str] = mapped_column(String(300))
+    created_at: Mapped[dt.datetime] = mapped_column(DateTime)
+    active: Mapped[bool] = mapped_column(Boolean, default=True)
 
 
 class AuditEntry(Base):

@@ -28,7 +28,15 @@ mileages where the confidence band crosses it (inverse regression: the
 earliest where the pessimistic edge of the band reaches the level, the latest
 where the optimistic edge does; None when that is beyond ten times the
 observed span). Mileages become dates through the vehicle's mileage rate
-(a least-squares line of mileage against date).
+(a least-squares line of mileage against date, :class:`Calendar`).
+
+**No trend, no forecast.** When the slope's 90 % interval contains 0 the data
+do not show a degradation: the trend is kept (its line and band are what the
+data say) but no crossing is forecast, whatever the central slope; the note
+says "no trend". The levels are then those of the domain edge the values are
+closest to. **Crossed levels.** A level the latest usable value is already
+past is *crossed*, with the abscissa of the first point of the last unbroken
+run of points past it (``crossed_x``): a measured fact, not a forecast.
 """
 
 from __future__ import annotations
@@ -57,7 +65,9 @@ class Forecast:
     date: dt.date | None = None
     date_low: dt.date | None = None
     date_high: dt.date | None = None
-    crossed: bool = False
+    crossed: bool = False           # the latest usable value is past the level (measured, not forecast)
+    crossed_x: float | None = None  # abscissa of the first point of the last run of points past the level
+    crossed_on: dt.date | None = None
 
 
 @dataclass
@@ -79,6 +89,20 @@ class Trend:
     side: str | None = None         # "low" or "high": the edge of the domain the trend heads to
     forecasts: list[Forecast] = field(default_factory=list)
     note: str = ""
+    x_first: float | None = None    # the usable points' abscissae: first and last
+    x_last: float | None = None
+
+    @property
+    def horizon(self) -> float | None:
+        """The farthest abscissa a crossing is forecast to: the last point plus ten observed spans."""
+        if self.x_first is None:
+            return None
+        return self.x_last + HORIZON_SPANS * (self.x_last - self.x_first)
+
+    @property
+    def significant(self) -> bool:
+        """Whether the slope's 90 % interval excludes 0 (a trend the data show, and crossings are forecast)."""
+        return self.slope_low is not None and not self.slope_low <= 0.0 <= self.slope_high
 
     def predict(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The line and its 90 % band at ``x``: (yhat, lower, upper)."""
@@ -130,6 +154,7 @@ def fit_trend(element_group: str, x: Sequence[float], y: Sequence[float], half_w
         trend.note = f"fewer than {MIN_POINTS} usable points at distinct {abscissa}: no trend"
         return trend
     xk, yk, hk = x[keep], y[keep], hw[keep]
+    trend.x_first, trend.x_last = float(xk.min()), float(xk.max())
     slope, _, lo, hi = stats.theilslopes(yk, xk, alpha=BAND_LEVEL)
     intercept = float(np.median(yk - slope * xk))   # median of the points' intercepts (scipy's median(y) -
     # slope * median(x) is biased when the abscissae are not symmetric about their median)
@@ -142,41 +167,103 @@ def fit_trend(element_group: str, x: Sequence[float], y: Sequence[float], half_w
     trend.y_pivot = float(intercept + slope * trend.x_pivot)
     trend.level_se = float(stats.t.ppf(0.5 + BAND_LEVEL / 2, xk.size - 1) * trend.sigma / np.sqrt(xk.size))
     trend.side = "low" if slope < 0 else "high"
+    if not trend.significant:
+        trend.note = "no trend: the slope's 90 % interval contains 0, so no crossing is forecast"
+        trend.side = _nearest_side(float(yk[np.argmax(xk)]), acceptable_low, acceptable_high) or trend.side
     levels = levels_for(acceptable_low, acceptable_high, h, trend.side)
     if levels is None:
-        trend.note = "no acceptable domain on the side the trend heads to: no forecast"
+        trend.note = trend.note or "no acceptable domain on the side the trend heads to: no forecast"
         return trend
     span = float(np.ptp(xk))
     grid = np.linspace(float(xk.min()), float(xk.max()) + HORIZON_SPANS * span, 4001)
     yhat, lower, upper = trend.predict(grid)
     below = trend.side == "low"
     pessimistic, optimistic = (lower, upper) if below else (upper, lower)
+    order = np.argsort(xk, kind="stable")
     for name in ("warning", "alarm"):
         level = levels[name]
+        past = (yk[order] <= level) if below else (yk[order] >= level)
+        crossed_x = None
+        if past[-1]:
+            first = len(past) - int(np.argmin(past[::-1])) if not past.all() else 0
+            crossed_x = float(xk[order][first])
+        if not trend.significant:
+            trend.forecasts.append(Forecast(name, level, None, None, None, crossed=bool(past[-1]),
+                                            crossed_x=crossed_x))
+            continue
         central = (level - trend.intercept) / trend.slope if trend.slope != 0 else None
         if central is not None and central < xk.min() - HORIZON_SPANS * span:
             central = None
         trend.forecasts.append(Forecast(name, level, central, _crossing(grid, pessimistic, level, below),
-                                        _crossing(grid, optimistic, level, below),
-                                        crossed=bool(yk[np.argmax(xk)] <= level if below else
-                                                     yk[np.argmax(xk)] >= level)))
+                                        _crossing(grid, optimistic, level, below), crossed=bool(past[-1]),
+                                        crossed_x=crossed_x))
     return trend
 
 
-def dates_from_mileage(trend: Trend, dates: Sequence[dt.date], mileages: Sequence[float | None]) -> None:
-    """Fill each forecast's dates: directly from days, or through a line of mileage against date."""
-    if not dates:
-        return
-    first = min(dates)
-    if trend.abscissa == "days":
-        to_date = lambda v: None if v is None else first + dt.timedelta(days=float(v))  # noqa: E731
-    else:
+def _nearest_side(value: float, low: float | None, high: float | None) -> str | None:
+    """The domain edge ``value`` is closest to (past it counts as closest): "low", "high", or None."""
+    if low is None and high is None:
+        return None
+    if low is None or high is None:
+        return "low" if high is None else "high"
+    return "low" if value - low <= high - value else "high"
+
+
+@dataclass(frozen=True)
+class Calendar:
+    """Abscissa <-> date of one vehicle: days since ``first``, or mileage through a line of mileage against date
+    (``km0`` at ``first``, ``rate`` km per day; None when the mileage does not grow with the dates)."""
+
+    abscissa: str
+    first: dt.date
+    rate: float | None = None
+    km0: float | None = None
+
+    @classmethod
+    def of(cls, abscissa: str, dates: Sequence[dt.date], mileages: Sequence[float | None]) -> "Calendar":
+        first = min(dates)
+        if abscissa == "days":
+            return cls(abscissa, first)
         pairs = [((d - first).days, m) for d, m in zip(dates, mileages) if m is not None]
         if len(pairs) < 2 or np.ptp([p[0] for p in pairs]) == 0:
-            return
+            return cls(abscissa, first)
         rate, km0 = np.polyfit([p[0] for p in pairs], [p[1] for p in pairs], 1)
-        if rate <= 0:
-            return
-        to_date = lambda v: None if v is None else first + dt.timedelta(days=float((v - km0) / rate))  # noqa: E731
+        return cls(abscissa, first, float(rate), float(km0)) if rate > 0 else cls(abscissa, first)
+
+    @property
+    def usable(self) -> bool:
+        return self.abscissa == "days" or self.rate is not None
+
+    def to_date(self, x: float | None) -> dt.date | None:
+        """The date at abscissa ``x`` (None when unknown or beyond the calendar)."""
+        if x is None or not self.usable:
+            return None
+        days = float(x) if self.abscissa == "days" else (float(x) - self.km0) / self.rate
+        try:
+            return self.first + dt.timedelta(days=days)
+        except OverflowError:
+            return None
+
+    def to_x(self, date: dt.date) -> float | None:
+        """The abscissa at ``date`` (None when the calendar cannot tell)."""
+        if not self.usable:
+            return None
+        days = float((date - self.first).days)
+        return days if self.abscissa == "days" else self.km0 + self.rate * days
+
+
+def dates_from_mileage(trend: Trend, dates: Sequence[dt.date], mileages: Sequence[float | None]) -> Calendar | None:
+    """Fill each forecast's dates (directly from days, or through the mileage rate) and the date of each crossed
+    level (the measurement's own date); returns the vehicle's :class:`Calendar` (None without dates)."""
+    if not dates:
+        return None
+    calendar = Calendar.of(trend.abscissa, dates, mileages)
+    on_x = {}
+    for d, m in zip(dates, mileages):
+        x = float((d - calendar.first).days) if trend.abscissa == "days" else m
+        if x is not None:
+            on_x.setdefault(float(x), d)
     for f in trend.forecasts:
-        f.date, f.date_low, f.date_high = to_date(f.x), to_date(f.x_low), to_date(f.x_high)
+        f.date, f.date_low, f.date_high = (calendar.to_date(v) for v in (f.x, f.x_low, f.x_high))
+        f.crossed_on = None if f.crossed_x is None else on_x.get(float(f.crossed_x))
+    return calendar

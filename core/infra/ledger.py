@@ -37,9 +37,9 @@ import threading
 import time
 import warnings
 from datetime import datetime, timezone
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -84,6 +84,12 @@ _COLUMNS = {
     "artifacts": ["key", "value", "created_at"],
 }
 """The tables of a suspid ledger and their columns, as created by the schema above."""
+
+
+ALIAS_PREFIX = "alias:"
+"""The ``worker`` of an evaluation filed again under a newer key (:meth:`Ledger.get_migrating`), followed by the
+key it was found under: a copy, not a simulation, so :meth:`Ledger.count` does not count it."""
+_NOT_ALIAS = f"(worker IS NULL OR substr(worker, 1, {len(ALIAS_PREFIX)}) != '{ALIAS_PREFIX}')"
 
 
 def stable_hash(*parts: Any) -> str:
@@ -152,7 +158,7 @@ def count_finished(path: str | Path) -> int | None:
     try:
         conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=5.0)
         try:
-            return conn.execute("SELECT COUNT(*) FROM evaluations WHERE status = 'ok'").fetchone()[0]
+            return conn.execute(f"SELECT COUNT(*) FROM evaluations WHERE status = 'ok' AND {_NOT_ALIAS}").fetchone()[0]
         finally:
             conn.close()
     except sqlite3.Error:
@@ -426,6 +432,19 @@ class Ledger:
         rows = self._read("SELECT * FROM evaluations WHERE key = ?", (key,))
         return self._row(rows[0]) if rows else None
 
+    def get_migrating(self, key: str, legacy: Sequence[str | None] = ()) -> Evaluation | None:
+        """The evaluation under ``key``, else under the first of the ``legacy`` keys that has one (keys a ledger
+        written by an earlier suspid used for the same evaluation), which is then committed under ``key`` too, so
+        that the next lookup finds it at once."""
+        ev = self.get(key)
+        for old in legacy:
+            if ev is not None:
+                break
+            if old and old != key and (ev := self.get(old)) is not None:
+                ev = replace(ev, key=key, worker=ALIAS_PREFIX + old)
+                self.put(ev)
+        return ev
+
     def evaluations(self, status: str | None = None) -> Iterator[Evaluation]:
         """Every evaluation, in the order it was committed."""
         sql = "SELECT * FROM evaluations" + (" WHERE status = ?" if status else "") + " ORDER BY rowid"
@@ -433,7 +452,8 @@ class Ledger:
             yield self._row(row)
 
     def count(self, status: str | None = "ok") -> int:
-        sql = "SELECT COUNT(*) FROM evaluations" + (" WHERE status = ?" if status else "")
+        """Evaluations of that status (any with None), each once: a copy filed under a newer key is not counted."""
+        sql = f"SELECT COUNT(*) FROM evaluations WHERE {_NOT_ALIAS}" + (" AND status = ?" if status else "")
         return self._read(sql, (status,) if status else ())[0][0]
 
     def _damaged_row(self, where: str, exc: BaseException | str) -> LedgerError:
@@ -545,6 +565,17 @@ class Ledger:
             return load_npy_bytes(blob, str(self.path))
         except (TypeError, ValueError, OSError, EOFError) as exc:
             raise self._damaged_row(f"array {key[:24]}", exc) from None
+
+    def get_array_migrating(self, key: str, legacy: Sequence[str | None] = ()) -> np.ndarray | None:
+        """:meth:`get_array` under ``key``, else under the first ``legacy`` key that has it (stored under ``key``
+        too): :meth:`get_migrating` for arrays."""
+        found = self.get_array(key)
+        for old in legacy:
+            if found is not None:
+                break
+            if old and old != key and (found := self.get_array(old)) is not None:
+                self.put_array(key, found)
+        return found
 
     def clear(self, log: Callable[[str], None] | None = None) -> None:
         """Forget every result (``--fresh``).

@@ -95,9 +95,10 @@ def group_estimates(problem: Problem, u_opt: np.ndarray, S: np.ndarray, min_grou
     """
     groups = data_groups(problem.channels, problem.freqs)
     share = group_information(S, problem.noise_model.variance_, problem.weights, groups)
-    key = stable_hash("data-groups", problem.simulator_identity, problem.data_identity, np.asarray(u_opt).tolist(),
-                      min_group_share, max_evaluations, initial_step)
-    cached = ledger.get_array(key) if ledger is not None else None
+    key, legacy = (stable_hash("data-groups", problem.simulator_identity, data, np.asarray(u_opt).tolist(),
+                               min_group_share, max_evaluations, initial_step)
+                   for data in (problem.data_identity, problem.legacy_identity))
+    cached = ledger.get_array_migrating(key, [legacy]) if ledger is not None else None
     if cached is not None:
         return GroupEstimates(groups, share, cached[:, :-1], int(cached[0, -1]))
     u_hat = np.full((len(groups), problem.q), np.nan)

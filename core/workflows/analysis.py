@@ -26,7 +26,7 @@ from suspid.method.noise import bootstrap_refit, reference_paths
 from suspid.method.objective import ObjectiveFunction
 from suspid.optimize.loop import LoopOutcome
 from suspid.optimize.normalize import Normalized
-from suspid.workflows.evaluation import j_of_spectra, objective_on
+from suspid.workflows.evaluation import j_of_spectra, objective_on, y_sim_key
 from suspid.workflows.problem import Problem, segment_speeds
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.workflows.adequacy import group_estimates
@@ -44,7 +44,7 @@ from suspid.elements import declared_parameters
 
 def _y_sim_key(problem: Problem, u: np.ndarray) -> tuple[str, dict[str, float]]:
     w = problem.w_of(problem.from_unit(u))
-    return stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest), w
+    return y_sim_key(problem, w), w
 
 
 def simulate_missing(problem: Problem, ledger: Ledger, us: Sequence[np.ndarray], executor: Executor | None = None,

@@ -34,11 +34,21 @@ from suspid.infra.ledger import Evaluation, Ledger
 from suspid.interfaces import Executor, Optimizer, OptimizerResult
 from suspid.optimize.driver import Evaluator, Flight, Outcome, run_trials
 from suspid.optimize.trials import Trial
-from suspid.workflows.evaluation import evaluate_many, evaluation_key_of, evaluation_task, from_ledger, record_outcome
+from suspid.infra.ledger import evaluation_key
+from suspid.workflows.evaluation import (evaluate_many, evaluation_key_of, evaluation_task, from_ledger,
+                                         j_of_spectra, legacy_evaluation_key, record_outcome, y_sim_key)
+from suspid.workflows.identity import IDENTITY_VERSION
 from suspid.workflows.gradient import ProblemSpectraModel
 from suspid.workflows.problem import Problem
 
-__all__ = ["drive", "TrainEvaluator"]
+__all__ = ["drive", "TrainEvaluator", "REPLAY_TOLERANCE"]
+
+REPLAY_TOLERANCE = 1e-6
+"""How far (max over components, in the normalised ``[0, 1]^q``) a resumed run's trial may lie from the point
+the ledger's trial of the same id was evaluated at and still take that evaluation (:meth:`TrainEvaluator.replay`).
+The optimiser's proposals are computed (GP fits, EI maximisation, linear solves), so on another processor they
+differ from the recorded ones in their last bits; 1e-6 of the admissible interval is far above that noise and far
+below any move of an estimate that matters (the intervals are percents of it)."""
 
 
 @dataclass
@@ -55,6 +65,46 @@ def failure(problem: Problem, ledger: Ledger, phase: str, x_si: np.ndarray) -> d
     key, w = evaluation_key_of(problem, x_si)
     found = ledger.get(key)
     return {"phase": phase, "w": w, "error": found.error if found is not None else "unknown"}
+
+
+LEGACY_J_TOLERANCE = 1e-6
+"""Relative agreement of J recomputed from recorded spectra with the J a ledger of an earlier suspid recorded there
+(:func:`same_data`): the same spectra through the same objective on this machine's B differ from it by about 1e-10;
+other data or another objective differ by far more than 1e-6."""
+
+
+def same_data(problem: Problem, ledger: Ledger, rows: dict[int, dict[str, Any]]) -> bool:
+    """Whether trials recorded before the input identities were evaluated on this run's data with its objective,
+    without a simulation: at the first of their points whose spectra the ledger also holds (the run's
+    intervals keep y_sim at w_opt), J recomputed here from those spectra matches the recorded J."""
+    for row in rows.values():
+        ev = ledger.get(row["key"])
+        y = ledger.get_array(y_sim_key(problem, ev.w) + ":y") if ev is not None and ev.ok else None
+        if y is not None and y.shape == problem.y_mes.shape:
+            J, _ = j_of_spectra(problem, y)
+            return abs(J - ev.J) <= LEGACY_J_TOLERANCE * max(1.0, abs(ev.J))
+    return False
+
+
+def recorded_trials(problem: Problem, ledger: Ledger) -> dict[int, list[dict[str, Any]]]:
+    """The recorded trials a resumed run may replay, by id, each id's candidates in order: the trials of every
+    run of the folder (the current run's first: a folder moved elsewhere has another ``output.dir`` and so
+    another run id), each checked by its key when it is replayed; and of a ledger written before the input
+    identities (rows without ``identity``), the runs whose recorded J :func:`same_data` confirms."""
+    groups: dict[str, dict[int, dict[str, Any]]] = {}
+    for run, i, rec in ledger.all_iterations():
+        if (run == "trials" or run.endswith("/trials")) and rec.get("key"):
+            groups.setdefault(run, {})[int(rec.get("id", i))] = rec
+    ordered = [groups.pop("trials", {}), *groups.values()]
+    out: dict[int, list[dict[str, Any]]] = {}
+    for rows in ordered:
+        legacy = {i: r for i, r in rows.items() if "identity" not in r}
+        keep = {i: r for i, r in rows.items() if "identity" in r}
+        if legacy and same_data(problem, ledger, legacy):
+            keep |= legacy
+        for i, r in sorted(keep.items()):
+            out.setdefault(i, []).append(r)
+    return out
 
 
 class TrainEvaluator(Evaluator):
@@ -75,6 +125,7 @@ class TrainEvaluator(Evaluator):
         self.tally = _Tally()
         self.bar = None
         self._task = None
+        self._stored: dict[int, list[dict[str, Any]]] | None = None   # recorded trials by id (replay)
 
     def _outcome(self, trial: Trial, key: str, w: dict[str, float], ev: Evaluation | None) -> Outcome:
         trial.w = w
@@ -82,13 +133,47 @@ class TrainEvaluator(Evaluator):
             trial.psi = ev.psi
         return Outcome(ev.J if ev is not None else None, ev.wall_time_s if ev is not None else None, (key, ev))
 
+    def replay(self, trial: Trial) -> None:
+        """Resume on another machine: where the ledger has no evaluation at ``trial.x`` but the run's recorded
+        trial of the same id was evaluated within :data:`REPLAY_TOLERANCE` of it, on the same data, that
+        evaluation is the trial's: its point becomes the recorded one (so that every later key at it, w_opt's
+        included, is the recorded run's) and the evaluation is filed under this run's key.
+
+        The same data: the recorded key is this run's key (or the key a ledger of an earlier suspid gave it on
+        this machine) at the recorded point. A trial recorded before the input identities (no ``identity`` in
+        its row) cannot be checked that way on another machine: its run's recorded J is checked instead
+        (:func:`recorded_trials`).
+        """
+        p = self.problem
+        if self._stored is None:
+            self._stored = recorded_trials(p, self.ledger)
+        if from_ledger(p, self.ledger, trial.x, self.retry_failed)[2] is not None:
+            return
+        u = p.to_unit(np.asarray(trial.x, float))
+        for row in self._stored.get(trial.id, []):
+            ev = self.ledger.get(row["key"])
+            if ev is None or (not ev.ok and self.retry_failed) or set(ev.w) != set(p.names):
+                continue
+            x = np.array([ev.w[n] for n in p.names], float)
+            if not np.max(np.abs(p.to_unit(x) - u)) <= REPLAY_TOLERANCE:
+                continue
+            key = evaluation_key(p.simulator_identity, ev.w, p.data_identity)
+            if row["key"] not in (key, legacy_evaluation_key(p, ev.w)) and "identity" in row:
+                continue   # recorded on other data
+            self.ledger.get_migrating(key, [row["key"]])
+            trial.x, trial.u = x, p.to_unit(x)
+            return
+
     def evaluate(self, trials: list[Trial]) -> list[Outcome]:
+        for t in trials:
+            self.replay(t)
         X = np.array([t.x for t in trials])
         evs = evaluate_many(self.problem, self.ledger, X, self.executor,
                             lambda i, ev, reused: self.bars.update(self.bar, advance=1), retry_failed=self.retry_failed)
         return [self._outcome(t, *evaluation_key_of(self.problem, t.x), ev) for t, ev in zip(trials, evs)]
 
     def start(self, trial: Trial) -> Flight:
+        self.replay(trial)
         key, w, found = from_ledger(self.problem, self.ledger, trial.x, self.retry_failed)
         if found:
             return Flight(trial, outcome=self._outcome(trial, key, w, found.ev))
@@ -117,7 +202,7 @@ class TrainEvaluator(Evaluator):
                 tally.j_max = max(tally.j_max, o.J)
         tally.n += len(trials)
         for t, o in zip(trials, outcomes):
-            self.ledger.put_trial(t.id, {"key": o.data[0], **t.summary()})
+            self.ledger.put_trial(t.id, {"key": o.data[0], "identity": IDENTITY_VERSION, **t.summary()})
         self.bars.update(self.bar, completed=tally.n,
                          status=f"J_max {tally.j_max:.4g}" if np.isfinite(tally.j_max) else "failed points")
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from suspid import registry
 from suspid.errors import SimulatorError
-from suspid.infra.ledger import Evaluation, Ledger, evaluation_key
+from suspid.infra.ledger import Evaluation, Ledger, evaluation_key, stable_hash
 from suspid.interfaces import Executor
 from suspid.method.noise import NoiseModel
 from suspid.method.objective import ObjectiveFunction
@@ -65,10 +65,23 @@ def simulate_spectra_task(task: tuple) -> np.ndarray:
     return SpectraTask(registry.get("simulator", plugin), dict(options), list(segments), spectra_options)(w)
 
 
+def y_sim_key(problem: Problem, w: dict[str, float]) -> str:
+    """The ledger key of the simulated spectra at ``w`` on the measurement date's segments (``key + ":y"``)."""
+    return stable_hash("y_sim", problem.simulator_identity, w, problem.segments_digest)
+
+
 def evaluation_key_of(problem: Problem, x_si: np.ndarray) -> tuple[str, dict[str, float]]:
     """The ledger key of ``x_si (q,)`` SI and its parameter mapping w."""
     w = problem.w_of(x_si)
     return evaluation_key(problem.simulator_identity, w, problem.data_identity), w
+
+
+def legacy_evaluation_key(problem: Problem, w: dict[str, float]) -> str | None:
+    """The key a ledger written before the input identities gave the evaluation at ``w`` (its data part the array
+    digests of this machine's y_mes, b and α: found only where they have the same bits), or None."""
+    if problem.legacy_identity is None:
+        return None
+    return evaluation_key(problem.simulator_identity, w, problem.legacy_identity)
 
 
 def evaluate_many(problem: Problem, ledger: Ledger, X_si: np.ndarray, executor: Executor,
@@ -117,7 +130,7 @@ def from_ledger(problem: Problem, ledger: Ledger, x_si: np.ndarray, retry_failed
     """``(key, w, found)`` of ``x_si (q,)`` SI: ``found`` when the ledger answers for it (a recorded
     failure too, unless ``retry_failed``), None when it must be simulated."""
     key, w = evaluation_key_of(problem, x_si)
-    ev = ledger.get(key)
+    ev = ledger.get_migrating(key, [legacy_evaluation_key(problem, w)])
     if ev is not None and (ev.ok or not retry_failed):
         return key, w, Found(ev if ev.ok else None)
     return key, w, None

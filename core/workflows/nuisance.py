@@ -68,12 +68,14 @@ def reidentify(problem: Problem, ledger: Ledger, u_opt: np.ndarray, points: list
     not simulate it again. Simulations run on ``executor``.
     """
     ref, ref_segments, config, q = problem.reference, problem.reference_segments, problem.config, problem.q
-    key = stable_hash("model-parameter-shifts", problem.simulator_identity, problem.data_identity,
-                      segments_digest(ref_segments), np.asarray(u_opt).tolist(), points,
-                      config.noise.model_dump(mode="json"), config.objective.plugin, config.objective.options,
-                      problem.weights.tolist(), config.spectra.model_dump(), config.seed, initial_step,
-                      max_evaluations)
-    cached = ledger.get_array(key)
+    ref_digest, u_list = segments_digest(ref_segments), np.asarray(u_opt).tolist()
+    key = stable_hash("model-parameter-shifts", problem.simulator_identity, problem.data_identity, ref_digest, u_list,
+                      points, initial_step, max_evaluations)   # the data identity covers B's inputs, α, J, the seed
+    legacy = stable_hash("model-parameter-shifts", problem.simulator_identity, problem.legacy_identity, ref_digest,
+                         u_list, points, config.noise.model_dump(mode="json"), config.objective.plugin,
+                         config.objective.options, problem.weights.tolist(), config.spectra.model_dump(), config.seed,
+                         initial_step, max_evaluations)   # ledgers written before the input identities
+    cached = ledger.get_array_migrating(key, [legacy])
     if cached is not None:
         return cached[:, :q], int(cached[0, q]) if len(cached) else 0
     noise_options = config.noise.model_dump(exclude={"path", "reference"})

@@ -17,7 +17,6 @@ run ledger, so that a resumed run does not simulate them again.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field, replace
 from functools import cached_property, partial
 from pathlib import Path
@@ -44,16 +43,7 @@ from suspid.method.spectra import SpectraOptions, compute_spectra, grid_lines
 from suspid.optimize.design import from_unit, to_unit
 from suspid.workflows.tasks import SpectraTask, run_tasks
 from suspid.elements import declared_parameters
-
-
-def array_digest(*arrays: np.ndarray) -> str:
-    """A content hash of arrays (shape, dtype and bytes)."""
-    h = hashlib.sha256()
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(str((a.shape, a.dtype.str)).encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+from suspid.workflows.identity import array_digest, data_identities, legacy_data_identity
 
 
 def segments_digest(segments: Sequence[TrackSegment]) -> str:
@@ -88,6 +78,9 @@ class Problem:
     :ivar reference: ``y_mes0``, ``y_sim0`` ``(v0, n_channels, n_freqs)`` dB at the reference date, when
         its data are part of the run (numerical experiment, or ``noise.reference``); empty otherwise.
     :ivar reference_segments: the reference date's track segments, in the order of ``reference``.
+    :ivar data_identity: what J depends on beyond the simulator and w, from the run's inputs (files' bytes,
+        the experiment's config and seed, the options; :mod:`suspid.workflows.identity`): the evaluation keys'
+        data part, the same on any machine.
     """
 
     config: Config
@@ -109,6 +102,10 @@ class Problem:
     w0: dict[str, float] = field(default_factory=dict)  # nominal values of the identified parameters (SI)
     b_more: np.ndarray | None = None
     weights_record: dict[str, Any] | None = None   # how α was chosen (``objective.weights: efficient``)
+    reference_identity: str = ""  # what the reference date's spectra are made of (suspid.workflows.identity)
+    noise_identity: str = ""     # what B is
+    weights_identity: str = ""   # what α is chosen from
+    legacy_identity: str | None = None   # the array-digest data identity of ledgers written before, to find them
 
     @property
     def noise_paths(self) -> np.ndarray:
@@ -453,15 +450,15 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
     weights = reference_weights(noise_model) if config.objective.weights == "reference" \
         else channel_weights(config, channels)
 
-    def identity(alpha: np.ndarray) -> str:
-        return stable_hash("data", array_digest(y_mes, b, *([] if b_more is None else [b_more])),
-                           segments_digest(segments),
-                           config.objective.plugin, config.objective.options, alpha.tolist(),
-                           spectra_options.model_dump())
+    ids = data_identities(config, sim_id, names, bounds)
+
+    def legacy(alpha: np.ndarray) -> str:
+        return legacy_data_identity(y_mes, b, b_more, segments_digest(segments), config, alpha)
 
     problem = Problem(config=config, simulator=simulator, names=names, bounds=bounds, segments=segments,
                       channels=channels, freqs=freqs, y_mes=y_mes, b=b, objective=objective, weights=weights,
-                      data_identity=identity(weights), w_ref=w_ref, reference=reference, noise_model=noise_model,
+                      data_identity=ids.data, reference_identity=ids.reference, noise_identity=ids.noise,
+                      weights_identity=ids.weights, legacy_identity=legacy(weights), w_ref=w_ref, reference=reference, noise_model=noise_model,
                       reference_segments=reference_segments, w0=w0, b_more=b_more)
     if config.objective.weights == "efficient":   # α from the reference date at w0, before identifying
         from suspid.workflows.weights import reference_efficient_weights
@@ -469,5 +466,5 @@ def build_problem(config: Config, ledger: Ledger, log: Callable[[str], None] = l
             raise config.error(EFFICIENT_NEEDS_REFERENCE, "objective.weights")
         log(f"reference date: channel weights α at w0 (objective.weights: efficient, {2 * len(names)} simulations)")
         alpha, record = reference_efficient_weights(problem, ledger, executor)
-        problem = replace(problem, weights=alpha, data_identity=identity(alpha), weights_record=record)
+        problem = replace(problem, weights=alpha, legacy_identity=legacy(alpha), weights_record=record)
     return problem

@@ -164,11 +164,16 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
     v0, q = y_mes0.shape[0], problem.q
     u0 = problem.to_unit(np.array([problem.w0[n] for n in problem.names]))
     max_eval = options.max_evaluations or 30 * q
-    key = stable_hash("self-check", problem.simulator_identity, segments_digest(segments), problem.names,
-                      problem.bounds.tolist(), options.model_dump(), config.noise.model_dump(mode="json"),
-                      config.objective.plugin, config.objective.options, problem.weights.tolist(),
-                      config.spectra.model_dump(), config.seed, *([dict(extra)] if extra else []))
-    cached = ledger.get_array(key)
+    common = (problem.simulator_identity, segments_digest(segments), problem.names, problem.bounds.tolist(),
+              options.model_dump())
+    extras = [dict(extra)] if extra else []
+    key = stable_hash("self-check", *common, problem.reference_identity, problem.noise_identity,
+                      problem.weights_identity, config.objective.plugin, config.objective.options,
+                      config.spectra.model_dump(), config.seed, *extras)
+    legacy = stable_hash("self-check", *common, config.noise.model_dump(mode="json"), config.objective.plugin,
+                         config.objective.options, problem.weights.tolist(), config.spectra.model_dump(), config.seed,
+                         *extras)   # ledgers written before the input identities
+    cached = ledger.get_array_migrating(key, [legacy])
     n_fit = v0 // 2
     if cached is not None:
         shifts = cached[:, :q]

@@ -159,8 +159,10 @@ def figure_verdict(path: Path, rows: Sequence[VerdictRow]) -> Path:
     ax.set_xticks(range(len(rows)), [f"{r.name}\n{format_value(r.nominal, r.unit)}" for r in rows], fontsize=8)
     ax.set_xlim(-0.6, len(rows) - 0.4)
     ax.set_ylabel("change from nominal (% of nominal)")
-    ax.set_title("Identified parameters against their nominal values and limits (nominal value under each name)",
-                 fontsize=9, pad=28 if any(r.borderline for r in rows) else 18)
+    title = "Identified parameters against their nominal values and limits (nominal value under each name)"
+    if q <= 3:   # a narrow axes (one to three parameters): two lines, so that the title is not clipped
+        title = "Identified parameters against their nominal values and limits\n(nominal value under each name)"
+    ax.set_title(title, fontsize=9, pad=28 if any(r.borderline for r in rows) else 18)
     ax.grid(alpha=0.3, axis="y")
     order = ["nominal", "warning level", "alarm level", *(f"verdict {v}" for v in VERDICT_COLOURS), *STYLE_LABELS,
              "w_ref"]

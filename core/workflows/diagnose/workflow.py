@@ -475,9 +475,9 @@ def _corrected_problem(config: Config, problem, records: list, in_data: dict[str
     y_mes, freqs = compute_spectra(untilt(records, items, problem.channels, error=config.error), config.spectra)
     if y_mes.shape != problem.y_mes.shape or not np.allclose(freqs, problem.freqs):
         raise RuntimeError("corrected records give other spectra than the run's")   # same files: cannot happen
-    return dataclasses.replace(problem, y_mes=y_mes,
-                               data_identity=stable_hash(problem.data_identity, "corrections",
-                                                         json.dumps(canonical(_corrections(in_data)), sort_keys=True)))
+    tag = json.dumps(canonical(_corrections(in_data)), sort_keys=True)
+    return dataclasses.replace(problem, y_mes=y_mes, data_identity=stable_hash(problem.data_identity, "corrections", tag),
+                               legacy_identity=stable_hash(problem.legacy_identity, "corrections", tag))
 
 
 def _locate(stage: Stage, grid: CellGrid, null: NullCalibration, alpha: float) -> None:
