@@ -37,7 +37,8 @@ except PackageNotFoundError:  # running from a source tree that is not installed
 
 _LAZY = {name: "suspid.api" for name in ("Validation", "diagnose", "identify", "ingest", "load_config", "modes",
                                           "monitor", "segments", "simulate", "stability", "study", "validate",
-                                          "indicators", "fleet_import", "fleet_demo", "dashboard")}
+                                          "indicators", "fleet_import", "fleet_demo", "dashboard", "parameters",
+                                          "ParameterInfo")}
 _LAZY["IdentificationResult"] = "suspid.workflows.identify"
 _LAZY |= {"StudyResult": "suspid.workflows.study", "MonitorResult": "suspid.workflows.monitor",
           "DiagnosisResult": "suspid.workflows.diagnose"}

@@ -18,17 +18,20 @@ and what was expected, before any simulation.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, Union
 
+from suspid import registry
 from suspid.config import Config, build_simulator, identified_bounds, load_config as _load, override_arguments
 from suspid.data.ingest import IngestResult
 from suspid.data.ingest import run as _run_ingest
 from suspid.data.files import read_track
-from suspid.errors import ConfigError
-from suspid.indicators.recordings import config_indicators
-from suspid.interfaces import TrackSegment
+from suspid.data.plausibility import refused, speed_doubts
+from suspid.errors import ConfigError, DataWarning, UnknownPluginError
+from suspid.indicators.recordings import config_indicators, write_indicator_files
+from suspid.interfaces import ElementSimulator, TrackSegment
 from suspid.method.spectra import compute_spectra
 from suspid.workflows import diagnose as _diagnose
 from suspid.workflows import identify as _identify
@@ -36,7 +39,7 @@ from suspid.workflows import monitor as _monitor
 from suspid.workflows import simulate as _simulate
 from suspid.workflows import study as _study
 from suspid.workflows.identify import IdentificationResult
-from suspid.workflows.checks import dry_run
+from suspid.workflows.checks import data_shortfalls, dry_run
 from suspid.workflows.problem import synthetic_track
 
 ConfigSource = Union[str, Path, Mapping[str, Any], Config]
@@ -118,6 +121,8 @@ def validate(config: ConfigSource, overrides: Overrides = None) -> Validation:
     """
     cfg = load_config(config, overrides)
     n = dry_run(cfg)
+    for shortfall in data_shortfalls(cfg):   # what the run will not assess for want of data
+        warnings.warn(shortfall, DataWarning, stacklevel=2)
     source, extra = _source(config), _override_list(overrides)  # as study and monitor will reload them
     if cfg.study is not None:
         _study.study_variants(source, extra, cfg)
@@ -200,6 +205,60 @@ def segments(config: ConfigSource, overrides: Overrides = None) -> list[TrackSeg
     return read_track(cfg.data.track_file, strict=cfg.data.strict, accept=cfg.data.accept)
 
 
+@dataclass(frozen=True)
+class ParameterInfo:
+    """One parameter of a simulator, as ``suspid parameters`` lists it (SI units).
+
+    :ivar lower, upper: the simulator's admissible interval C_w; :ivar domain: where the parameter is physical.
+    :ivar elements: for a simulator with suspension elements, the groups ``kind[tags]`` of the elements this
+        parameter sets (empty otherwise).
+    :ivar identified: ``(lower, upper)`` the config identifies it within, None when it does not.
+    """
+
+    name: str
+    description: str
+    unit: str
+    nominal: float
+    lower: float
+    upper: float
+    domain: tuple[float, float]
+    elements: tuple[str, ...]
+    identified: tuple[float, float] | None
+
+
+def parameters(config: ConfigSource | None = None, overrides: Overrides = None, *,
+               simulator: str | None = None) -> list[ParameterInfo]:
+    """A simulator's parameters (``suspid parameters``): description, unit, nominal value, bounds, physical
+    domain, the elements each sets, and which the config identifies within which bounds.
+
+    :param config: the config whose simulator (with its options: a preset, ``vehicle:`` overrides) is listed;
+        None lists ``simulator`` built with its default options.
+    :param simulator: a registered simulator's name (default ``exudyn-train``), without a config.
+    :raises ConfigError: both a config and ``simulator`` given, or an unknown simulator.
+    """
+    if config is not None and simulator is not None:
+        raise ConfigError("give a config or a simulator's name, not both (the config names its simulator)",
+                          key="simulator")
+    identified: dict[str, tuple[float, float]] = {}
+    if config is not None:
+        cfg = load_config(config, overrides)
+        sim = build_simulator(cfg)
+        if cfg.parameters:
+            identified = identified_bounds(cfg, sim)
+    else:
+        name = simulator or "exudyn-train"
+        try:
+            sim = registry.get("simulator", name)()
+        except UnknownPluginError as exc:
+            raise ConfigError(str(exc), key="simulator") from None
+    by_kind: dict[str, list[str]] = {}
+    for e in sim.elements() if isinstance(sim, ElementSimulator) else []:
+        by_kind.setdefault(e.kind, []).append(f"{e.kind}[{','.join(e.tags)}]")
+    return [ParameterInfo(p.name, p.description, p.unit, float(p.nominal), float(p.lower), float(p.upper),
+                          (float(p.domain[0]), float(p.domain[1])), tuple(by_kind.get(p.name, ())),
+                          identified.get(p.name)) for p in sim.parameters()]
+
+
 def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[str, float] | None = None,
              out_dir: str | Path | None = None) -> Path:
     """Simulate ``w`` (other parameters nominal) on the configured segments (``suspid simulate``).
@@ -211,10 +270,10 @@ def simulate(config: ConfigSource, overrides: Overrides = None, *, w: Mapping[st
     cfg = load_config(config, overrides)
     sim = build_simulator(cfg)
     known = {p.name for p in sim.parameters()}
-    unknown = sorted(set(w or {}) - known)
-    if unknown:
-        raise cfg.error(f"unknown parameter(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}",
-                        "parameters")
+    for name in w or {}:   # the values are the caller's, not the config's: the error names w, not a line
+        if name not in known:
+            raise ConfigError(f"unknown parameter '{name}' for simulator '{cfg.simulator.plugin}'; known: "
+                              f"{', '.join(sorted(known))}", key=f"w.{name}")
     out = Path(out_dir) if out_dir is not None else cfg.run_dir() / "simulation"
     return _simulate.write_simulation(sim, segments(cfg), dict(w or {}), out,
                                       lambda rs: compute_spectra(rs, cfg.spectra))
@@ -256,6 +315,10 @@ def modes(config: ConfigSource, overrides: Overrides = None, *, speed_mps: float
     :param out_dir: where ``modes.json`` goes (default: the run directory; the folder is created).
     """
     cfg = load_config(config, overrides)
+    if speed_mps is not None:   # judged as a track file's speed is (suspid.data.plausibility)
+        refusal = refused(speed_doubts(speed_mps), accept=cfg.data.accept)
+        if refusal is not None:
+            raise ConfigError(refusal, key="speed_mps")
     out = Path(out_dir) if out_dir is not None else cfg.run_dir()
     out.mkdir(parents=True, exist_ok=True)
     return _simulate.modes_report(build_simulator(cfg), speed_mps, out, w)
@@ -271,10 +334,15 @@ def ingest(ingest_file: str | Path | Mapping[str, Any], overrides: Overrides = N
     :param out_dir: default ``output.dir`` of the file, else ``ingested/<recording stem>/`` beside it.
     :returns: a :class:`suspid.data.ingest.IngestResult`: the track and accelerations written (the
         ``data.track_file`` and ``data.measurements`` of a measured-data config), the offset and its
-        confidence, the segments, the warnings; ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
+        confidence, the segments, the warnings (and, for two dates, ``config_warnings``: what a run of the
+        two-date config will not assess for want of data); ``ingest.md``, ``ingest.json`` and PNGs in ``out_dir``.
     :raises suspid.errors.SuspidError: a config or data problem, in one line.
     """
-    return _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))
+    result = _run_ingest(ingest_file, _override_list(overrides), out_dir=out_dir, log=log or (lambda s: None))
+    if result.config_path is not None:   # what a run of the two-date config will not assess, said now
+        result.config_warnings = data_shortfalls(load_config(result.config_path),
+                                                 n_reference=len(result.reference.segments))
+    return result
 
 
 def fleet_import(database: str | Path, folders: Sequence[str | Path], *, fleet: str, trainset: str,
@@ -293,16 +361,27 @@ def fleet_import(database: str | Path, folders: Sequence[str | Path], *, fleet: 
                                 log=log or (lambda s: None))
 
 
-def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None):
+def indicators(config: ConfigSource, overrides: Overrides = None, *, log: Log | None = None,
+               out_dir: str | Path | None = None):
     """EN 14363 bogie-frame instability and EN 12299 mean comfort of the config's recordings, per segment and
     per run (``suspid indicators``; ``docs/fleet.md``); stored when the config has a ``fleet.database``.
 
+    Each value's ``detail`` holds what it was judged against: ``warning_level`` and ``alarm_level``, and for the
+    instability the limit's inputs ``bogie_mass_kg`` and ``f0_hz`` (the band's hunting frequency, with
+    ``hunting_hz_source``).
+
+    :param out_dir: also write ``indicators.json`` and ``indicators.csv`` there
+        (:func:`suspid.indicators.recordings.write_indicator_files`: the date, the levels, the limit's inputs).
     :returns: (the list of :class:`suspid.indicators.IndicatorValue`, the database record or None).
     """
     cfg = load_config(config, overrides)
     if cfg.fleet is not None and cfg.fleet.database is not None:
-        return _fleet().run_indicators(cfg, log=log or (lambda s: None))
-    return config_indicators(cfg), None
+        values, rec = _fleet().run_indicators(cfg, log=log or (lambda s: None))
+    else:
+        values, rec = config_indicators(cfg, hunting_hz=cfg.fleet.hunting_hz if cfg.fleet else None), None
+    if out_dir is not None:
+        write_indicator_files(out_dir, cfg, values)
+    return values, rec
 
 
 def dashboard(database: str | Path, *, host: str = "127.0.0.1", port: int = 8050, allow_ack: bool = False,

@@ -8,20 +8,25 @@ has none, says that the output folder keeps the previous ingest).
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import importlib.util
+import json
 import sqlite3
 import sys
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 from typing import List, Optional
 
 import click
 import typer
+from rich import box
 from rich.console import Console
-from rich.markup import escape  # element groups (c_yaw[bogie1]) are not markup
+from rich.measure import Measurement
 from rich.table import Table
+from rich.text import Text  # cells as Text: element groups (c_yaw[bogie1]) are not markup
 
 import suspid
 from suspid import registry
@@ -49,8 +54,9 @@ _report = _lazy("suspid.workflows.report")
 _simulate = _lazy("suspid.workflows.simulate")
 _verdict = _lazy("suspid.workflows.verdict")
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Identify train suspension parameters from on-track accelerations.")
+# rich_markup_mode=None: click's plain help, whose metavars are words (:data:`METAVARS`), not typer's <list[str]>
 console = Console(soft_wrap=True)
 
 ConfigArg = typer.Argument(..., help="YAML config file.", show_default=False)
@@ -162,12 +168,24 @@ def _parse_params(items: list[str] | None) -> dict[str, float]:
     for item in items or []:
         name, sep, value = item.partition("=")
         if not sep or not name:
-            raise ConfigError(f"--param expects name=value, got '{item}'")
+            raise ConfigError("expected name=value", option=f"--param {item}")
         try:
             out[name] = float(value)
         except ValueError:
-            raise ConfigError(f"--param {name}: '{value}' is not a number") from None
+            raise ConfigError(f"'{value}' is not a number", option=f"--param {item}") from None
     return out
+
+
+@contextmanager
+def _options_named(options: dict[str, str]):
+    """Inside, an API error about one of its arguments (``ConfigError.key``: ``w.c_yaw``, ``speed_mps``) names
+    the command-line option the value came from (``options``: key -> ``--param c_yaw=1``), not a config line."""
+    try:
+        yield
+    except ConfigError as exc:
+        if exc.key in options and exc.file is None:
+            raise ConfigError(exc.detail, option=options[exc.key]) from None
+        raise
 
 
 @app.command()
@@ -176,7 +194,9 @@ def simulate(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
              param: Optional[List[str]] = typer.Option(None, "--param", help="name=value in SI units (repeatable); "
                                                        "other parameters nominal.")) -> None:
     """Simulate the nominal (or given) parameters on the configured segments; writes simulation.h5 and a PNG."""
-    path = api.simulate(config, set_ or [], w=_parse_params(param), out_dir=out)
+    w = _parse_params(param)
+    with _options_named({f"w.{item.partition('=')[0]}": f"--param {item}" for item in param or []}):
+        path = api.simulate(config, set_ or [], w=w, out_dir=out)
     console.print(f"wrote {path} and {path.parent / 'spectra.png'}")
 
 
@@ -199,7 +219,9 @@ def modes(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
           out: Optional[Path] = typer.Option(None, "--out", help="Folder of modes.json (default: the run dir)."),
           max_hz: float = typer.Option(20.0, "--max-hz", help="Print modes up to this frequency.")) -> None:
     """Eigenmodes at the configured speed: frequency, damping ratio, body and motion; writes modes.json."""
-    report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6, out_dir=out)
+    with _options_named({"speed_mps": f"--speed-kmh {speed_kmh:g}" if speed_kmh is not None else ""}):
+        report = api.modes(config, set_ or [], speed_mps=None if speed_kmh is None else speed_kmh / 3.6,
+                           out_dir=out)
     console.print(_simulate.format_modes(report, max_hz), markup=False, highlight=False)
     where = out if out is not None else api.load_config(config, set_ or []).run_dir()
     console.print(f"stable: {str(report['stable']).lower()}; wrote {Path(where) / 'modes.json'}")
@@ -250,11 +272,14 @@ def ingest(ingest_file: Path = typer.Argument(..., help="Ingest YAML file (docs/
                       f"{res.peak_ratio:.2f}); data.track_file: {res.track_path}, data.measurements: "
                       f"{res.measurements_path}; report: {res.out_dir / 'ingest.md'}", markup=False, highlight=False)
     if r.config_path is not None:
+        for w in r.config_warnings:
+            print(f"warning: {w}", file=sys.stderr)
         console.print(f"two-date config: {r.config_path} (suspid validate {r.config_path}; suspid run "
                       f"{r.config_path})", markup=False, highlight=False)
 
 
-fleet_app = typer.Typer(no_args_is_help=True, help="The fleet's monitoring database (docs/fleet.md).")
+fleet_app = typer.Typer(no_args_is_help=True, rich_markup_mode=None,
+                        help="The fleet's monitoring database (docs/fleet.md).")
 app.add_typer(fleet_app, name="fleet")
 
 
@@ -303,19 +328,82 @@ def fleet_demo(plan: Path = typer.Argument(..., help="Fleet plan (configs/fleet-
         api.dashboard(out.database, port=port, log=_log(False))
 
 
+def _levels(v) -> str:
+    """``4.52 / 5.65``: the warning and alarm levels an indicator value was judged against."""
+    w, a = v.detail.get("warning_level"), v.detail.get("alarm_level")
+    return "no bogie mass" if a is None else f"{w:.3g} / {a:.3g}"
+
+
 @app.command()
-def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt) -> None:
+def indicators(config: Path = ConfigArg, set_: Optional[List[str]] = SetOpt,
+               out: Optional[Path] = typer.Option(None, "--out", metavar="DIR",
+                                                  help="Also write indicators.json and indicators.csv there.")
+               ) -> None:
     """EN 14363 bogie-frame instability and EN 12299 comfort of the config's recordings, per segment and run."""
-    values, rec = api.indicators(config, set_ or [])
+    values, rec = api.indicators(config, set_ or [], out_dir=out)
+    if not console.is_terminal:
+        console.width = 200  # keep rows whole when piped
     table = Table(title="indicators")
-    for col in ("indicator", "segment", "value", "limit", "verdict"):
+    for col in ("indicator", "segment", "value", "warning / alarm", "f0", "verdict"):
         table.add_column(col)
     for v in values:
-        table.add_row(v.name, v.segment or "[b]run[/b]", f"{v.value:.3g} {v.unit}",
-                      "-" if v.limit is None else f"{v.limit:.3g}", v.verdict)
+        f0 = v.detail.get("f0_hz")
+        table.add_row(v.name, v.segment or "[b]run[/b]", f"{v.value:.3g}" + ("" if v.unit == "-" else f" {v.unit}"),
+                      _levels(v), "-" if f0 is None else f"{f0:.2f} Hz", v.verdict)
     console.print(table)
+    inst = next((v for v in values if v.detail.get("bogie_mass_kg") is not None), None)
+    if inst is not None:
+        console.print(f"EN 14363 limit (12 - m_b / 5) / 2 = {inst.detail['alarm_level']:.3g} m/s^2 from the bogie "
+                      f"mass m_b = {inst.detail['bogie_mass_kg']:g} kg; band f0 +- 2 Hz, f0: "
+                      f"{inst.detail['hunting_hz_source']} (fleet.hunting_hz sets it); EN 12299 N_MV: warning from "
+                      f"2 (medium), alarm from 4 (uncomfortable)", markup=False, highlight=False)
+    if out is not None:
+        console.print(f"wrote {out / 'indicators.json'} and {out / 'indicators.csv'}", markup=False, highlight=False)
     if rec is not None:
         console.print(f"recorded as run {rec.run_id} in the monitoring database", markup=False)
+
+
+def _elements_text(groups: tuple[str, ...]) -> str:
+    """``4 at bogie1/bogie2, left/right``: how many elements a parameter sets, and where they sit."""
+    if not groups:
+        return "-"
+    tags = [g[g.index("[") + 1:-1].split(",") for g in groups]
+    places = [list(dict.fromkeys(t[i] for t in tags if len(t) > i)) for i in range(max(map(len, tags)))]
+    return f"{len(groups)} at " + ", ".join("/".join(p) for p in places)
+
+
+@app.command("parameters")
+def parameters_(config: Optional[Path] = typer.Argument(None, show_default=False,
+                                                        help="YAML config: its simulator, and what it identifies."),
+                set_: Optional[List[str]] = SetOpt,
+                simulator: Optional[str] = typer.Option(None, "--simulator", metavar="NAME",
+                                                        help="A simulator's registered name, without a config "
+                                                             "(default: exudyn-train; `suspid plugins` lists them)."),
+                as_json: bool = typer.Option(False, "--json", help="JSON on stdout (every field, the descriptions "
+                                                                   "with their sources)."),
+                identified_only: bool = typer.Option(False, "--identified", help="Only the parameters the config "
+                                                                                 "identifies.")) -> None:
+    """A simulator's parameters: description, unit, nominal value, bounds, the elements each sets; with a config,
+    the ones it identifies and within which bounds (SI units)."""
+    with _options_named({"simulator": f"--simulator {simulator}"}):
+        rows = api.parameters(config, set_ or [], simulator=simulator)
+    if identified_only:
+        rows = [p for p in rows if p.identified is not None]
+    if as_json:
+        print(json.dumps([dataclasses.asdict(p) for p in rows], indent=2))
+        return
+    if not console.is_terminal:
+        console.width = 200  # keep rows whole when piped
+    table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False)
+    for col in ("parameter", "description", "unit", "nominal", "bounds", "elements",
+                *(["identified within"] if config else [])):
+        table.add_column(Text(col), no_wrap=col != "description")
+    for p in rows:
+        ident = [] if config is None else ["-" if p.identified is None else
+                                           f"{p.identified[0]:.6g} to {p.identified[1]:.6g}"]
+        table.add_row(*map(Text, [p.name, _verdict.short_description(p.description), p.unit, f"{p.nominal:.6g}",
+                                  f"{p.lower:.6g} to {p.upper:.6g}", _elements_text(p.elements), *ident]))
+    console.print(table)
 
 
 @app.command()
@@ -381,28 +469,57 @@ def _log(quiet: bool):
     return (lambda s: None) if quiet else (lambda s: console.print(f"[dim]{s}[/dim]"))
 
 
+_STYLE = {"no": "red", "not assessed": "yellow", "not identifiable": "dim", "warning": "yellow",
+          "warning (borderline)": "yellow", "alarm": "bold red", "alarm (borderline)": "bold red",
+          "not assessable": "dim"}
+"""Styles of the verdict table's trust and verdict cells."""
+
+
+def _verdict_table(rows, with_reference: bool, with_nominal: bool) -> Table:
+    """The verdict table (verdict first; :func:`suspid.workflows.verdict.terminal_table`) as a rich table
+    without vertical rules: every column's content on one line, nothing truncated."""
+    header, cells = _verdict.terminal_table(rows, with_reference=with_reference, with_nominal=with_nominal)
+    table = Table(box=box.SIMPLE_HEAD, show_edge=False, pad_edge=False, collapse_padding=True)
+    for col in header:
+        table.add_column(Text(col), no_wrap=True)
+    for row in cells:
+        table.add_row(*[Text(c, style=_STYLE.get(c, "")) if h in ("trust", "verdict") else Text(c)
+                        for h, c in zip(header, row)])
+    return table
+
+
+def _print_verdicts(result: dict) -> None:
+    """The verdict table at the console's width: with the nominal values where they fit, without them where
+    they do not, else (below about 100 columns for the quickstart) a few lines per parameter."""
+    rows = _verdict.rows_of(result)
+    if not rows:
+        return
+    for with_nominal in (True, False):
+        table = _verdict_table(rows, "w_ref" in result, with_nominal)
+        natural = Measurement.get(console, console.options.update_width(10_000), table).maximum  # unclamped
+        if natural <= console.width:
+            console.print(table)
+            return
+    for line in _verdict.vertical_lines(rows):
+        console.print(line, markup=False, highlight=False)
+
+
 def _print_result(result: dict, run_dir: Path) -> None:
     stop = result["stop_reason"]
     if result.get("refine_stop_reason"):
         stop += f", then {result['n_refine_iterations']} refinement steps: {result['refine_stop_reason']}"
     if not console.is_terminal:
         console.width = 200  # keep rows whole when piped
-    table = Table(title=f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, "
-                        f"{result['n_simulator_calls']} simulations, {result['wall_time_s']:.0f} s)")
-    rows = _verdict.rows_of(result)
-    header, cells = _verdict.table(rows, with_reference="w_ref" in result)
-    for col in header:
-        table.add_column(col)
-    style = {"no": "[red]no[/red]", "not assessed": "[yellow]not assessed[/yellow]", "warning": "[yellow]warning[/yellow]",
-             "alarm": "[bold red]alarm[/bold red]", "not assessable": "[dim]not assessable[/dim]"}
-    for row in cells:
-        table.add_row(*[style.get(c, escape(c)) if h in ("identifiable", "trustworthy", "verdict") else escape(c)
-                        for h, c in zip(header, row)])
-    console.print(table)
-    for r in rows:
+    n, new = result["n_simulator_calls"], result.get("n_simulator_calls_this_session")
+    reused = ", none new: all reused from the ledger" if new == 0 and n else ""
+    console.print(f"{result['name']}: J_max = {result['J_max']:.6g} ({stop}, {n} simulations{reused}, "
+                  f"{result['wall_time_s']:.0f} s)", markup=False, highlight=False)
+    _print_verdicts(result)
+    for r in _verdict.rows_of(result):
         console.print(_verdict.summary_line(r, markdown=False), markup=False, highlight=False)
-    for line in _report.checks_lines(result):
-        console.print(line.strip(), markup=False, highlight=False)
+    checks = _report.checks_line(result)
+    if checks:
+        console.print(checks, markup=False, highlight=False)
     unchanged = _report.no_change_line(result)
     if unchanged:
         console.print(unchanged, markup=False, highlight=False)
@@ -468,6 +585,46 @@ def _click_exceptions() -> dict[str, tuple[type, ...]]:
 _CLICK = _click_exceptions()
 
 
+METAVARS = {"set_": "KEY=VALUE", "param": "NAME=VALUE", "out": "DIR", "db": "PATH|URL", "host": "ADDRESS",
+            "port": "PORT", "speed_kmh": "KM/H", "max_hz": "HZ", "n_points": "N", "fleet": "NAME",
+            "trainset": "NAME", "vehicle": "NAME", "date": "YYYY-MM-DD", "mileage_km": "KM", "km_per_day": "KM",
+            "simulator": "NAME", "config": "CONFIG", "ingest_file": "INGEST.yaml", "plan": "PLAN.yaml",
+            "folders": "FOLDER"}
+"""Help metavars in words (``--set KEY=VALUE``, ``--out DIR``), by parameter name; others by type (N, NUMBER,
+TEXT, PATH); a flag takes none."""
+_TYPE_WORDS = {"integer": "N", "float": "NUMBER", "text": "TEXT", "path": "PATH"}
+
+
+def _command() -> click.Command:
+    """The click command of :data:`app` with the help's metavars in words a user knows (:data:`METAVARS`)
+    instead of typer's Python types (``<list[str]>``, ``<bool>``)."""
+    command = typer.main.get_command(app)
+
+    def name(cmd) -> None:
+        for p in cmd.params:
+            if isinstance(p, click.Argument) or getattr(p, "param_type_name", "") == "argument":
+                # the name says what it is (CONFIG, FOLDER...); typer would add its Python type (<list[Path]>)
+                # and braces in the usage line: both set on the instance, typer's classes are left as they are
+                p.display_type_rich = lambda ctx=None: None
+                p.metavar = shown = p.metavar or METAVARS.get(p.name, p.name.upper())
+                p._usage_display_name = lambda shown=shown, p=p: (shown if p.required else f"[{shown}]") + (
+                    "..." if p.nargs != 1 else "")
+                continue
+            if p.metavar is not None:
+                continue
+            if getattr(p, "is_flag", False):
+                p.metavar = ""
+            elif p.name in METAVARS:
+                p.metavar = METAVARS[p.name]
+            elif getattr(p.type, "name", "") in _TYPE_WORDS:
+                p.metavar = _TYPE_WORDS[p.type.name]
+        for sub in getattr(cmd, "commands", {}).values():
+            name(sub)
+
+    name(command)
+    return command
+
+
 _interrupted_note: str | None = None
 """What an interrupted command keeps, set by a command without a ledger (``ingest``); else :func:`_kept`."""
 
@@ -494,7 +651,7 @@ def main(argv: list[str] | None = None) -> int:
     interrupted = False
     try:
         # Without standalone mode, typer catches Ctrl-C itself and *returns* 130 instead of raising.
-        returned = app(args=argv, prog_name="suspid", standalone_mode=False)
+        returned = _command()(args=argv, prog_name="suspid", standalone_mode=False)
         code = returned if isinstance(returned, int) else 0
         interrupted = code == 130
     except _CLICK["Exit"] as exc:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -30,7 +31,8 @@ import yaml
 from pydantic import BaseModel, Field, PrivateAttr, ValidationError, model_validator
 
 from suspid import registry
-from suspid.errors import ConfigError, UnknownPluginError
+from suspid.data.plausibility import Doubt, refused, speed_doubts
+from suspid.errors import ConfigError, DataWarning, UnknownPluginError
 from suspid.fleet.options import FleetSection
 from suspid.infra.seeds import seed_for
 from suspid.method.floor import density_problem
@@ -88,6 +90,7 @@ class Config(Section):
     _notes: list[str] = PrivateAttr(default_factory=list)  # what the dry run changed (validate and report.md say it)
     _raw: dict[str, Any] | None = PrivateAttr(default=None)  # the data it was validated from (Config.with_)
     _base_dir: Path | None = PrivateAttr(default=None)         # where that data's relative paths resolve
+    _options: dict[tuple, str] = PrivateAttr(default_factory=dict)  # key path -> the --set option that gave it
 
     @model_validator(mode="after")
     def _derive_seeds(self) -> "Config":
@@ -108,8 +111,9 @@ class Config(Section):
         return base / "runs" / self.name
 
     def error(self, message: str, key: str) -> ConfigError:
-        """A one-line :class:`ConfigError` naming this config's file, ``key`` and its YAML line."""
-        return key_error(message, key, self.file, self._lines)
+        """A one-line :class:`ConfigError` naming this config's file, ``key`` and its YAML line (or the ``--set``
+        option that gave the value of ``key``)."""
+        return from_option(key_error(message, key, self.file, self._lines), self._options)
 
     def with_(self, *updates: Mapping[str, Any], **keys: Any) -> "Config":
         """A copy with ``updates`` (``{"key.path": value}`` mappings with typed values, applied in order), then
@@ -211,9 +215,10 @@ def _check_shape(text: str, file: str) -> None:
 def read_yaml(path: Path) -> tuple[dict[str, Any], dict[tuple, int]]:
     """Safe-load a YAML mapping and the line of every key path.
 
-    A UTF-8 byte-order mark (what spreadsheet programs write) is accepted.
+    A UTF-8 byte-order mark (what spreadsheet programs write) is accepted. Errors name the file by its
+    absolute path.
     """
-    file = str(path)
+    file = str(Path(path).resolve())
     try:
         text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
@@ -244,25 +249,48 @@ def read_yaml(path: Path) -> tuple[dict[str, Any], dict[tuple, int]]:
 
 
 def apply_overrides(data: dict[str, Any], overrides: Sequence[str], file: str) -> dict[str, Any]:
-    """Apply ``--set key.path=value`` overrides (values parsed as YAML scalars or flows)."""
+    """Apply ``--set key.path=value`` overrides (values parsed as YAML scalars or flows).
+
+    :raises ConfigError: naming the ``--set`` option (not the file: the value is not in it).
+    """
     data = copy.deepcopy(data)
     for item in overrides:
         if "=" not in item:
-            raise ConfigError(f"--set expects key.path=value, got '{item}'", file=file)
+            raise ConfigError("expected key.path=value", option=f"--set {item}")
         key, raw = item.split("=", 1)
         try:
             value = parse_yaml(raw) if raw.strip() else ""
         except yaml.YAMLError:
             value = raw
-        set_path(data, key, value, file)
+        try:
+            set_path(data, key, value, file)
+        except ConfigError as exc:
+            raise ConfigError(exc.detail, option=f"--set {item}") from None
     return data
+
+
+def option_paths(overrides: Sequence[str]) -> dict[tuple, str]:
+    """Key path (``("ego", "max_iter")``) -> the ``--set`` option that set it, for :func:`from_option`."""
+    return {tuple(item.split("=", 1)[0].strip().split(".")): f"--set {item}" for item in overrides if "=" in item}
+
+
+def from_option(exc: ConfigError, options: Mapping[tuple, str]) -> ConfigError:
+    """``exc`` naming the ``--set`` option that gave the value of its key (or of a parent of it), else ``exc``:
+    a value given on the command line has no line in the file."""
+    if exc.key is None or exc.option is not None:
+        return exc
+    parts = tuple(exc.key.split("."))
+    for path, option in options.items():
+        if parts[:len(path)] == path:    # the key inside a value the option set (--set a={b: 1}) is named too
+            return ConfigError(exc.detail, option=option if len(parts) == len(path) else f"{option}, key '{exc.key}'")
+    return exc
 
 
 def set_path(data: dict[str, Any], key: str, value: Any, file: str) -> None:
     """Set ``key`` (``a.b.0.c``: mappings and list indices) of ``data`` to ``value`` in place."""
     parts = key.strip().split(".")
     if not all(parts):
-        raise ConfigError(f"--set has an empty key in '{key}'", file=file, key=key)
+        raise ConfigError(f"an empty key in '{key}'", file=file, key=key)
     node: Any = data
     for depth, part in enumerate(parts[:-1]):
         here = ".".join(parts[: depth + 1])
@@ -271,15 +299,14 @@ def set_path(data: dict[str, Any], key: str, value: Any, file: str) -> None:
         elif isinstance(node, list) and part.isdigit() and int(part) < len(node):
             node = node[int(part)]
         else:
-            raise ConfigError(f"--set {key}: '{here}' is not a mapping that can hold '{parts[depth + 1]}'",
-                              file=file, key=key)
+            raise ConfigError(f"'{here}' is not a mapping that can hold '{parts[depth + 1]}'", file=file, key=key)
     last = parts[-1]
     if isinstance(node, dict):
         node[last] = value
     elif isinstance(node, list) and last.isdigit() and int(last) < len(node):
         node[int(last)] = value
     else:
-        raise ConfigError(f"--set {key}: the parent of '{last}' is not a mapping", file=file, key=key)
+        raise ConfigError(f"the parent of '{last}' is not a mapping", file=file, key=key)
 
 
 def override_arguments(mapping: Mapping[str, Any]) -> list[str]:
@@ -332,26 +359,40 @@ def load_config(source: str | Path | Mapping[str, Any], overrides: Sequence[str]
         folder = Path(base_dir).resolve() if base_dir is not None else Path.cwd()
     else:
         path = Path(source)
-        file = str(path)
+        file = str(path.resolve())          # messages name the file by its absolute path, as Config.file does
         data, lines = read_yaml(path)
+        if not data:
+            raise ConfigError(EMPTY_CONFIG, file=file)
         folder = path.resolve().parent
     data = apply_overrides(data, overrides, file)
-    return _validated(data, file, path, lines, folder, check_plugins)
+    return _validated(data, file, path, lines, folder, check_plugins, option_paths(overrides))
+
+
+EMPTY_CONFIG = ("the config is empty (no sections); a config names at least the parameters to identify under "
+                "parameters: (`suspid parameters` lists a simulator's)")
 
 
 def _validated(data: dict[str, Any], file: str, path: Path | None, lines: dict[tuple, int], folder: Path,
-               check_plugins: bool) -> Config:
-    """``data`` (a config as read, overrides applied) validated into a :class:`Config` (:func:`load_config`)."""
+               check_plugins: bool, options: Mapping[tuple, str] | None = None) -> Config:
+    """``data`` (a config as read, overrides applied) validated into a :class:`Config` (:func:`load_config`).
+
+    :param options: key path -> the ``--set`` option that gave its value (its errors name the option).
+    """
+    options = dict(options or {})
     try:
-        config = Config.model_validate(data, context={"base_dir": folder})
-    except ValidationError as exc:
-        raise_validation_error(exc, Config, file, lines)
-    config.source_file = path.resolve() if path is not None else None
-    config._lines = lines
-    config._raw = copy.deepcopy(data)
-    config._base_dir = folder
-    if check_plugins:
-        check_config_plugins(config)
+        try:
+            config = Config.model_validate(data, context={"base_dir": folder})
+        except ValidationError as exc:
+            raise_validation_error(exc, Config, file, lines)
+        config.source_file = path.resolve() if path is not None else None
+        config._lines = lines
+        config._raw = copy.deepcopy(data)
+        config._base_dir = folder
+        config._options = options
+        if check_plugins:
+            check_config_plugins(config)
+    except ConfigError as exc:
+        raise from_option(exc, options) from None
     return config
 
 
@@ -375,7 +416,8 @@ def derive(config: Config, *updates: Mapping[str, Any]) -> Config:
     for mapping in updates:
         for path, value in mapping.items():
             set_path(data, path, copy.deepcopy(value), config.file)
-    return _validated(data, config.file, config.source_file, config._lines, config._base_dir, check_plugins=True)
+    return _validated(data, config.file, config.source_file, config._lines, config._base_dir, check_plugins=True,
+                      options=config._options)
 
 
 def plugin_class(kind: str, section: PluginSection, key: str, config: Config) -> type:
@@ -413,6 +455,7 @@ def check_config_plugins(config: Config) -> None:
         raise config.error(W_REF_MEASURED, "data.w_ref")
     check_nuisance(config, simulator)
     check_limits(config, simulator)
+    check_speeds(config)
     channels = simulator.channels()
     channel_weights(config, channels)
     if config.objective.weights == "efficient" and (
@@ -426,6 +469,34 @@ def check_config_plugins(config: Config) -> None:
         if name not in registry.names("effect"):
             raise config.error(f"unknown effect '{name}'; effects: {', '.join(registry.names('effect'))}",
                                f"diagnose.effects.{i}")
+
+
+def judge_value(config: Config, doubts: Sequence[Doubt], key: str) -> None:
+    """Findings about a value of the config (``key``) judged by the policy of measured data
+    (:func:`suspid.data.plausibility.judge`): the impossible refused unless ``data.accept`` names its check, the
+    unusual a warning (an error with ``data.strict``), in the same words, after the config's file, line and key.
+
+    :raises ConfigError: the first refused finding.
+    """
+    refusal = refused(doubts, accept=config.data.accept)
+    if refusal is not None:
+        raise config.error(refusal, key)
+    messages = [d.message + (f" (accepted: {d.check} in data.accept)" if d.check else "") for d in doubts]
+    if config.data.strict and any(d.check is None for d in doubts):
+        raise config.error(next(m for m, d in zip(messages, doubts) if d.check is None) + " (refused in strict mode)",
+                           key)
+    for message in messages:
+        warnings.warn(str(config.error(message, key)), DataWarning, stacklevel=3)
+
+
+def check_speeds(config: Config) -> None:
+    """The speed of a numerical experiment (``data.track``) is judged as a track file's speed is: a train faster
+    than any that has run is refused with the words a track file at that speed gets."""
+    if config.data.source != "experiment":
+        return      # measured data: every segment's speed is judged in its file
+    track = config.data.track
+    key = "data.track.speed_mps" if track.speed_mps is not None else "data.track.speed_kmh"
+    judge_value(config, speed_doubts(track.speed), key)
 
 
 def check_optimizer_section(config: Config, base_dir: Path | None) -> None:
@@ -590,7 +661,8 @@ def _check_range(name: str, ends: tuple[float, float], parameter, key: str, line
 def identified_bounds(config: Config, simulator) -> dict[str, tuple[float, float]]:
     """Name -> (lower, upper) in SI units of the identified parameters, in order.
 
-    An empty ``parameters:`` section identifies the simulator's default set.
+    An empty ``parameters:`` section gives the simulator's default set (what ``observability`` and ``stability``
+    analyse; the commands that identify refuse it, :func:`suspid.workflows.checks.check_identified`).
     """
     known = {p.name: p for p in declared_parameters(simulator)}
     names = list(config.parameters) or simulator.default_parameters()

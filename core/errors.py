@@ -19,16 +19,22 @@ class ConfigError(SuspidError):
 
     The message names the file, the key path (``simulator.options.step``),
     the YAML line where known, and what was expected.
+
+    A value that came from a command-line option rather than from the file (``--set key=value``,
+    ``--param name=value``) is named by that option instead (``option``): the file has no line for it.
     """
 
     def __init__(self, message: str, *, file: str | None = None, key: str | None = None,
-                 line: int | None = None):
-        self.file, self.key, self.line, self.detail = file, key, line, message
+                 line: int | None = None, option: str | None = None):
+        self.file, self.key, self.line, self.detail, self.option = file, key, line, message, option
         where = []
-        if file:
-            where.append(f"{file}" + (f":{line}" if line else ""))
-        if key:
-            where.append(f"key '{key}'")
+        if option:
+            where.append(option)
+        else:
+            if file:
+                where.append(f"{file}" + (f":{line}" if line else ""))
+            if key:
+                where.append(f"key '{key}'")
         prefix = ", ".join(where)
         super().__init__(f"{prefix}: {message}" if prefix else message)
 

@@ -66,7 +66,7 @@ def _allowed_keys(model: type[BaseModel], loc: tuple) -> list[str] | None:
         if not nested:
             return None
         model = nested[0]
-    return sorted(model.model_fields)
+    return sorted(n for n, f in model.model_fields.items() if not f.exclude)   # not what load_config sets
 
 
 def _clean_loc(loc: tuple) -> tuple:

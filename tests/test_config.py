@@ -64,7 +64,7 @@ BAD = [
     ("unknown parameter", GOOD.replace("c_secondary: {}", "c_tertiary: {}"), (), "parameters.c_tertiary",
      "unknown parameter 'c_tertiary'"),
     ("bad --set path", GOOD, ("--set", "seed.value=3"), "seed.value", "is not a mapping"),
-    ("bad --set syntax", GOOD, ("--set", "seed"), None, "expects key.path=value"),
+    ("bad --set syntax", GOOD, ("--set", "seed"), None, "expected key.path=value"),
     ("unknown plugin option", GOOD.replace("fs_hz: 80", "fs: 80"), (), "simulator.options.fs",
      "unknown key; expected one of: fs_hz, m_body_kg, m_wheel_kg"),
     ("plugin option type", GOOD.replace("fs_hz: 80", "fs_hz: fast"), (), "simulator.options.fs_hz",
@@ -101,9 +101,12 @@ def test_malformed_config_is_one_line_exit_2(tmp_path, capsys, quarter_car, what
     assert code == 2
     assert len(lines) == 1, err
     assert "Traceback" not in err
-    assert str(tmp_path / "run.yaml") in lines[0]
-    if key:
-        assert f"key '{key}'" in lines[0]
+    if extra:   # a value given by --set is named by the option, not by a line of the file it is not in
+        assert lines[0].startswith(f"error: {' '.join(extra)}: "), lines[0]
+    else:
+        assert str(tmp_path / "run.yaml") in lines[0]
+        if key:
+            assert f"key '{key}'" in lines[0]
     assert words in lines[0]
 
 
@@ -141,7 +144,7 @@ def test_debug_shows_traceback(tmp_path):
 @pytest.mark.parametrize("args, words", [
     (["no-such-command"], "No such command 'no-such-command'"),
     (["run", "--no-such-option", "x.yaml"], "No such option: --no-such-option"),
-    (["run"], "Missing argument 'config'"),
+    (["run"], "Missing argument 'CONFIG'"),
 ])
 def test_command_line_mistakes_are_usage_errors_with_exit_2(args, words):
     """A mistyped command, option or a missing argument: click's usage message and exit 2, never "internal error"."""

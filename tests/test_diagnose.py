@@ -336,6 +336,12 @@ def test_cli_diagnose(tmp_path):
     res = run_cli("diagnose", str(path), "--quiet")
     assert res.returncode == 0, res.stderr
     assert "Named: `carbody-bending`" in res.stdout
+    # the first lines in plain words: what, how sure, the identification; the statistics below them
+    top = res.stdout.split("## 1.")[0]
+    assert "**Found:** the measurements show what the model lacks: a carbody first vertical bending mode" in top
+    assert "**How sure:** it explains" in top and "**Identification:**" in top
+    assert "q (BY)" not in top and "score" not in top and "None" not in top
+    assert "=None" not in res.stdout
     bad = run_cli("diagnose", str(tmp_path / "missing.yaml"))
     assert bad.returncode == 2 and "config file not found" in bad.stderr
 

@@ -51,6 +51,11 @@ def test_two_recordings_give_both_segment_sets_and_a_config_validate_and_run_acc
     p = run_cli("ingest", str(root / "ingest.yaml"), "--quiet")
     assert p.returncode == 0, p.stderr
     out = root / "ingested"
+    # what a run of the two-date config will not assess, said by ingest: 4 reference segments, no limits
+    config_file = out / "two-dates.yaml"
+    assert (f"warning: {config_file}: the reference date has 4 segments ({out / 'reference' / 'accelerations'}); "
+            f"the reference-date self-check needs 8, so trust will be 'not assessed'") in p.stderr, p.stderr
+    assert f"warning: {config_file}: no limits: for c_sec_z, k_sec_z: their maintenance verdict" in p.stderr
     assert "two-date config: " in p.stdout and str(out / "two-dates.yaml") in p.stdout
     for date in ("reference", "measurement"):
         assert (out / date / "track").is_dir() and (out / date / "accelerations").is_dir()

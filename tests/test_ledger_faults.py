@@ -130,7 +130,7 @@ DAMAGED_ROWS: dict[str, tuple[Callable[[Path], None], Callable[[Ledger], object]
     "iteration_record_J_nan": (lambda p: (filled(p), _sql(p, "INSERT INTO iterations VALUES "
                                                              "('ego', 0, '{\"J\": nan}')")),
                                lambda led: led.iterations("ego"), "iteration 0 of ego: JSONDecodeError"),
-    "pickled_object_array": (_object_array, lambda led: led.get_array("y"), "array y: ValueError"),
+    "pickled_object_array": (_object_array, lambda led: led.get_array("y"), "array y: holds Python objects (object), expected numbers"),
 }
 
 

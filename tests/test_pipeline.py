@@ -128,7 +128,7 @@ def measured(tmp_path_factory):
         write_track_csv(seg, root / "track" / f"{seg.name}.csv")
         write_accelerations_csv(r, root / "acc" / f"{seg.name}.csv")
     cfg = root / "measured.yaml"
-    cfg.write_text("name: m\ndata: {source: measured, measurements: acc, track_file: track}\n"
+    cfg.write_text("name: m\nparameters: {c_yaw: {}}\ndata: {source: measured, measurements: acc, track_file: track}\n"
                    "noise: {reference: {measurements: acc, track_file: track}}\n"   # validate needs a noise model
                    "spectra: {f_min_hz: 0.5, f_max_hz: 20.0, n_freqs: 60}\n")
     return root, cfg

@@ -105,7 +105,7 @@ def test_broken_plugin_warns_and_everything_else_works(broken_dist, tmp_path):
     assert 'Error importing plugin "broken" (distribution suspid-broken)' in res.stderr
     assert "overlap" in res.stdout and "broken" in res.stdout
     cfg = tmp_path / "c.yaml"
-    cfg.write_text("name: ok\nsimulator: {plugin: exudyn-train}\n")
+    cfg.write_text("name: ok\nsimulator: {plugin: exudyn-train}\nparameters: {c_yaw: {}}\n")
     res = run_cli("validate", str(cfg), env=_env(broken_dist))
     assert res.returncode == 0, res.stderr
     assert "broken" in res.stderr

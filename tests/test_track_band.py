@@ -79,7 +79,7 @@ def test_a_wrong_track_band_is_a_config_error_naming_the_key(band, message):
 
 
 def test_validate_restricts_the_spectra_of_an_experiment_and_says_so():
-    cfg = {"name": "band", "data": {"track": {"n_segments": 4, "speed_kmh": 300.0},
+    cfg = {"name": "band", "parameters": {"c_sec_z": {}}, "data": {"track": {"n_segments": 4, "speed_kmh": 300.0},
                                     "track_band": {"filter": "en13848", "bands": ["D1", "D2"]}},
            "spectra": {"f_min_hz": 0.4, "f_max_hz": 20.0, "n_freqs": 100, "window": "hann"}}
     checked = suspid.validate(cfg).config

@@ -237,6 +237,47 @@ def test_with_a_noise_model_file_no_component_is_called_trustworthy(two_dates, c
     assert "Model-error checks that ran: none." in report
     assert "reference-date self-check (needed for a yes): not run" in report
     assert report.count("| *not assessed* |") == 2 and "| yes | yes |" not in report
-    header = next(line for line in out.splitlines() if "identifiable" in line)
-    assert "trustworthy" in header
-    assert out.count("not assessed") >= 2 and "Model-error checks that ran: none." in out
+    header = next(line for line in out.splitlines() if line.startswith("verdict "))
+    assert "trust" in header
+    checks_line = [line for line in out.splitlines() if line.startswith("Model-error checks")]   # report.md: each
+    assert out.count("not assessed") >= 2 and len(checks_line) == 1 and "noise.path" in checks_line[0]
+    assert checks_line[0].endswith(": trust is not assessed (report.md lists the checks)"), checks_line
+
+
+def test_too_few_reference_segments_are_said_by_validate_and_named_by_the_run(two_dates, capsys):
+    """A reference date of 5 segments: validate warns that the self-check needs 8 (trust not assessed), and the
+    run's status names that cause, not noise.reference (which is given)."""
+    import shutil
+
+    few = two_dates / "few"
+    for kind in ("track", "accelerations"):
+        (few / kind).mkdir(parents=True, exist_ok=True)
+        for f in sorted((two_dates / "reference" / kind).glob("*.csv"))[:5]:
+            shutil.copy(f, few / kind / f.name)
+    limits = {"c_yaw": {"warning": -25, "alarm": -40}, "c_sec_y": {"warning": -25, "alarm": -40}}
+    cfg = _config(two_dates, "linearised", name="few", limits=limits,
+                  noise={"reference": {"measurements": "few/accelerations", "track_file": "few/track"}})
+    cfg = cfg.rename(two_dates / "few.yaml")
+    capsys.readouterr()
+    assert _cli("validate", str(cfg)) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"warning: {cfg}: the reference date has 5 segments ({few / 'accelerations'}); the "
+                   f"reference-date self-check needs 8, so trust will be 'not assessed' (record more kilometres at "
+                   f"constant speed on the reference date, or cut shorter segments)"]
+    assert _cli("run", str(cfg), "--quiet") == 0
+    result = json.loads((two_dates / "runs" / "few" / "result.json").read_text())
+    assert result["model_error"]["checks"]["self_check"]["status"] == (
+        "not run: the reference date has 5 segments, the self-check needs 8 (record more kilometres at constant "
+        "speed on the reference date, or cut shorter segments)")
+    out = capsys.readouterr().out
+    assert "the reference date has 5 segments, the self-check needs 8" in out and "give noise.reference" not in out
+
+
+def test_measured_data_without_limits_are_warned_of(two_dates, capsys):
+    cfg = _config(two_dates)
+    capsys.readouterr()
+    assert _cli("validate", str(cfg)) == 0
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"warning: {cfg}: no limits: for c_sec_y, c_yaw: their maintenance verdict will be 'not assessable' (give "
+        f"warning and alarm levels in % of nominal under limits:, e.g. c_sec_y: {{warning: -25, alarm: -40}})"]
+

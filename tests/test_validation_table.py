@@ -285,4 +285,4 @@ def test_impossible_measured_data_are_refused_by_validate_and_run_unless_accepte
     assert code == 0 and "valid" in out, err
     assert "accepted: implausible_amplitude in data.accept" in err
     code, out, err = _cli(capsys, "validate", str(path), "--set", "data.accept=[dead_chanel]")
-    assert code == 2 and "key 'data.accept.0'" in err and "implausible_amplitude" in err, err
+    assert code == 2 and "--set data.accept=[dead_chanel], key 'data.accept.0': " in err and "implausible_amplitude" in err, err

@@ -116,6 +116,7 @@ import numpy as np
 from suspid.data.plausibility import (ABSURD, Doubt, acceleration_doubts, d1_rms, judge, speed_doubts, speed_statistic,
                                       track_doubts, vibration_rms)
 from suspid.errors import DataError
+from suspid.infra.arrays import check_bytes, check_fits, check_text, declared, human_bytes
 from suspid.infra.files import atomic_open, write_text
 from suspid.interfaces import IRREGULARITY_CHANNELS, Response, TrackSegment
 
@@ -298,9 +299,19 @@ def _written(path: Path, write: Any) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------- CSV
+CSV_MEMORY_FACTOR = 6
+"""Bytes :func:`_read_csv` holds per byte of the file at most: the text, its lines, the rows as Python floats
+(about 32 bytes for 10 characters of text), the array."""
+
+
 def _read_csv(path: Path) -> tuple[dict[str, str], list[str], np.ndarray]:
-    """Metadata, header and values (float array rows x columns) of a suspid CSV file."""
+    """Metadata, header and values (float array rows x columns) of a suspid CSV file.
+
+    A file that is not text (NUL bytes), or too large for the memory available, is refused before it is read.
+    """
     try:
+        size = check_text(path, "a suspid CSV file: # metadata lines, a header, rows of numbers")
+        check_bytes(str(path), f"reading its {human_bytes(size)} of text", size * CSV_MEMORY_FACTOR)
         text = path.read_text(encoding="utf-8-sig")   # -sig: skip the byte-order mark spreadsheets write
     except FileNotFoundError:
         raise _fail(path, "file not found") from None
@@ -531,8 +542,19 @@ def _attr_float(attrs: Any, key: str, path: Path, where: str) -> float:
     return float(a.reshape(()))
 
 
-def _dataset(group: Any, key: str, path: Path) -> np.ndarray:
-    """The real-valued contents of ``group[key]``; anything else raises naming the dataset."""
+def _fits_shape(shape: Sequence[int], pattern: Sequence[int | None]) -> bool:
+    """``shape`` is ``pattern``, whose None entries stand for any length."""
+    return len(shape) == len(pattern) and all(p is None or p == s for s, p in zip(shape, pattern))
+
+
+def _dataset(group: Any, key: str, path: Path, shapes: Sequence[tuple[int | None, ...]] = (), meaning: str = ""
+             ) -> np.ndarray:
+    """The real-valued contents of ``group[key]``; anything else raises naming the dataset.
+
+    Its declared shape is checked before it is read: against ``shapes`` (the shapes it may have, given the
+    segment's other datasets; ``meaning`` says what the axes are) and, as float64, against the memory available
+    (:func:`suspid.infra.arrays.check_fits`): a damaged file's absurd shape is one error, not an allocation.
+    """
     h5py = _h5()
     where = f"{group.name}/{key}"
     if key not in group:
@@ -545,6 +567,11 @@ def _dataset(group: Any, key: str, path: Path) -> np.ndarray:
         raise _fail(path, f"{where}: complex values ({d.dtype}); expected real numbers")
     if kind not in "iuf":
         raise _fail(path, f"{where}: values of type {d.dtype} (not numbers); expected real numbers")
+    if shapes and not any(_fits_shape(d.shape, s) for s in shapes):
+        shown = " or ".join("(" + ", ".join("n" if a is None else str(a) for a in s) + (",)" if len(s) == 1 else ")")
+                            for s in shapes)
+        raise _fail(path, f"{where} declares {declared(d.shape, d.dtype)}, expected shape {shown} ({meaning})")
+    check_fits(str(path), f"dataset {where}", d.shape, np.float64)
     return np.asarray(d[()], dtype=float)
 
 
@@ -738,14 +765,20 @@ def read_track_h5(path: str | Path, *, strict: bool = False,
             g = f["segments"][name]
             if not isinstance(g, _h5().Group):
                 raise _fail(path, f"/segments/{name} is a dataset, expected a group")
-            data = {key: _dataset(g, key, path) for key in ("distance", "irregularities", "speed")}
+            x = _dataset(g, "distance", path)
+            n = (len(x),) if x.ndim == 1 else x.shape       # check_segment names any other shape
+            data = {"distance": x,
+                    "irregularities": _dataset(g, "irregularities", path, [(len(IRREGULARITY_CHANNELS), *n)],
+                                               "irregularity channels x points of distance"),
+                    "speed": _dataset(g, "speed", path, [(), n], "one speed, or one per point of distance")}
             channels = _text_list(g["irregularities"].attrs.get("channels"), path,
                                   f"/segments/{name}/irregularities attribute 'channels'")
             if channels and tuple(channels) != IRREGULARITY_CHANNELS:
                 raise _fail(path, f"segment '{name}': irregularity channels {channels}, expected "
                                   f"{list(IRREGULARITY_CHANNELS)}")
             speed = data["speed"]
-            curve = {key: _dataset(g, key, path) if key in g else None for key in ("curvature", "cant")}
+            curve = {key: _dataset(g, key, path, [n], "one per point of distance") if key in g else None
+                     for key in ("curvature", "cant")}
             seg = TrackSegment(name, data["distance"], data["irregularities"],
                                float(speed) if speed.ndim == 0 else speed, meta={"file": str(path)}, **curve)
             out.append(check_segment(seg, path))
@@ -819,7 +852,7 @@ def read_accelerations_h5(path: str | Path, channels: Sequence[str] | None = Non
             g = f["segments"][seg]
             if not isinstance(g, _h5().Group):
                 raise _fail(path, f"/segments/{seg} is a dataset, expected a group")
-            a = _dataset(g, "accelerations", path)
+            a = _dataset(g, "accelerations", path, [(len(names), None)], "the root's channels x samples")
             if "fs_hz" not in g["accelerations"].attrs:
                 raise _fail(path, f"segment '{seg}': accelerations have no 'fs_hz' attribute")
             fs = _attr_float(g["accelerations"].attrs, "fs_hz", path, f"/segments/{seg}/accelerations")

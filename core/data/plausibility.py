@@ -207,6 +207,19 @@ def speed_doubts(speed: float, what: str = "speed") -> list[Doubt]:
     return []
 
 
+def refused(doubts: Sequence[Doubt], *, accept: Collection[str] = (), accept_key: str = "data.accept") -> str | None:
+    """The first finding :func:`judge` refuses, worded as it words it (without the file), or None.
+
+    For a value that is no file's (a config's speed, a command-line option): the caller puts its own prefix
+    (a config's file, line and key) before the same words.
+    """
+    accepted = set(accept)
+    for d in doubts:
+        if d.check is not None and d.check not in accepted:
+            return f"{d.message} (if these values are right, add {d.check} to {accept_key})"
+    return None
+
+
 def judge(doubts: Sequence[Doubt], where: Path | str, *, accept: Collection[str] = (), strict: bool = False,
           accept_key: str = "data.accept", emit: bool = True, stacklevel: int = 2) -> list[str]:
     """Refuse the impossible, warn about the unusual: the policy of the module docstring.
@@ -221,10 +234,9 @@ def judge(doubts: Sequence[Doubt], where: Path | str, *, accept: Collection[str]
     :returns: the warnings, one line each.
     :raises DataError: the first finding that is refused, one line naming ``where``.
     """
-    accepted = set(accept)
-    for d in doubts:
-        if d.check is not None and d.check not in accepted:
-            raise DataError(f"{where}: {d.message} (if these values are right, add {d.check} to {accept_key})")
+    refusal = refused(doubts, accept=accept, accept_key=accept_key)
+    if refusal is not None:
+        raise DataError(f"{where}: {refusal}")
     messages = [f"{where}: {d.message}" + (f" (accepted: {d.check} in {accept_key})" if d.check else "")
                 for d in doubts]
     if strict and any(d.check is None for d in doubts):

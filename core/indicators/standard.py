@@ -163,8 +163,13 @@ def compute_indicators(segments: Sequence[TrackSegment], responses: Sequence[Res
     car_y = lateral_carbody or _first(channels, "carbody", "lateral")
     car_z = vertical_carbody or _first(channels, "carbody", "vertical")
     limit = instability_limit(bogie_mass_kg) if bogie_mass_kg is not None else None
+    # what the verdicts were judged against, in every value's detail (an output file must say it)
+    inputs = {"bogie_mass_kg": bogie_mass_kg, "alarm_level": limit,
+              "warning_level": None if limit is None else round(INSTABILITY_WARNING_FRACTION * limit, 9),
+              "hunting_hz_source": "given" if hunting_hz is not None else "spectral peak of the segment"}
+    levels = {"warning_level": COMFORT_WARNING, "alarm_level": COMFORT_ALARM}
     out: list[IndicatorValue] = []
-    worst: tuple[float, str] | None = None
+    worst: tuple[float, str, float] | None = None
     all_y, all_z = [], []
     for seg, resp in zip(segments, responses):
         index = {c: i for i, c in enumerate(resp.channels)}
@@ -174,9 +179,9 @@ def compute_indicators(segments: Sequence[TrackSegment], responses: Sequence[Res
             out.append(IndicatorValue(INSTABILITY, peak, "m/s^2",
                                       _verdict(peak, None if limit is None else INSTABILITY_WARNING_FRACTION * limit,
                                                limit), resp.segment or seg.name, bogie, limit,
-                                      {"f0_hz": f0, "window_m": WINDOW_M, "step_m": STEP_M}))
+                                      {"f0_hz": f0, "window_m": WINDOW_M, "step_m": STEP_M} | inputs))
             if worst is None or peak > worst[0]:
-                worst = (peak, resp.segment or seg.name)
+                worst = (peak, resp.segment or seg.name, f0)
         if car_y in index and car_z in index:
             ay = block_rms(weight(resp.accelerations[index[car_y]], resp.fs, WD), resp.fs)
             az = block_rms(weight(resp.accelerations[index[car_z]], resp.fs, WB), resp.fs)
@@ -185,15 +190,16 @@ def compute_indicators(segments: Sequence[TrackSegment], responses: Sequence[Res
             n = comfort_nmv(float(np.percentile(ay, 95)), float(np.percentile(az, 95)))
             out.append(IndicatorValue(COMFORT, n, "-", _verdict(n, COMFORT_WARNING, COMFORT_ALARM),
                                       resp.segment or seg.name, f"{car_y}, {car_z}", None,
-                                      {"n_blocks": int(ay.size), "longitudinal": "not measured (left out)"}))
+                                      {"n_blocks": int(ay.size), "longitudinal": "not measured (left out)"} | levels))
     if worst is not None:
         out.append(IndicatorValue(INSTABILITY, worst[0], "m/s^2",
                                   _verdict(worst[0], None if limit is None else INSTABILITY_WARNING_FRACTION * limit,
-                                           limit), None, bogie, limit, {"worst_segment": worst[1]}))
+                                           limit), None, bogie, limit,
+                                  {"worst_segment": worst[1], "f0_hz": worst[2]} | inputs))
     if all_y:
         ay, az = np.concatenate(all_y), np.concatenate(all_z)
         n = comfort_nmv(float(np.percentile(ay, 95)), float(np.percentile(az, 95)))
         out.append(IndicatorValue(COMFORT, n, "-", _verdict(n, COMFORT_WARNING, COMFORT_ALARM), None,
                                   f"{car_y}, {car_z}", None,
-                                  {"n_blocks": int(ay.size), "longitudinal": "not measured (left out)"}))
+                                  {"n_blocks": int(ay.size), "longitudinal": "not measured (left out)"} | levels))
     return out

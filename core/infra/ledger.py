@@ -44,6 +44,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from suspid.errors import LedgerError, LedgerWarning
+from suspid.infra.arrays import load_npy_bytes, npy_bytes_problem
 from suspid.infra.files import canonical
 
 SCHEMA_VERSION = 2
@@ -549,13 +550,19 @@ class Ledger:
         self._write("INSERT OR REPLACE INTO artifacts VALUES (?, ?, ?)", (key, buf.getvalue(), time.time()))
 
     def get_array(self, key: str) -> np.ndarray | None:
-        from io import BytesIO
-
+        """The array stored under ``key`` (None when there is none); its declared size is checked against the
+        bytes stored before it is allocated, and an object array (pickled) is refused, never unpickled."""
         rows = self._read("SELECT value FROM artifacts WHERE key = ?", (key,))
         if not rows:
             return None
-        try:   # an object array (pickled) is refused, never unpickled
-            return np.load(BytesIO(rows[0][0]), allow_pickle=False)
+        blob = rows[0][0]
+        if not isinstance(blob, bytes):
+            raise self._damaged_row(f"array {key[:24]}", f"a {type(blob).__name__}, not an array")
+        problem = npy_bytes_problem(blob)
+        if problem is not None:
+            raise self._damaged_row(f"array {key[:24]}", problem)
+        try:
+            return load_npy_bytes(blob, str(self.path))
         except (TypeError, ValueError, OSError, EOFError) as exc:
             raise self._damaged_row(f"array {key[:24]}", exc) from None
 

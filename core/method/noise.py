@@ -58,13 +58,13 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from pathlib import Path
 from typing import Annotated, Any, Literal, Mapping, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from suspid.infra.arrays import CheckedNpz
 from suspid.infra.files import atomic_open
 from suspid.method.floor import NoiseFloor, estimate_floor, spec_floor
 from suspid.options import parse_options
@@ -443,16 +443,13 @@ class NoiseModel:
             format version, or inconsistent arrays; the message names the file.
         """
         path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                content = {key: data[key] for key in data.files}
-        except FileNotFoundError:
-            raise DataError(f"noise model file {path} not found") from None
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise DataError(f"noise model file {path} is not a readable .npz file ({exc})") from None
-        missing = [key for key in ("meta", "freqs", *cls._ARRAYS) if key not in content]
-        if missing:
-            raise DataError(f"noise model file {path} is not a suspid noise model (missing {', '.join(missing)})")
+        with CheckedNpz(path, "noise model file") as npz:   # every array's size checked before it is read
+            missing = [key for key in ("meta", "freqs", *cls._ARRAYS) if key not in npz.files]
+            if missing:
+                raise DataError(f"noise model file {path} is not a suspid noise model (missing {', '.join(missing)})")
+            meta = npz.load("meta")
+            cls._expect_shapes(npz, meta)
+            content = {"meta": meta} | {key: npz.load(key) for key in npz.files if key != "meta"}
         try:
             return cls._from_content(content, path)
         except DataError:
@@ -462,6 +459,35 @@ class NoiseModel:
             what = exc.detail if isinstance(exc, ConfigError) else f"{type(exc).__name__}: {exc}"
             where = f" at '{exc.key}'" if isinstance(exc, ConfigError) and exc.key else ""
             raise DataError(f"noise model file {path} has a damaged header{where} ({what})") from None
+
+    @classmethod
+    def _expect_shapes(cls, npz: CheckedNpz, meta: np.ndarray) -> None:
+        """Each array's declared shape against the model's grid, before any is read: (channels, frequencies)
+        from the header's channels and the ``freqs`` array (else from ``mean``'s own shape), r components."""
+        m = npz.members
+        grid = m["mean"].shape
+        try:
+            channels = json.loads(str(meta)).get("channels") if meta.ndim == 0 else None
+        except (json.JSONDecodeError, AttributeError):
+            channels = None     # the header's own check (_from_content) names what is wrong with it
+        n_c = len(channels) if isinstance(channels, list) else (grid[0] if len(grid) == 2 else None)
+        n_f = m["freqs"].shape[0] if len(m["freqs"].shape) == 1 and m["freqs"].shape[0] else (
+            grid[1] if len(grid) == 2 else None)
+        if n_c is None or n_f is None:
+            raise DataError(f"noise model file {npz.path}: array 'mean' declares shape {grid}, expected "
+                            f"(channels, frequencies)")
+        shape, axes = (n_c, n_f), "channels x frequencies of the model's grid"
+        for name in ("mean", "variance", "residual_variance", "floor_power", "floor_gain_db"):
+            if name in m:
+                npz.expect(name, shape, axes)
+        r = m["eigenvalues"].shape[0] if len(m["eigenvalues"].shape) == 1 else 0
+        npz.expect("eigenvalues", (r,), "one per component")
+        npz.expect("explained_variance_ratio", (r,), "one per component")
+        npz.expect("components", (r, n_c * n_f), "components x (channels x frequencies)")
+        if "speeds" in m and len(m["speeds"].shape) == 1:
+            n_s = m["speeds"].shape[0]
+            npz.expect("speed_counts", (n_s,), "one per speed group")
+            npz.expect("speed_means", (n_s, *shape), "speed groups x channels x frequencies")
 
     @classmethod
     def _from_content(cls, content: Mapping[str, np.ndarray], path: Path) -> "NoiseModel":

@@ -35,7 +35,7 @@ from suspid.workflows.phases import Phases
 from suspid.workflows.linearised import (calibrate_at_reference, calibration_result, linearised_model_error,
                                          model_parameters)
 from suspid.workflows.no_change import NoChange, apply_no_change, no_change_test, reported_correction
-from suspid.workflows.reference import self_check
+from suspid.workflows.reference import self_check, self_check_missing
 from suspid.workflows.trust import (CHECK_LABELS, BiasSources, checks_report, combine_sources, correction_report,
                                     transfer_term, trust_states)
 from suspid.workflows.results import Analysis, FailedPoint, IntervalMethod, PaperLoop, Sensitivity
@@ -551,12 +551,7 @@ def model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, h: float, o
         phases.start(f"self-check ({sc_opt.n_splits} splits)")
         check = self_check(problem, ledger, sc_opt, log=phases.status, executor=executor, extra=extra)
         if check is None:
-            if not problem.reference or not problem.reference_segments:
-                why = "the reference date's data are not part of this run" + (
-                    " (the noise model is read from noise.path)" if problem.config.noise.path is not None else "")
-            else:
-                why = f"the reference date has {len(problem.reference_segments)} segments, the self-check needs 8"
-            report["self_check"] = {"status": f"not run: {why} (give noise.reference with at least 8 segments)"}
+            report["self_check"] = {"status": f"not run: {self_check_missing(problem)}"}
         else:
             bias = np.abs(check.bias)
             sources.self_check, ran = np.asarray(check.bias, float), True

@@ -30,6 +30,8 @@ from suspid.errors import DataError
 from suspid.method.noise import NoiseModel
 from suspid.method.spectra import frequency_grid, grid_lines
 from suspid.workflows.problem import synthetic_track, validate_data
+from suspid.workflows.reference import SELF_CHECK_MIN_SEGMENTS
+from suspid.workflows.verdict import limits_for
 
 
 def check_output_dir(config: Config) -> Path:
@@ -56,12 +58,73 @@ def check_noise_model(config: Config, channels: list[str]) -> None:
         return
     if path.is_dir():
         raise config.error(f"{path} is a directory; expected a noise_model.npz written by a run", "noise.path")
-    model = NoiseModel.load(path)
+    try:
+        model = NoiseModel.load(path)     # the message names the file; the prefix, the config's key
+    except DataError as exc:
+        raise config.error(str(exc), "noise.path") from None
     freqs = frequency_grid(config.spectra)[0]
     try:
         model.check_grid(freqs, channels)
     except DataError as exc:
-        raise DataError(f"noise model {path}: {exc}") from None
+        raise config.error(f"noise model {path}: {exc}", "noise.path") from None
+
+
+NO_PARAMETERS = "no parameters to identify; name them under parameters: (bounds default to the simulator's; " \
+                "`suspid parameters{file}` lists them)"
+
+
+def reference_segment_count(config: Config) -> int | None:
+    """The segments of the reference date's measured data (``noise.reference``), None without them."""
+    ref = config.noise.reference
+    if ref is None or ref.track_file is None:
+        return None
+    with warnings.catch_warnings():     # validate_data reads them again and says what it finds
+        warnings.simplefilter("ignore")
+        return len(read_track(ref.track_file, accept=config.data.accept))
+
+
+def data_shortfalls(config: Config, n_reference: int | None = None) -> list[str]:
+    """What a run of ``config`` will not assess for want of data, one line each, naming the number needed:
+
+    - the reference-date self-check (needed for a component to be called trustworthy) needs the reference
+      date's data with :data:`~suspid.workflows.reference.SELF_CHECK_MIN_SEGMENTS` segments: measured data with
+      fewer (``noise.reference``), or with a noise model read from a file (``noise.path``), leave trust *not
+      assessed*;
+    - on measured data, an identified parameter without ``limits:`` gets no maintenance verdict.
+
+    :param n_reference: the reference date's segments when the caller knows them (default: read
+        ``noise.reference.track_file``).
+    """
+    out = []
+    me = config.identifiability.model_error
+    measured = config.data.source == "measured"
+    if measured and me.run != "never" and me.self_check.enabled:
+        need = SELF_CHECK_MIN_SEGMENTS
+        if config.noise.reference is not None:
+            n = reference_segment_count(config) if n_reference is None else n_reference
+            if n is not None and n < need:
+                out.append(f"{config.file}: the reference date has {n} segments ({config.noise.reference.measurements});"
+                           f" the reference-date self-check needs {need}, so trust will be 'not assessed' (record "
+                           f"more kilometres at constant speed on the reference date, or cut shorter segments)")
+        elif config.noise.path is not None:
+            out.append(f"{config.file}: the noise model is read from noise.path: the reference-date self-check needs "
+                       f"the reference date's data (noise.reference, at least {need} segments), so trust will be "
+                       f"'not assessed'")
+    if measured:
+        missing = [n for n in config.parameters if limits_for(n, config.limits) is None]
+        if missing:
+            out.append(f"{config.file}: no limits: for {', '.join(missing)}: their maintenance verdict will be "
+                       f"'not assessable' (give warning and alarm levels in % of nominal under limits:, e.g. "
+                       f"{missing[0]}: {{warning: -25, alarm: -40}})")
+    return out
+
+
+def check_identified(config: Config) -> None:
+    """A run identifies parameters the config names: a config without ``parameters:`` is refused rather than run
+    on the simulator's default set, which the user did not choose (``suspid parameters`` lists them)."""
+    if not config.parameters:
+        where = f" {config.source_file}" if config.source_file is not None else ""
+        raise config.error(NO_PARAMETERS.format(file=where), "parameters")
 
 
 def track_speeds(config: Config) -> np.ndarray:
@@ -137,6 +200,7 @@ def dry_run(config: Config) -> int:
     :returns: the number of measured segments read (0 for a numerical experiment).
     :raises SuspidError: the first problem, in one line.
     """
+    check_identified(config)
     check_output_dir(config)
     apply_track_band(config)
     simulator = build_simulator(config)

@@ -137,6 +137,8 @@ def _run(config: Config, run_dir: Path, run_id: str, ledger: Ledger, executor: E
     """
     t_start = time.perf_counter()
     n_before = ledger.count()
+    if n_before:   # a resumed or repeated run: what it will not simulate again
+        log(f"reusing {n_before} finished simulations from the ledger {ledger.path} (--fresh starts over)")
     problem = build_problem(config, ledger, log, executor)
     problem.noise_model.save(run_dir / "noise_model.npz")
     optimizer = optimizer_for(config, problem)

@@ -65,7 +65,7 @@ from suspid.method.noise import fit_noise_model
 from suspid.method.objective import ObjectiveFunction
 from suspid.workflows.adequacy import group_estimates
 from suspid.workflows.problem import Problem, segment_speeds, segments_digest
-from suspid.workflows.reference import local_search
+from suspid.workflows.reference import SELF_CHECK_MIN_SEGMENTS, local_search, self_check_missing
 from suspid.workflows.trust import (BiasSources, checks_report, combine_sources, correction_report,  # noqa: F401
                                     equivalent_bias_bound, model_spread, transfer_term, trust_states)
 from suspid.elements import declared_parameters
@@ -350,7 +350,7 @@ def linear_self_check(problem: Problem, jac0: DateJacobian, options: ModelErrorO
     at w0 and the model parameters the run identifies with, the calibrated ones where calibrated):
     ``(n_splits, q)`` shifts u_opt − u0, or None without enough reference segments."""
     ref, segments = problem.reference, problem.reference_segments
-    if not ref or not segments or len(segments) < 8:
+    if not ref or not segments or len(segments) < SELF_CHECK_MIN_SEGMENTS:
         return None
     sc, config, q = options.self_check, problem.config, problem.q
     y_mes0, y_sim0 = ref["y_mes0"], jac0.y
@@ -458,8 +458,7 @@ def linearised_model_error(problem: Problem, ledger: Ledger, u_opt: np.ndarray, 
     else:
         shifts = linear_self_check(problem, jac0_cal, options) if have_ref else None
         if shifts is None:
-            report["self_check"] = {"status": "not run: the reference date's data are not part of this run "
-                                              "(give noise.reference, or use at least 8 reference segments)"}
+            report["self_check"] = {"status": f"not run: {self_check_missing(problem)}"}
         else:
             n_splits = shifts.shape[0]
             bias = shifts.mean(axis=0)

@@ -122,6 +122,26 @@ class SelfCheck:
                 "segments_identify": self.n_identify, "n_simulations": self.n_evaluations}
 
 
+SELF_CHECK_MIN_SEGMENTS = 8
+"""Reference-date segments the self-check needs: it fits B on half of them and identifies on the other half."""
+
+
+def self_check_missing(problem: Problem) -> str | None:
+    """Why the self-check cannot run on this problem's data, with what to do (None: it can)."""
+    if not problem.reference or not problem.reference_segments:
+        if problem.config.noise.path is not None:
+            return ("the reference date's data are not part of this run: the noise model is read from noise.path "
+                    f"(give noise.reference, the reference date's measured data, with at least "
+                    f"{SELF_CHECK_MIN_SEGMENTS} segments)")
+        return (f"the reference date's data are not part of this run (give noise.reference with at least "
+                f"{SELF_CHECK_MIN_SEGMENTS} segments)")
+    n = len(problem.reference_segments)
+    if n < SELF_CHECK_MIN_SEGMENTS:
+        return (f"the reference date has {n} segments, the self-check needs {SELF_CHECK_MIN_SEGMENTS} (record "
+                f"more kilometres at constant speed on the reference date, or cut shorter segments)")
+    return None
+
+
 def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
                log: Callable[[str], None] = lambda s: None, executor: Executor | None = None,
                extra: dict[str, float] | None = None) -> SelfCheck | None:
@@ -137,7 +157,7 @@ def self_check(problem: Problem, ledger: Ledger, options: SelfCheckOptions,
     """
     ref = problem.reference
     segments = problem.reference_segments
-    if not ref or not segments or len(segments) < 8:
+    if not ref or not segments or len(segments) < SELF_CHECK_MIN_SEGMENTS:
         return None
     config = problem.config
     y_mes0 = ref["y_mes0"]

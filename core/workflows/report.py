@@ -274,6 +274,38 @@ def no_change_line(result: dict[str, Any]) -> str | None:
             f"{_estimates_from_w0(result)} of the admissible interval from them, inside the intervals.")
 
 
+def _reason(status: str) -> str:
+    """A check's status without its leading ``not run``: the reason, with what to do where it says so."""
+    if status.startswith("not run: "):
+        return status[len("not run: "):]
+    if status.startswith("not run (") and status.endswith(")"):
+        return status[len("not run ("):-1]
+    return status
+
+
+def checks_line(result: dict[str, Any]) -> str | None:
+    """One line for the terminal on the model-error checks that did not run: which, why and what to do (their
+    statuses, grouped when they share one), and whether trust is therefore not assessed; None when all ran.
+    report.md keeps the list (:func:`checks_lines`)."""
+    checks = (result.get("model_error") or {}).get("checks")
+    if not checks:
+        return None
+    labels = check_labels((result.get("model_error") or {}).get("method"))
+    missed = {c: v for c, v in checks.items() if not v["ran"]}
+    if not missed:
+        return None
+    by_reason: dict[str, list[str]] = {}
+    for c, v in missed.items():
+        by_reason.setdefault(_reason(v["status"]), []).append(labels.get(c, c))
+    if len(missed) == len(checks) and len(by_reason) == 1:
+        what = f"Model-error checks not run ({next(iter(by_reason))})"
+    else:
+        what = (f"Model-error checks: {len(checks) - len(missed)} of {len(checks)} ran; not run: "
+                + "; ".join(f"{', '.join(names)} ({reason})" for reason, names in by_reason.items()))
+    required = any(v["required"] for v in missed.values())
+    return what + (": trust is not assessed (report.md lists the checks)" if required else "")
+
+
 def checks_lines(result: dict[str, Any]) -> list[str]:
     """Which model-error checks ran and which did not, and why (from ``result["model_error"]["checks"]``)."""
     checks = (result.get("model_error") or {}).get("checks")

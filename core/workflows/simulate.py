@@ -28,6 +28,7 @@ import h5py
 import numpy as np
 
 from suspid.errors import SimulatorError
+from suspid.infra.arrays import check_fits
 from suspid.infra.files import canonical, pyplot, save_figure, write_text
 from suspid.method.spectra import compute_spectra
 from suspid.interfaces import Response, Simulator, TrackSegment
@@ -98,6 +99,8 @@ def read_simulation(path: str | Path) -> tuple[list[Response], np.ndarray, np.nd
     """Records, spectra ``y`` and ``freqs`` of a ``simulation.h5``."""
     responses = read_accelerations_h5(path)
     with h5py.File(path, "r") as f:
+        for key in ("y", "freqs"):   # their declared sizes, before they are read
+            check_fits(str(path), f"dataset /{key}", f[key].shape, f[key].dtype)
         return responses, np.asarray(f["y"][()]), np.asarray(f["freqs"][()])
 
 

@@ -43,7 +43,8 @@ from suspid.sections import Limits
 from suspid.workflows.trust import trust_word
 
 __all__ = ["VERSION", "STATES", "DECISIONS", "ACTIONS", "VerdictRow", "verdict_rows", "verdict_block", "rows_of",
-           "zone", "judge", "format_value", "table", "summary_line", "verdict_markdown"]
+           "zone", "judge", "format_value", "table", "terminal_table", "vertical_lines", "summary_line",
+           "verdict_markdown"]
 
 VERSION = 1
 """Version of ``result.json``'s ``verdict`` block (bumped when a field changes meaning or goes)."""
@@ -214,9 +215,10 @@ def nominal_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[s
     return float(p.nominal)
 
 
-def _short(description: str) -> str:
+def short_description(description: str) -> str:
     """The head of a parameter description: up to its first ``;`` or ``(`` (the rest is its source)."""
     return re.split(r"[;(]", description, maxsplit=1)[0].strip()
+
 
 
 def _qualifiers(name: str) -> str:
@@ -234,10 +236,10 @@ def label_of(name: str, parameters: Mapping[str, Parameter], limits: Mapping[str
     if own is not None and own.label:
         return own.label
     if name in parameters and parameters[name].description:
-        return _short(parameters[name].description)
+        return short_description(parameters[name].description)
     kind = limits.get(kind_of(name))
     base = kind.label if kind is not None and kind.label else (
-        _short(parameters[kind_of(name)].description) if kind_of(name) in parameters
+        short_description(parameters[kind_of(name)].description) if kind_of(name) in parameters
         and parameters[kind_of(name)].description else kind_of(name))
     where = _qualifiers(name)
     return f"{where}: {base}" if where else base
@@ -382,6 +384,61 @@ def table(rows: Sequence[VerdictRow], *, with_reference: bool = False, with_rule
         row += [_levels_text(r), r.rule] if with_rule else []
         cells.append(row)
     return header, cells
+
+
+TERMINAL_COLUMNS = ("verdict", "parameter", "identified", "change [interval]", "nominal", "trust", "w_ref", "error")
+"""The terminal's verdict table, verdict first (:func:`terminal_table`); ``nominal`` is the first to go where the
+terminal is narrow, ``w_ref`` and ``error`` are only for numerical experiments (where the truth is known)."""
+
+
+def _verdict_text(r: VerdictRow) -> str:
+    return r.verdict + (" (borderline)" if r.borderline else "")
+
+
+def _change_text(r: VerdictRow) -> str:
+    """``-28.7 % [-31.2, -26.1]``: the change and its interval, % of nominal."""
+    if r.change_percent is None:
+        return "-"
+    lo, hi = r.interval_percent
+    return f"{r.change_percent:+.1f} % [{lo:+.1f}, {hi:+.1f}]"
+
+
+def terminal_table(rows: Sequence[VerdictRow], *, with_reference: bool = False, with_nominal: bool = True
+                   ) -> tuple[list[str], list[list[str]]]:
+    """The verdict table as the terminal shows it (:data:`TERMINAL_COLUMNS`): the verdict first, the change and
+    its interval in one column, identifiability folded into the trust (``not identifiable``), so that the
+    quickstart's table fits 100 columns; report.md keeps the full :func:`table`.
+
+    :param with_reference: add ``w_ref`` (as % of nominal) and the error (% of the admissible interval).
+    :param with_nominal: add the nominal value.
+    """
+    header = [c for c in TERMINAL_COLUMNS if (with_nominal or c != "nominal")
+              and (with_reference or c not in ("w_ref", "error"))]
+    cells = []
+    for r in rows:
+        cell = {"verdict": _verdict_text(r), "parameter": r.name, "identified": format_value(r.value, r.unit),
+                "change [interval]": _change_text(r), "nominal": format_value(r.nominal, r.unit),
+                "trust": r.trust if r.identifiable else "not identifiable",
+                "w_ref": "-" if r.w_ref is None or not r.nominal else f"{_percent(r.w_ref, r.nominal):+.1f} %",
+                "error": "-" if r.error_percent is None else f"{r.error_percent:.2f}"}
+        cells.append([cell[h] for h in header])
+    return header, cells
+
+
+def vertical_lines(rows: Sequence[VerdictRow]) -> list[str]:
+    """The verdict table for a terminal too narrow for :func:`terminal_table`: a few short lines per row."""
+    out = []
+    for r in rows:
+        out.append(f"{r.name}: {_verdict_text(r)}")
+        out.append(f"  identified {format_value(r.value, r.unit)}, {_change_text(r)} of nominal "
+                   f"{format_value(r.nominal, r.unit)}")
+        trust = r.trust if r.identifiable else "not identifiable"
+        ref = "" if r.w_ref is None else (
+            f"; w_ref {format_value(r.w_ref, r.unit)}"
+            + (f" ({_percent(r.w_ref, r.nominal):+.1f} %)" if r.nominal else "")
+            + ("" if r.error_percent is None else f", error {r.error_percent:.2f} % of the interval"))
+        out.append(f"  trust {trust}{ref}")
+    return out
 
 
 def summary_line(row: VerdictRow, markdown: bool = True) -> str:

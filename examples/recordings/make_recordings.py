@@ -24,13 +24,18 @@ measured-data config on what ``ingest-mf4.yaml`` writes, for ``suspid
 validate``); ``truth.json`` holds the offset and the speed profile.
 
 With ``--reference REF_DIR`` (a folder this script wrote before, e.g. with another ``--seed``: the
-reference date) it also writes ``identify.yaml`` (the simulator, five parameters, the spectra) and
-``ingest-two-dates.yaml``: the measurement date's first format here and the reference date's
-recording in REF_DIR, for ``suspid ingest`` to write both dates and ``ingested/two-dates.yaml``.
+reference date) it also writes ``identify.yaml`` (the simulator, five parameters, their example
+``limits:``, the spectra) and ``ingest-two-dates.yaml``: the measurement date's first format here and the
+reference date's recording in REF_DIR, for ``suspid ingest`` to write both dates and
+``ingested/two-dates.yaml``. ``--param NAME=VALUE`` (SI, repeatable) gives the vehicle of this date a
+parameter other than exudyn-train's nominal one: a worn element for the measurement date to find.
 
-Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...] [--reference REF_DIR]``
-(about 15 s of computing, the time solver at variable speed; tests call :func:`make` with a
-``tmp_path``).
+Run: ``python examples/recordings/make_recordings.py OUT_DIR [--formats mf4 mat ...] [--reference REF_DIR]
+[--param c_yaw=150e3] [--cruise-km 9]`` (about a minute of computing, the time solver at variable speed;
+the default 9 km at 300 km/h gives 9 segments of 1000 m, one more than the reference-date self-check's 8;
+tests call :func:`make` with a ``tmp_path`` and a shorter run). Nothing is written unless every format's
+library is there (mf4 needs asammdf, tdms npTDMS: ``pip install 'suspid[ingest]'``); the files are written
+in a folder beside OUT_DIR and moved in once all are written.
 """
 
 from __future__ import annotations
@@ -38,8 +43,13 @@ from __future__ import annotations
 import argparse
 import functools
 import datetime as dt
+import importlib
 import json
 import math
+import os
+import shutil
+import sys
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -223,6 +233,32 @@ def ingest_file(fmt: str, recording: str, out_name: str, units: dict[str, str] |
 
 FILES = {"mf4": "recording.mf4", "mat": "recording.mat", "mat73": "recording-v73.mat", "tdms": "recording.tdms",
          "csv": "recording.csv"}
+LIBRARIES = {"mf4": ("asammdf", "asammdf"), "tdms": ("nptdms", "npTDMS")}
+"""Format -> (module, distribution) of the optional libraries that write it (the ``ingest`` extra)."""
+PARAMETERS = ("k_sec_z", "c_sec_z", "k_prim_z", "c_sec_y", "c_yaw")
+"""The parameters ``identify.yaml`` identifies."""
+BOUNDS = {"c_yaw": {"lower": 90.0e3}}
+"""``identify.yaml``'s bounds where exudyn-train's do not do: a yaw damper worn to half its rate (150 kN s/m, the
+default lower bound) is identified inside the interval, not on its edge."""
+LIMITS = {"k_sec_z": {"warning": [-15, 15], "alarm": [-30, 30]}, "c_sec_z": {"warning": -25, "alarm": -40},
+          "k_prim_z": {"warning": [-15, 15], "alarm": [-30, 30]}, "c_sec_y": {"warning": -25, "alarm": -40},
+          "c_yaw": {"warning": -25, "alarm": -40}}
+"""Example warning and alarm levels of ``identify.yaml`` (% of nominal, as configs/quickstart.yaml's): not a
+standard, the operator's maintenance rules set them."""
+
+
+def _importable(module: str) -> bool:
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
+
+
+def missing_libraries(formats: Sequence[str]) -> list[str]:
+    """``'asammdf' (for mf4)``, ...: the libraries the formats need that cannot be imported."""
+    return [f"'{dist}' (for {fmt})" for fmt in formats if fmt in LIBRARIES
+            for module, dist in [LIBRARIES[fmt]] if not _importable(module)]
 
 
 def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0, offset_m: float = 137.37,
@@ -236,6 +272,9 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    unknown = sorted(set(w or {}) - {p.name for p in ExudynTrain().parameters()})
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {', '.join(unknown)} of exudyn-train")
     profile = profile or Profile()
     t, v, d, acc, x_track, irr = simulate(profile, fs, offset_m, seed, w=tuple(sorted((w or {}).items())))
     # simulate() is cached: copy what is changed
@@ -260,9 +299,11 @@ def make(out: str | Path, formats: Sequence[str] = FORMATS, *, fs: float = 200.0
     v_kmh_50 = np.round(profile.speed(t_v) * 3.6, 2)
     _write_track(out / "track-record.csv", x_track, irr)
     simulator = {"plugin": "exudyn-train", "options": {"fs_hz": fs, "sensors": sensors_options()}}
-    (out / "suspid.yaml").write_text(yaml.safe_dump({"name": "recordings", "simulator": simulator}, sort_keys=False))
+    parameters = {p: {} for p in PARAMETERS}
+    (out / "suspid.yaml").write_text(yaml.safe_dump({"name": "recordings", "simulator": simulator,
+                                                     "parameters": parameters}, sort_keys=False))
     (out / "measured.yaml").write_text(yaml.safe_dump({   # what `suspid validate` reads after ingest-mf4.yaml
-        "name": "measured", "simulator": simulator, "data": {
+        "name": "measured", "simulator": simulator, "parameters": parameters, "data": {
             "source": "measured", "track_file": "ingested/mf4/track",
             "measurements": "ingested/mf4/accelerations"}}, sort_keys=False))
     for fmt in formats:
@@ -294,8 +335,8 @@ def two_date_ingest(out: str | Path, reference: str | Path, fmt: str = "csv", re
     ref_fmt = ref_fmt or next(f for f in FORMATS if (reference / FILES[f]).exists())
     config = yaml.safe_load((out / "suspid.yaml").read_text())
     config["simulator"]["options"]["solver"] = "frequency"
-    config |= {"name": "recordings-two-dates", "seed": 7,
-               "parameters": {"k_sec_z": {}, "c_sec_z": {}, "k_prim_z": {}, "c_sec_y": {}, "c_yaw": {}},
+    config |= {"name": "recordings-two-dates", "seed": 7, "parameters": {p: BOUNDS.get(p, {}) for p in PARAMETERS},
+               "limits": LIMITS,
                "spectra": {"f_min_hz": 0.5, "f_max_hz": 20.0, "n_freqs": 100, "window": "hann"},
                "design": {"n_initial": 30}, "ego": {"max_iter": 30}}
     (out / "identify.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
@@ -309,6 +350,12 @@ def two_date_ingest(out: str | Path, reference: str | Path, fmt: str = "csv", re
     return path
 
 
+def _fail(message: str) -> None:
+    """One line on stderr and exit code 2 (a user's mistake or a missing library: no traceback)."""
+    print(f"{Path(sys.argv[0]).name}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("out", type=Path)
@@ -316,14 +363,47 @@ def main(argv: Sequence[str] | None = None) -> None:
     p.add_argument("--fs", type=float, default=200.0)
     p.add_argument("--offset", type=float, default=137.37, help="track record offset, m")
     p.add_argument("--seed", type=int, default=3)
+    p.add_argument("--cruise-km", type=float, default=9.0, help="length of the cruise at 300 km/h, km (default "
+                   "9: 9 segments of 1000 m, the reference-date self-check needs 8)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="a parameter of this date's vehicle other than nominal, SI units (repeatable), e.g. "
+                        "c_yaw=150e3: a worn yaw damper for the measurement date")
     p.add_argument("--reference", type=Path, default=None, help="folder of the reference date's recording "
                    "(written before by this script): also write ingest-two-dates.yaml")
     a = p.parse_args(argv)
-    truth = make(a.out, a.formats, fs=a.fs, offset_m=a.offset, seed=a.seed)
-    print(f"wrote {', '.join(truth['files'].values())} and track-record.csv to {a.out} "
-          f"({truth['distance_m'] / 1000:.2f} km, {truth['duration_s']:.0f} s, offset {truth['offset_m']} m)")
-    if a.reference is not None:
-        print(f"wrote {two_date_ingest(a.out, a.reference, a.formats[0])}")
+    missing = missing_libraries(a.formats)
+    if missing:   # before anything is simulated or written
+        _fail(f"writing {' and '.join(missing)} needs the ingest extra: pip install 'suspid[ingest]' (or choose "
+              f"other --formats: {', '.join(f for f in FORMATS if f not in LIBRARIES)} need nothing more)")
+    if a.reference is not None and not (a.reference / "track-record.csv").is_file():
+        _fail(f"--reference {a.reference}: no recording written by this script there (no track-record.csv)")
+    known = {q.name for q in ExudynTrain().parameters()}
+    w = {}
+    for item in a.param:
+        name, _, value = item.partition("=")
+        if name not in known:
+            _fail(f"--param {name}: not a parameter of exudyn-train; known: {', '.join(sorted(known))}")
+        try:
+            w[name] = float(value)
+        except ValueError:
+            _fail(f"--param {item}: expected NAME=VALUE with a number (SI units)")
+    out = a.out.resolve()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}-", dir=out.parent))   # moved in once complete
+    try:
+        truth = make(staging, a.formats, fs=a.fs, offset_m=a.offset, seed=a.seed,
+                     profile=Profile(cruise_m=1000.0 * a.cruise_km), w=w)
+        two = two_date_ingest(staging, a.reference, a.formats[0]) if a.reference is not None else None
+        out.mkdir(exist_ok=True)
+        for f in sorted(staging.iterdir()):
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    changed = "".join(f", {name} = {value:g}" for name, value in w.items())
+    print(f"wrote {', '.join(truth['files'].values())} and track-record.csv to {out} "
+          f"({truth['distance_m'] / 1000:.2f} km, {truth['duration_s']:.0f} s, offset {truth['offset_m']} m{changed})")
+    if two is not None:
+        print(f"wrote {out / two.name}")
 
 
 if __name__ == "__main__":

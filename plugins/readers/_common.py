@@ -15,6 +15,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from suspid.errors import DataError, DataWarning, SuspidError
+from suspid.infra.arrays import check_fits
 
 
 def optional_library(module: str, package: str, path: Path) -> Any:
@@ -35,6 +36,14 @@ def unknown_channel(path: Path, channel: str, available: Sequence[str]) -> DataE
 def check_exists(path: Path) -> None:
     if not path.is_file():
         raise DataError(f"{path}: file not found")
+
+
+def check_channel(path: Path, channel: str, shape: Sequence[int], dtype: Any = np.float64) -> None:
+    """Refuse a channel whose declared size (the file's shape and type, before it is read) this process could
+    not hold together with its float64 copy (:func:`suspid.infra.arrays.check_fits`): a damaged file's absurd
+    length is one error naming the file and the channel, not an allocation."""
+    copies = 1.0 if np.dtype(dtype) == np.float64 else 1.0 + 8.0 / max(np.dtype(dtype).itemsize, 1)
+    check_fits(str(path), f"channel '{channel}'", shape, dtype, copies=copies)
 
 
 def as_float(values: Any, path: Path, channel: str) -> np.ndarray:

@@ -22,7 +22,15 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
+from suspid.infra.arrays import check_fits, check_text, human_bytes
+
 from ._common import check_exists, unknown_channel
+
+TEXT = "delimited text: a header line of channel names, one row per sample"
+MAX_LINE = 1 << 20
+"""Longest line of a recording, bytes: thousands of columns of numbers (a file without newlines is no text)."""
+BLOCK = 1 << 20
+"""Bytes read at a time when the rows are counted."""
 
 _UNIT = re.compile(r"^(.*?)\s*[\[(]([^\])]*)[\])]\s*$")
 
@@ -55,12 +63,17 @@ class CsvReader(Reader):
     def _read_header(self) -> list[str]:
         if self._header is None:
             check_exists(self.path)
-            with open(self.path, encoding="utf-8", errors="replace") as fh:
-                for n, line in enumerate(fh):
+            check_text(self.path, TEXT)
+            with open(self.path, "rb") as fh:     # lines read with a bound: a file without newlines is no header
+                for n in itertools.count():
+                    raw = fh.readline(MAX_LINE + 1)
+                    if not raw:
+                        raise DataError(f"{self.path}: no header line (column names) found")
+                    if len(raw) > MAX_LINE:
+                        raise self._long_line(n + 1)
+                    line = raw.decode("utf-8", errors="replace")
                     if line.strip() and not line.lstrip().startswith("#"):
                         break
-                else:
-                    raise DataError(f"{self.path}: no header line (column names) found")
             names = []
             for raw in line.rstrip("\r\n").split(self.opts.delimiter):
                 raw = raw.strip().strip('"')
@@ -86,8 +99,8 @@ class CsvReader(Reader):
         if not wanted:
             return
         cols = [header.index(c) for c in wanted]
-        with open(self.path, "rb") as fh:   # count the rows first: the columns are filled in place
-            n_rows = sum(1 for line in itertools.islice(fh, self._skip, None) if line.strip())
+        n_rows = self._count_rows()      # first: the columns are filled in place
+        check_fits(str(self.path), f"{len(wanted)} columns of its {n_rows} rows", (len(wanted), n_rows), np.float64)
         data = [np.empty(n_rows) for _ in wanted]
         with open(self.path, encoding="utf-8", errors="replace") as fh:
             lines = itertools.islice(fh, self._skip, None)
@@ -109,6 +122,36 @@ class CsvReader(Reader):
                 row += len(chunk)
         for c, column in zip(wanted, data):
             self._columns[c] = column[:filled]
+
+    def _long_line(self, line: int | str) -> DataError:
+        return DataError(f"{self.path}: line {line} is longer than {human_bytes(MAX_LINE)}: not a delimited text "
+                         f"recording (expected {TEXT})")
+
+    def _count_rows(self) -> int:
+        """The rows after the header (an upper bound: blank and comment lines count too), the whole file checked
+        on the way in blocks of bytes: no NUL byte, no line longer than :data:`MAX_LINE`."""
+        lines, run, offset = 0, 0, 0
+        with open(self.path, "rb") as fh:
+            while chunk := fh.read(BLOCK):
+                nul = chunk.find(b"\0")
+                if nul >= 0:
+                    line = lines + chunk.count(b"\n", 0, nul) + 1
+                    raise DataError(f"{self.path}: not text: a NUL byte on line {line} (byte {offset + nul}; a binary "
+                                    f"or damaged file, expected {TEXT})")
+                ends = np.flatnonzero(np.frombuffer(chunk, np.uint8) == ord("\n"))
+                if not ends.size:
+                    run += len(chunk)
+                    if run > MAX_LINE:
+                        raise self._long_line(lines + 1)
+                    offset += len(chunk)
+                    continue
+                lengths = np.diff(ends, prepend=-1 - run)   # of each line this block ends, newline included
+                if lengths.max() > MAX_LINE + 1:
+                    raise self._long_line(lines + 1 + int(np.argmax(lengths > MAX_LINE + 1)))
+                run = len(chunk) - int(ends[-1]) - 1
+                lines += int(ends.size)
+                offset += len(chunk)
+        return max(lines + (run > 0) - self._skip, 0)
 
     def read(self, channel: str) -> Signal:
         if channel not in self._columns:

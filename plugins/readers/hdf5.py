@@ -20,7 +20,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, library_errors, unknown_channel
+from ._common import as_float, check_channel, check_exists, library_errors, unknown_channel
 
 
 class Hdf5Options(Section):
@@ -82,14 +82,18 @@ class Hdf5Reader(Reader):
             raise unknown_channel(self.path, channel, self.channels())
         return obj
 
-    def read(self, channel: str) -> Signal:
+    def _values(self, channel: str) -> tuple[np.ndarray, h5py.Dataset]:
+        """A dataset's values as float64, its declared size checked first."""
         d = self._dataset(channel)
+        check_channel(self.path, channel, d.shape, d.dtype)
         with library_errors(self.path, "HDF5"):
-            values = as_float(d[()], self.path, channel)
+            return as_float(d[()], self.path, channel), d
+
+    def read(self, channel: str) -> Signal:
+        values, d = self._values(channel)
         unit = _text(d.attrs.get("unit", d.attrs.get("units", "")))
         if self.opts.index:
-            return Signal(channel, values, unit, index=as_float(self._dataset(self.opts.index)[()], self.path,
-                                                                self.opts.index))
+            return Signal(channel, values, unit, index=self._values(self.opts.index)[0])
         step = self.opts.step or d.attrs.get("dt", d.attrs.get("step"))
         if step is None:
             raise DataError(f"{self.path}: channel '{channel}' has no abscissa: give recording option 'index' "

@@ -21,7 +21,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, library_errors, unknown_channel
+from ._common import as_float, check_channel, check_exists, library_errors, unknown_channel
 from .hdf5 import datasets
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -86,6 +86,7 @@ class MatReader(Reader):
         self.opts = MatOptions(**options)
         self._h5: h5py.File | None = None
         self._names: list[str] | None = None
+        self._shapes: dict[str, tuple[int, ...]] = {}
 
     def _open(self) -> list[str]:
         if self._names is None:
@@ -103,6 +104,7 @@ class MatReader(Reader):
                 self._names = [name for name, shape, cls in info
                                if cls in ("double", "single", "int8", "int16", "int32", "int64", "uint8",
                                           "uint16", "uint32", "uint64") and len(shape) == 2 and min(shape) == 1]
+                self._shapes = {name: shape for name, shape, _ in info}
         return self._names
 
     def channels(self) -> list[str]:
@@ -112,9 +114,14 @@ class MatReader(Reader):
         names = self._open()
         if name not in names:
             raise unknown_channel(self.path, name, [n for n in names if n != self.opts.index])
+        if self._h5 is not None:    # the declared size checked before the values are read
+            d = self._h5[name]
+            check_channel(self.path, name, d.shape, d.dtype)
+        else:
+            check_channel(self.path, name, self._shapes[name])
         with library_errors(self.path, "MATLAB"):
             if self._h5 is not None:
-                return as_float(self._h5[name][()], self.path, name)
+                return as_float(d[()], self.path, name)
             return as_float(scipy.io.loadmat(str(self.path), variable_names=[name])[name], self.path, name)
 
     def read(self, channel: str) -> Signal:

@@ -25,7 +25,7 @@ from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, library_errors, optional_library, unknown_channel
+from ._common import as_float, check_channel, check_exists, library_errors, optional_library, unknown_channel
 
 
 class Mdf4Options(Section):
@@ -73,6 +73,7 @@ class Mdf4Reader(Reader):
             raise unknown_channel(self.path, channel, self.channels())
         group, index = mdf.channels_db[channel][0]
         n = int(mdf.groups[group].channel_group.cycles_nr)
+        check_channel(self.path, channel, (2, n))     # its values and time stamps, before they are allocated
         step = self.opts.chunk_records
         values, times, unit = np.empty(n), np.empty(n), ""
         with library_errors(self.path, "MDF"):

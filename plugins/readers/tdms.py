@@ -12,13 +12,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, ClassVar
 
+import numpy as np
 from pydantic import Field, PositiveFloat
 
 from suspid.errors import DataError
 from suspid.interfaces import Reader, Signal
 from suspid.options import Section
 
-from ._common import as_float, check_exists, library_errors, optional_library, unknown_channel
+from ._common import as_float, check_channel, check_exists, library_errors, optional_library, unknown_channel
 
 
 class TdmsOptions(Section):
@@ -63,14 +64,21 @@ class TdmsReader(Reader):
         except KeyError:
             raise unknown_channel(self.path, name, self.channels()) from None
 
-    def read(self, channel: str) -> Signal:
-        ch = self._channel(channel)
+    def _values(self, name: str) -> tuple[np.ndarray, Any]:
+        """A channel's values as float64, its declared length (the file's metadata) checked first."""
+        ch = self._channel(name)
         with library_errors(self.path, "TDMS", "nptdms"):
-            values = as_float(ch[:], self.path, channel)
+            n, dtype = len(ch), getattr(ch, "dtype", None)
+        check_channel(self.path, name, (n,), dtype if isinstance(dtype, np.dtype) else np.float64)
+        with library_errors(self.path, "TDMS", "nptdms"):
+            return as_float(ch[:], self.path, name), ch
+
+    def read(self, channel: str) -> Signal:
+        values, ch = self._values(channel)
+        with library_errors(self.path, "TDMS", "nptdms"):
             unit = str(ch.properties.get("unit_string", ""))
             if self.opts.index:
-                return Signal(channel, values, unit, index=as_float(self._channel(self.opts.index)[:], self.path,
-                                                                    self.opts.index))
+                return Signal(channel, values, unit, index=self._values(self.opts.index)[0])
             step = ch.properties.get("wf_increment", self.opts.step)
         if step is None:
             raise DataError(f"{self.path}: channel '{channel}' has no wf_increment property; give recording "

@@ -40,7 +40,7 @@ def load_ingest(source: str | Path | Mapping[str, Any], overrides: Sequence[str]
     else:
         path = Path(source)
         data, lines = read_yaml(path)
-        file, base = str(path), path.resolve().parent
+        file, base = str(path.resolve()), path.resolve().parent     # messages name it by its absolute path
     data = apply_overrides(data, overrides, file)
     try:
         opts = IngestOptions.model_validate(data, context={"base_dir": base})

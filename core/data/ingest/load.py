@@ -14,7 +14,6 @@ is a warning.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -24,6 +23,7 @@ from scipy import signal as sps
 
 from suspid import registry
 from suspid.errors import ConfigError, DataError
+from suspid.infra.arrays import available_memory, human_bytes
 from suspid.interfaces import Reader, Signal
 from suspid.options import parse_options
 
@@ -204,14 +204,6 @@ def onto_grid(sig: Signal, idx: np.ndarray | None, grid: Grid, gap_factor: float
     return out, True
 
 
-def physical_memory() -> int | None:
-    """Bytes of physical memory of this machine (None where the system does not say)."""
-    try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
 def grid_arrays(path: Path, channel: str, grid: Grid, n_channels: int) -> np.ndarray:
     """The ``(n_channels, grid.n)`` array of the recording on its grid, when it can fit in memory.
 
@@ -220,7 +212,7 @@ def grid_arrays(path: Path, channel: str, grid: Grid, n_channels: int) -> np.nda
     The whole ingest holds about ``n_channels + 3`` rows of the grid (the speed, the distance, a copy).
     """
     need = 8.0 * grid.n * (n_channels + 3)
-    total = physical_memory()
+    total = available_memory()
     problem = total is not None and need > total
     if not problem:
         try:
@@ -228,8 +220,8 @@ def grid_arrays(path: Path, channel: str, grid: Grid, n_channels: int) -> np.nda
         except MemoryError:
             problem = True
     raise DataError(f"{path}: channel '{channel}' spans {grid.n / grid.fs:.6g} s at {grid.fs:g} Hz, {grid.n} "
-                    f"samples per channel ({need / 2 ** 30:.3g} GiB in all), more than this machine's memory"
-                    f"{f' ({total / 2 ** 30:.3g} GiB)' if total else ''}: are its time stamps in seconds, "
+                    f"samples per channel ({human_bytes(need)} in all), more than the memory available"
+                    f"{f' ({human_bytes(total)})' if total else ''}: are its time stamps in seconds, "
                     f"without a jump (a sparse or damaged time channel)?")
 
 

@@ -64,6 +64,8 @@ class IngestResult:
     :ivar report: the content of ``ingest.json``.
     :ivar reference: with ``reference:`` in the ingest file, the reference date's result (its own folder).
     :ivar config_path: with ``reference:``, the two-date config written (``two-dates.yaml``).
+    :ivar config_warnings: with ``reference:``, what a run of that config will not assess for want of data
+        (:func:`suspid.workflows.checks.data_shortfalls`: too few reference segments, no limits), one line each.
     """
 
     out_dir: Path
@@ -76,6 +78,7 @@ class IngestResult:
     report: dict[str, Any] = field(repr=False, default_factory=dict)
     reference: "IngestResult | None" = None      # the reference date's ingest (two-date ingest)
     config_path: Path | None = None              # the two-date config written (two-date ingest)
+    config_warnings: list[str] = field(default_factory=list)   # what a run of it will not assess
 
     def to_dict(self) -> dict[str, Any]:
         """Equals ``ingest.json``."""

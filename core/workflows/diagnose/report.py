@@ -12,6 +12,7 @@ from suspid import registry
 from suspid.infra.files import pyplot, save_figure, write_text
 from suspid.workflows.report import markdown_table
 from suspid.workflows.trust import trust_word
+from suspid.workflows.verdict import format_value, short_description
 
 from .fit import Candidate
 from .locate import DiscrepancyMap
@@ -73,8 +74,11 @@ def figure_spectra_gap(path: Path, stage_before: Stage, stage_after: Stage | Non
 
 
 def _fmt_params(params: dict[str, Any]) -> str:
+    """``damping=0.0198, frequency_hz=9.496``: an effect's parameters (those left at their default, None, omitted)."""
     out = []
     for k, v in params.items():
+        if v is None:
+            continue
         if isinstance(v, float):
             out.append(f"{k}={v:.4g}")
         elif isinstance(v, dict):
@@ -82,6 +86,94 @@ def _fmt_params(params: dict[str, Any]) -> str:
         else:
             out.append(f"{k}={v}")
     return ", ".join(out)
+
+
+def _parameter_words(effect: str, name: str, value: Any) -> str:
+    """``natural frequency of the first vertical bending mode 9.496 Hz``: an effect's parameter as its option's
+    description words it (its head and unit), else ``name = value``."""
+    field = getattr(registry.get("effect", effect), "Options", None)
+    field = field.model_fields.get(name) if field is not None else None
+    shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+    if field is None or not field.description:
+        return f"{name} = {shown}"
+    head = short_description(field.description)
+    what, _, unit = head.rpartition(", ") if ", " in head else (head, "", "")
+    return f"{what} {shown}{' ' + unit if unit else ''}"
+
+
+def _effect_words(effect: str, parameters: dict[str, Any]) -> str:
+    """``a carbody first vertical bending mode (`carbody-bending`; natural frequency of the first vertical bending
+    mode 9.496 Hz)``: a named effect in plain words with its main parameter (the others in section 2)."""
+    cls = registry.get("effect", effect)
+    main = getattr(cls, "main_parameter", None)
+    value = f"; {_parameter_words(effect, main, parameters[main])}" if parameters.get(main) is not None else ""
+    return f"a {short_description(cls.description)} (`{effect}`{value})"
+
+
+def _changes(before: dict[str, float], after: dict[str, float], units: dict[str, str]) -> str:
+    """``c_yaw 213.9 → 298.1 kN s/m (+39 %)``, largest change first; those within 0.5 % summed up."""
+    moved, still = [], []
+    for n in after:
+        if n not in before or not before[n]:
+            continue
+        change = 100.0 * (after[n] / before[n] - 1.0)
+        (moved if abs(change) >= 0.5 else still).append((abs(change), n, change))
+    parts = [f"{n} {format_value(before[n], units.get(n, ''))} → {format_value(after[n], units.get(n, ''))} "
+             f"({c:+.0f} %)" for _, n, c in sorted(moved, reverse=True)]
+    if still:
+        parts.append(f"{', '.join(n for _, n, _ in still)} within 0.5 %")
+    return "; ".join(parts) if parts else "no parameter moves"
+
+
+def plain_summary(diagnosis: dict[str, Any], units: dict[str, str]) -> str:
+    """The report's first lines, in plain words: what was found, how sure, and what changed in the
+    identification; the statistics (tests, scores, q values) stay in the sections below.
+
+    :param units: parameter name -> SI unit (the simulator's), for the suspension's values.
+    """
+    gb, ga = diagnosis["gap_before"], diagnosis["gap_after"]
+    alpha = diagnosis["statistics"]["alpha"]
+    named = [(s["named"], s["named_parameters"]) for s in diagnosis.get("steps") or [] if s.get("named")] or (
+        [(diagnosis["named"], diagnosis["named_parameters"])] if diagnosis["named"] else [])
+    share = f"{100 * gb['share_flagged']:.1f} % of the spectra ({gb['n_flagged']} of {gb['n_cells']} cells)"
+    if not gb["n_flagged"]:
+        found = (f"nothing: the model reproduces the measurements within the noise model (no part of the spectra "
+                 f"disagrees at a false discovery rate of {100 * alpha:g} %).")
+        sure = None
+    elif named:
+        found = ("the measurements show what the model lacks: " + "; then ".join(_effect_words(e, p) for e, p in named)
+                 + ".")
+        best = next((c for c in diagnosis.get("ranking") or [] if c.get("effect") == named[0][0]), {})
+        explained = (best.get("evidence") or {}).get("explained_own", best.get("explained"))
+        runner = next((c["effect"] for c in diagnosis.get("ranking") or []
+                       if c.get("status") == "fitted" and c.get("effect") != named[0][0]), None)
+        sure = ((f"it explains {100 * explained:.0f} % of the disagreement where it acts" if explained is not None
+                 else "it explains the disagreement where it acts")
+                + (f", clearly ahead of the next explanation (`{runner}`) and of a generic bump" if runner else
+                   ", clearly ahead of a generic bump")
+                + (f"; with it in the model the part of the spectra that disagrees falls from {share} to "
+                   f"{100 * ga['share_flagged']:.1f} %." if ga else "."))
+    else:
+        top = (diagnosis.get("flagged") or [{}])[0]
+        where = (f", most on {top['channel']} at {top['f_low_hz']:.3g}-{top['f_high_hz']:.3g} Hz"
+                 if top.get("channel") else "")
+        found = (f"the model and the measurements disagree in {share}{where}, and no effect of the catalogue "
+                 f"explains it (section 3 lists what is left unexplained).")
+        sure = (f"the disagreement lies beyond the noise model at a false discovery rate of {100 * alpha:g} %; its "
+                f"cause is not named.")
+    reported = diagnosis.get("suspension") or {}
+    start = (gb.get("identified") or {}).get("w") or gb.get("w") or {}
+    if reported.get("w") and start:
+        ident = (f"the suspension reported with the effect{'s' if len(named) > 1 else ''} added "
+                 f"(the {reported.get('source', 're-identification')}) against the identification before: "
+                 f"{_changes(start, reported['w'], units)}.")
+    elif diagnosis.get("base_model") != "identified":
+        ident = ("not re-run: the diagnosis compared the model at its nominal suspension (diagnose.at: nominal); "
+                 "run it at the identified one (diagnose.at: identified) to see the suspension change.")
+    else:
+        ident = "unchanged (nothing was added to the model)."
+    lines = [f"**Found:** {found}"] + ([f"**How sure:** {sure}"] if sure else []) + [f"**Identification:** {ident}"]
+    return "\n\n".join(lines) + "\n\nThe statistics behind each statement are in the sections below."
 
 
 def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Stage, after: Stage | None,
@@ -140,8 +232,8 @@ def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Sta
             gap_rows.append([f"error of {n} (% of interval)", f"{eb:.2f}" if eb is not None else "-",
                              f"{ea:.2f}" if ea is not None else "-", ""])
     named = diagnosis["named"]
-    verdict = (f"**Named: `{named}`** with {_fmt_params(diagnosis['named_parameters'])}. {diagnosis['reason']}."
-               if named else f"**Nothing named.** {diagnosis['reason']}.")
+    verdict = (f"Named: `{named}` with {_fmt_params(diagnosis['named_parameters'])}. {diagnosis['reason']}."
+               if named else f"Nothing named. {diagnosis['reason']}.")
     if len(diagnosis.get("named_effects") or []) > 1:
         verdict += " Then: " + "; ".join(f"step {s['step']}: `{s['named']}` ({s['reason']})"
                                          for s in diagnosis["steps"][1:] if s["named"]) + "."
@@ -153,13 +245,14 @@ def write_diagnosis_report(out_dir: Path, diagnosis: dict[str, Any], before: Sta
                  s["reason"]] for s in diagnosis.get("steps", [])]
     unexplained = "\n".join(f"- {u['text']}" for u in diagnosis.get("unexplained") or []) or "(none)"
     st = diagnosis["statistics"]
+    units = {p.name: p.unit for p in before.problem.simulator.parameters()}
     text = f"""# Discrepancy diagnosis `{diagnosis['name']}`
+
+{plain_summary(diagnosis, units)}
 
 Base model: the config's model at its {'identified' if diagnosis['base_model'] == 'identified' else 'nominal'}
 parameters. Measurements: {before.problem.y_mes.shape[0]} segments, {len(before.problem.channels)} channels,
 {before.problem.freqs.size} frequencies. Wall time {diagnosis['wall_time_s']:.0f} s (ranking {diagnosis['ranking_time_s']:.0f} s).
-
-{verdict}
 
 ## 1. Where the model and the measurements disagree
 
@@ -186,6 +279,8 @@ the flagged cells must shrink, with at most {100 * st.get('max_new_flagged', 0):
 the cells it changes, or it is retracted.
 
 {markdown_table(['candidate', 'status', 'score', 'p', 'ΔD', 'explained', 'ΔJ', 'main parameter', 'parameters'], rank_rows)}
+
+{verdict}
 
 ## 3. One effect after the other
 
