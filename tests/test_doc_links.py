@@ -108,3 +108,11 @@ def test_the_citation_check_reads_the_forms_in_use():
             '`benchmarks/RESULTS.md`, "Gone"; RESULTS.md (its figures)')
     known = ["EGO", "Table 1 analogue (q = 7)", "Discrepancy workflow", "exudyn train model: modes, stability"]
     assert missing_sections(text, known) == ["Gone"]
+
+
+def test_the_readme_maps_every_docs_page():
+    """The README's map of docs/ names every page, so that none is found only by chance."""
+    linked = {Path(t.partition("#")[0]).name for t in LINK.findall((ROOT / "README.md").read_text())
+              if t.startswith("docs/")}
+    pages = {p.name for p in (ROOT / "docs").glob("*.md")}
+    assert not pages - linked, f"docs pages the README does not link: {sorted(pages - linked)}"
